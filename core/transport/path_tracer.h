@@ -1,0 +1,45 @@
+// The unbiased reference: a volumetric path tracer every faster method is measured against.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/transport/image.h"
+#include "core/transport/scene.h"
+
+namespace cloudbake {
+
+/// Progress callback: fraction in [0,1]. Return false to cancel (the tracer then throws
+/// Cancelled from its top-level loop within one tile's work).
+using ProgressFn = std::function<bool(double fraction)>;
+
+struct PathTracerOptions {
+  int samples_per_pixel = 64;  ///< >= 1
+  uint64_t seed = 1;           ///< results are identical for the same seed at any thread count
+  int max_depth = 100000;      ///< scattering events per path; high enough to be unbiased
+  int threads = 0;             ///< 0: the caller's TBB arena / all hardware threads
+  int tile_size = 16;          ///< pixels per tile side (work unit)
+};
+
+/// Render layers, all linear radiance in the units of the lights (W m^-2 sr^-1 for E in
+/// W m^-2): `beauty` (RGBA; A = 1 - mean transmittance through the cloud along the pixel's
+/// rays), and the parts it is the sum of: `sun`, `sky` (each: light scattered at least once
+/// from that source), `single` and `multiple` (scattered exactly once / more than once, both
+/// sources), plus what is seen directly behind the cloud (the sky through it), which is in
+/// beauty only. beauty.rgb = sun + sky + background = single + multiple + background.
+struct RenderLayers {
+  Image beauty;     ///< 4 channels
+  Image sun;        ///< 3 channels
+  Image sky;        ///< 3 channels
+  Image single;     ///< 3 channels
+  Image multiple;   ///< 3 channels
+};
+
+/// Renders one view by path tracing. Throws InputError for invalid medium/camera/options.
+RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& sky,
+                              const Camera& camera, const PathTracerOptions& options,
+                              const ProgressFn& progress = {});
+
+}  // namespace cloudbake

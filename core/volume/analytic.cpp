@@ -1,0 +1,100 @@
+#include "core/volume/analytic.h"
+
+#include <cmath>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+void checkDensity(double density, const char* what) {
+  if (!std::isfinite(density) || density < 0) {
+    std::ostringstream os;
+    os << what << ": density must be finite and >= 0, got " << density;
+    throw InputError(os.str());
+  }
+}
+
+class BoxLookup final : public DensityField::Lookup {
+ public:
+  BoxLookup(const Bounds3& b, double d) : box_(b), density_(d) {}
+  double density(const Vec3& p) override { return box_.contains(p) ? density_ : 0.0; }
+
+ private:
+  Bounds3 box_;
+  double density_;
+};
+
+class SphereLookup final : public DensityField::Lookup {
+ public:
+  SphereLookup(const Vec3& c, double r, double d) : center_(c), r2_(r * r), density_(d) {}
+  double density(const Vec3& p) override {
+    const Vec3 v = p - center_;
+    return dot(v, v) <= r2_ ? density_ : 0.0;
+  }
+
+ private:
+  Vec3 center_;
+  double r2_, density_;
+};
+
+}  // namespace
+
+BoxDensity::BoxDensity(const Vec3& min, const Vec3& max, double density) : density_(density) {
+  for (int a = 0; a < 3; ++a) {
+    if (!std::isfinite(min[a]) || !std::isfinite(max[a]) || !(min[a] < max[a])) {
+      throw InputError("box: min must be finite and strictly less than max on every axis");
+    }
+  }
+  checkDensity(density, "box");
+  box_.min = min;
+  box_.max = max;
+  majorants_ = MajorantGrid::uniform(box_, static_cast<float>(density));
+}
+
+std::unique_ptr<DensityField::Lookup> BoxDensity::lookup() const {
+  return std::make_unique<BoxLookup>(box_, density_);
+}
+
+double BoxDensity::featureSize() const {
+  const Vec3 e = box_.extent();
+  return std::min(e.x, std::min(e.y, e.z)) / 32.0;
+}
+
+std::string BoxDensity::describe() const {
+  std::ostringstream os;
+  os << "box [" << box_.min.x << "," << box_.min.y << "," << box_.min.z << "]-[" << box_.max.x
+     << "," << box_.max.y << "," << box_.max.z << "] density " << density_;
+  return os.str();
+}
+
+SphereDensity::SphereDensity(const Vec3& center, double radius, double density)
+    : center_(center), radius_(radius), density_(density) {
+  if (!isFinite(center)) throw InputError("sphere: center must be finite");
+  if (!std::isfinite(radius) || !(radius > 0)) {
+    throw InputError("sphere: radius must be finite and > 0");
+  }
+  checkDensity(density, "sphere");
+  majorants_ = MajorantGrid::uniform(bounds(), static_cast<float>(density));
+}
+
+Bounds3 SphereDensity::bounds() const {
+  Bounds3 b;
+  b.min = center_ - Vec3(radius_);
+  b.max = center_ + Vec3(radius_);
+  return b;
+}
+
+std::unique_ptr<DensityField::Lookup> SphereDensity::lookup() const {
+  return std::make_unique<SphereLookup>(center_, radius_, density_);
+}
+
+std::string SphereDensity::describe() const {
+  std::ostringstream os;
+  os << "sphere center [" << center_.x << "," << center_.y << "," << center_.z << "] radius "
+     << radius_ << " density " << density_;
+  return os.str();
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,47 @@
+// The density-field interface the transport and bake code read clouds through.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "core/math/vec3.h"
+#include "core/volume/majorant_grid.h"
+
+namespace cloudbake {
+
+/// A scalar density field in world space (unitless density; the medium's `extinction` turns it
+/// into sigma_t per world unit). Zero outside bounds(). Implementations: analytic box/sphere
+/// (exact, for verification) and GridVolume (sparse OpenVDB FloatGrid, trilinear lookups).
+///
+/// Thread-safety: the field itself is immutable and shared; lookups go through a per-thread
+/// Lookup object (OpenVDB accessors cache tree nodes and must not be shared between threads).
+class DensityField {
+ public:
+  /// Per-thread density lookup.
+  class Lookup {
+   public:
+    virtual ~Lookup() = default;
+    /// Density at world position `p` (>= 0, finite).
+    virtual double density(const Vec3& p) = 0;
+  };
+
+  virtual ~DensityField() = default;
+
+  /// World-space box outside which density is exactly zero.
+  virtual Bounds3 bounds() const = 0;
+  /// Upper bound of density anywhere.
+  virtual double maxDensity() const = 0;
+  /// A new lookup object, to be used by one thread at a time.
+  virtual std::unique_ptr<Lookup> lookup() const = 0;
+  /// Per-region density upper bounds for tracking and empty-space skipping.
+  virtual const MajorantGrid& majorants() const = 0;
+  /// Characteristic feature size in world units (voxel size for grids; for analytic shapes a
+  /// small fraction of their extent). Ray marchers use it to choose step lengths.
+  virtual double featureSize() const = 0;
+  /// e.g. "box [..]-[..] density 1" or "vdb 'density' 412x300x500 voxels of 0.5".
+  virtual std::string describe() const = 0;
+};
+
+using DensityFieldPtr = std::shared_ptr<const DensityField>;
+
+}  // namespace cloudbake
