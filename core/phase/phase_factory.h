@@ -16,13 +16,16 @@ struct PhaseSpec {
   double diameter_um = 20.0;         ///< mie_approx: droplet diameter, micrometres (5..50)
   double effective_radius_um = 10.0; ///< mie: effective radius of the gamma size distribution
   double effective_variance = 0.1;   ///< mie: effective variance (dimensionless, > 0)
+  /// Any type: Mie/isotropic ratio R in [0, 1]; p = R p_type + (1 - R) / (4 pi). 1 = unblended.
+  double mie_ratio = 1.0;
 };
 
 /// Throws InputError naming the parameter when a value is out of range.
 std::shared_ptr<const PhaseFunction> makePhaseFunction(const PhaseSpec& spec);
 
 /// Parses the compact CLI form, e.g. "isotropic", "hg:g=0.75", "mie_approx:d=20",
-/// "mie:reff=10,veff=0.1". Throws InputError on unknown names or bad values.
+/// "mie:reff=10,veff=0.1"; any form may add "ratio=R" (e.g. "mie:reff=10,ratio=0.3").
+/// Throws InputError on unknown names or bad values.
 PhaseSpec parsePhaseSpec(const std::string& text);
 
 }  // namespace cloudbake

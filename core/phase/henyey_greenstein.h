@@ -1,0 +1,35 @@
+// The Henyey-Greenstein phase function.
+#pragma once
+
+#include "core/phase/phase_function.h"
+
+namespace cloudbake {
+
+/// HG value p(cos_theta) = (1 - g^2) / (4 pi (1 + g^2 - 2 g cos_theta)^(3/2)), sr^-1.
+/// Henyey & Greenstein 1941, ApJ 93:70.
+double hgEval(double g, double cos_theta);
+
+/// Inverts the HG CDF: cos_theta for a uniform u in [0, 1). Written as one rational function of
+/// g and u so it has no 1/g cancellation and is exact at g = 0 (uniform) and stable near |g| = 1.
+double hgSampleCosTheta(double g, double u);
+
+/// Henyey-Greenstein phase function with asymmetry `g` in (-1, 1) (default isotropic), grey.
+/// Its mean cosine equals g.
+class HenyeyGreensteinPhase final : public PhaseFunction {
+ public:
+  /// Throws InputError ("phase.g: ...") unless g is finite and in (-1, 1).
+  explicit HenyeyGreensteinPhase(double g);
+
+  Rgb eval(double cos_theta) const override { return Rgb(hgEval(g_, cos_theta)); }
+  double pdf(double cos_theta) const override { return hgEval(g_, cos_theta); }
+  double sampleCosTheta(double u) const override { return hgSampleCosTheta(g_, u); }
+  Rgb meanCosine() const override { return Rgb(g_); }
+  std::string describe() const override;
+
+  double g() const { return g_; }
+
+ private:
+  double g_;
+};
+
+}  // namespace cloudbake
