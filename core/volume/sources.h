@@ -51,6 +51,12 @@ struct PerlinCloudOptions {
   uint64_t seed = 1;
 };
 
+/// All three return a GridVolume (core/volume/grid_volume.h) and throw InputError naming the
+/// file / option on bad input. loadVdbVolume converts level sets to fog volumes
+/// (openvdb::tools::sdfToFogVolume: 1 inside, linear ramp across the inner narrow band) and
+/// rejects non-float, empty, non-finite or negative grids (vdb_source.cpp). meshToVolume fills
+/// voxels whose generalised winding number exceeds 1/2 (core/volume/mesh_volume.h), so open
+/// meshes get a sensible solid. makePerlinCloud is described in core/volume/perlin_cloud.h.
 DensityFieldPtr loadVdbVolume(const VdbSourceOptions& options);
 DensityFieldPtr meshToVolume(const MeshSourceOptions& options);
 DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& options);

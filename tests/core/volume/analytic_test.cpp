@@ -4,6 +4,9 @@
 
 #include "core/error.h"
 
+#include <algorithm>
+#include <cmath>
+
 namespace cloudbake {
 namespace {
 
@@ -29,6 +32,33 @@ TEST(SphereDensity, InsideAndOutsideAndBadInput) {
   EXPECT_EQ(lookup->density(Vec3(2.5, 3.5, 3)), 0.0);
   EXPECT_THROW(SphereDensity(Vec3(0, 0, 0), 0, 1), InputError);
   EXPECT_THROW(SphereDensity(Vec3(0, 0, 0), 1, INFINITY), InputError);
+}
+
+}  // namespace
+}  // namespace cloudbake
+
+namespace cloudbake {
+namespace {
+
+TEST(SphereDensity, MajorantsBoundTheSphereAndSkipEmptyCorners) {
+  SphereDensity s(Vec3(0.5, -1, 2), 1.5, 3.0);
+  const MajorantGrid& m = s.majorants();
+  // Corner cells of the bounding box lie outside the sphere: majorant 0 there.
+  EXPECT_EQ(m.cell(0, 0, 0), 0.f);
+  EXPECT_EQ(m.cell(m.nx() - 1, m.ny() - 1, m.nz() - 1), 0.f);
+  // Every point inside the sphere lies in a cell whose majorant covers its density.
+  auto lookup = s.lookup();
+  const Bounds3 b = m.bounds();
+  const Vec3 e = b.extent();
+  for (int i = 0; i < 20000; ++i) {
+    const Vec3 u(std::fmod(i * 0.6180339887, 1.0), std::fmod(i * 0.7548776662, 1.0),
+                 std::fmod(i * 0.5698402910, 1.0));
+    const Vec3 p = b.min + e * u;
+    const int x = std::min(m.nx() - 1, static_cast<int>(u.x * m.nx()));
+    const int y = std::min(m.ny() - 1, static_cast<int>(u.y * m.ny()));
+    const int z = std::min(m.nz() - 1, static_cast<int>(u.z * m.nz()));
+    ASSERT_GE(m.cell(x, y, z), lookup->density(p)) << "at " << p.x << "," << p.y << "," << p.z;
+  }
 }
 
 }  // namespace

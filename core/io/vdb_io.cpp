@@ -1,0 +1,202 @@
+#include "core/io/vdb_io.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
+#include <openvdb/tree/LeafManager.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <set>
+
+#include "core/error.h"
+#include "core/volume/grid_volume.h"
+#include "core/volume/openvdb_grid.h"
+#include "core/volume/sources.h"
+
+namespace cloudbake {
+namespace {
+
+void initOpenVdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+// Evaluates `fn` at every active voxel of `topology` into a grid of the same topology.
+template <typename GridT, typename Fn>
+typename GridT::Ptr gridFromTopology(const openvdb::FloatGrid& topology, Fn&& fn) {
+  using TreeT = typename GridT::TreeType;
+  using ValueT = typename GridT::ValueType;
+  auto tree =
+      std::make_shared<TreeT>(topology.tree(), openvdb::zeroVal<ValueT>(), openvdb::TopologyCopy());
+  tree->voxelizeActiveTiles();
+  const openvdb::math::Transform& xform = topology.transform();
+  openvdb::tree::LeafManager<TreeT> leaves(*tree);
+  leaves.foreach ([&](typename TreeT::LeafNodeType& leaf, size_t) {
+    for (auto it = leaf.beginValueOn(); it; ++it) {
+      const openvdb::Vec3d w = xform.indexToWorld(it.getCoord());
+      const ValueT v = fn(Vec3(w.x(), w.y(), w.z()));
+      if (v == openvdb::zeroVal<ValueT>()) {
+        it.setValueOff();
+      } else {
+        it.setValue(v);
+      }
+    }
+  });
+  tree->prune();
+  auto grid = GridT::create(tree);
+  grid->setTransform(xform.copy());
+  return grid;
+}
+
+void addMetadata(openvdb::GridBase& grid, const std::map<std::string, std::string>& meta) {
+  for (const auto& [k, v] : meta) grid.insertMeta(k, openvdb::StringMetadata(v));
+}
+
+}  // namespace
+
+void writeVdb(const std::string& path, const DensityField& density,
+              const VdbWriteOptions& options) {
+  initOpenVdb();
+  std::set<std::string> names{"density"};
+  for (const auto& g : options.float_grids)
+    if (g.name.empty() || !g.value || !names.insert(g.name).second)
+      throw InputError(path + ": extra float grid name '" + g.name +
+                       "' is empty, duplicated or has no value function");
+  for (const auto& g : options.vec3_grids)
+    if (g.name.empty() || !g.value || !names.insert(g.name).second)
+      throw InputError(path + ": extra vec3 grid name '" + g.name +
+                       "' is empty, duplicated or has no value function");
+
+  DensityFieldPtr voxelized;
+  const auto* volume = dynamic_cast<const GridVolume*>(&density);
+  if (!volume) {
+    voxelized = voxelize(density, options.voxel_size, options.max_voxels);
+    volume = dynamic_cast<const GridVolume*>(voxelized.get());
+  }
+  // A shallow copy shares the (immutable) tree; only its metadata changes.
+  auto grid = openvdb::ConstPtrCast<openvdb::FloatGrid>(openvdbGrid(*volume)->copy());
+  grid->setName("density");
+  grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+  addMetadata(*grid, options.grid_metadata);
+  openvdb::GridPtrVec grids{grid};
+  for (const auto& spec : options.float_grids) {
+    auto g = gridFromTopology<openvdb::FloatGrid>(*grid, spec.value);
+    g->setName(spec.name);
+    addMetadata(*g, options.grid_metadata);
+    grids.push_back(g);
+  }
+  for (const auto& spec : options.vec3_grids) {
+    auto g = gridFromTopology<openvdb::Vec3SGrid>(*grid, [&](const Vec3& p) {
+      const Vec3 v = spec.value(p);
+      return openvdb::Vec3s(static_cast<float>(v.x), static_cast<float>(v.y),
+                            static_cast<float>(v.z));
+    });
+    g->setName(spec.name);
+    g->setVectorType(openvdb::VEC_INVARIANT);
+    addMetadata(*g, options.grid_metadata);
+    grids.push_back(g);
+  }
+  openvdb::MetaMap file_meta;
+  for (const auto& [k, v] : options.file_metadata)
+    file_meta.insertMeta(k, openvdb::StringMetadata(v));
+
+  const std::string tmp = path + ".tmp";
+  try {
+    openvdb::io::File file(tmp);
+    file.write(grids, file_meta);
+    file.close();
+  } catch (const std::exception& e) {
+    std::remove(tmp.c_str());
+    throw InputError(path + ": cannot write VDB file (" + e.what() + ")");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    throw InputError(path + ": cannot rename " + tmp + " into place (" + ec.message() + ")");
+  }
+}
+
+struct VdbFileReader::Impl {
+  std::string path;
+  std::map<std::string, std::string> file_meta;
+  std::vector<VdbGridInfo> infos;
+  openvdb::GridPtrVec grids;
+
+  openvdb::GridBase::ConstPtr find(const std::string& name) const {
+    for (const auto& g : grids)
+      if (g->getName() == name) return g;
+    throw InputError(path + ": no grid named '" + name + "'");
+  }
+};
+
+namespace {
+
+std::map<std::string, std::string> stringMeta(const openvdb::MetaMap& meta) {
+  std::map<std::string, std::string> out;
+  for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
+    if (it->second && it->second->typeName() == openvdb::StringMetadata::staticTypeName()) {
+      out[it->first] = it->second->str();
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+VdbFileReader::VdbFileReader(const std::string& path) : impl_(std::make_unique<Impl>()) {
+  initOpenVdb();
+  impl_->path = path;
+  if (!std::filesystem::is_regular_file(path)) throw InputError(path + ": VDB file not found");
+  try {
+    // Like loadVdbVolume: a stream that throws on short reads catches truncated files.
+    std::ifstream in(path, std::ios::binary);
+    in.exceptions(std::ios::failbit | std::ios::badbit);
+    openvdb::io::Stream stream(in, /*delayLoad=*/false);
+    impl_->grids = *stream.getGrids();
+    impl_->file_meta = stringMeta(*stream.getMetadata());
+  } catch (const std::exception& e) {
+    throw InputError(path + ": not a readable OpenVDB file (" + e.what() + ")");
+  }
+  for (const auto& g : impl_->grids) {
+    VdbGridInfo info;
+    info.name = g->getName();
+    info.value_type = g->valueType();
+    info.grid_class = openvdb::GridBase::gridClassToString(g->getGridClass());
+    if (info.value_type.rfind("vec3", 0) == 0) {
+      info.vector_type = openvdb::GridBase::vecTypeToString(g->getVectorType());
+    }
+    info.active_voxels = g->activeVoxelCount();
+    info.voxel_size = g->voxelSize()[0];
+    info.metadata = stringMeta(*g);
+    impl_->infos.push_back(info);
+  }
+}
+
+VdbFileReader::~VdbFileReader() = default;
+
+const std::map<std::string, std::string>& VdbFileReader::fileMetadata() const {
+  return impl_->file_meta;
+}
+const std::vector<VdbGridInfo>& VdbFileReader::grids() const { return impl_->infos; }
+
+float VdbFileReader::floatAt(const std::string& name, const Vec3& p) const {
+  auto grid = openvdb::gridConstPtrCast<openvdb::FloatGrid>(impl_->find(name));
+  if (!grid) throw InputError(impl_->path + ": grid '" + name + "' is not a float grid");
+  const openvdb::Coord ijk =
+      grid->transform().worldToIndexCellCentered(openvdb::Vec3d(p.x, p.y, p.z));
+  return grid->tree().getValue(ijk);
+}
+
+Vec3 VdbFileReader::vec3At(const std::string& name, const Vec3& p) const {
+  auto grid = openvdb::gridConstPtrCast<openvdb::Vec3SGrid>(impl_->find(name));
+  if (!grid) throw InputError(impl_->path + ": grid '" + name + "' is not a Vec3s grid");
+  const openvdb::Coord ijk =
+      grid->transform().worldToIndexCellCentered(openvdb::Vec3d(p.x, p.y, p.z));
+  const openvdb::Vec3s v = grid->tree().getValue(ijk);
+  return {v.x(), v.y(), v.z()};
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,131 @@
+#include "core/io/vdb_io.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "core/error.h"
+#include "core/math/rng.h"
+#include "core/volume/analytic.h"
+#include "core/volume/grid_volume.h"
+#include "core/volume/sources.h"
+
+namespace cloudbake {
+namespace {
+
+class VdbIoTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = (std::filesystem::temp_directory_path() /
+            ("cloudbake_vdb_io_test_" + std::to_string(::getpid())))
+               .string();
+    std::filesystem::remove_all(dir_);
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string dir_;
+};
+
+TEST_F(VdbIoTest, RoundTripsDensityExtraGridsAndMetadata) {
+  PerlinCloudOptions cloud;
+  cloud.resolution = 32;
+  const auto field = makePerlinCloud(cloud);
+  VdbWriteOptions o;
+  o.float_grids.push_back({"height", [](const Vec3& p) { return static_cast<float>(p.z + 1); }});
+  o.vec3_grids.push_back({"Cd", [](const Vec3& p) { return Vec3(p.x, 2.0, p.z); }});
+  o.file_metadata["creator"] = "cloudbake test";
+  o.grid_metadata["units"] = "metres";
+  const std::string path = dir_ + "/cloud.vdb";
+  writeVdb(path, *field, o);
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
+
+  const VdbFileReader reader(path);
+  EXPECT_EQ(reader.fileMetadata().at("creator"), "cloudbake test");
+  ASSERT_EQ(reader.grids().size(), 3u);
+  // Grid order in the file is OpenVDB's choice; look them up by name.
+  auto grid = [&](const std::string& name) {
+    for (const auto& info : reader.grids())
+      if (info.name == name) return info;
+    ADD_FAILURE() << "no grid " << name;
+    return VdbGridInfo{};
+  };
+  const VdbGridInfo g[3] = {grid("density"), grid("height"), grid("Cd")};
+  const uint64_t active = dynamic_cast<const GridVolume&>(*field).activeVoxelCount();
+  EXPECT_EQ(g[0].name, "density");
+  EXPECT_EQ(g[0].value_type, "float");
+  EXPECT_EQ(g[0].grid_class, "fog volume");
+  EXPECT_EQ(g[0].active_voxels, active);
+  EXPECT_EQ(g[0].metadata.at("units"), "metres");
+  EXPECT_EQ(g[1].name, "height");
+  EXPECT_EQ(g[1].active_voxels, active);
+  EXPECT_EQ(g[2].name, "Cd");
+  EXPECT_EQ(g[2].value_type, "vec3s");
+  EXPECT_EQ(g[2].vector_type, "invariant");
+  EXPECT_EQ(g[2].active_voxels, active);
+  EXPECT_NEAR(g[2].voxel_size, dynamic_cast<const GridVolume&>(*field).voxelSize(), 1e-12);
+
+  // Values at voxel centres survive; the density reloads as the same field.
+  const auto reloaded = loadVdbVolume({path, "density"});
+  auto a = field->lookup(), b = reloaded->lookup();
+  Rng rng(1);
+  int checked = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const Vec3 p(rng.uniform() * 2 - 1, rng.uniform() * 2 - 1, rng.uniform());
+    EXPECT_EQ(a->density(p), b->density(p));
+    const float d = reader.floatAt("density", p);
+    if (d > 0) {
+      ++checked;
+      EXPECT_NEAR(reader.floatAt("height", p), p.z + 1, 0.04);
+      const Vec3 cd = reader.vec3At("Cd", p);
+      EXPECT_NEAR(cd.x, p.x, 0.04);
+      EXPECT_EQ(cd.y, 2.0);
+    }
+  }
+  EXPECT_GT(checked, 100);
+  EXPECT_THROW(reader.floatAt("nope", Vec3(0)), InputError);
+  EXPECT_THROW(reader.floatAt("Cd", Vec3(0)), InputError);
+}
+
+TEST_F(VdbIoTest, VoxelizesAnalyticFieldsAndOverwritesAtomically) {
+  const BoxDensity box(Vec3(0.01, 0.01, 0.01), Vec3(0.99, 0.49, 0.29), 3.0);
+  const std::string path = dir_ + "/box.vdb";
+  VdbWriteOptions o;
+  EXPECT_THROW(writeVdb(path, box, o), InputError);  // no voxel size for a non-grid field
+  o.voxel_size = 0.1;
+  writeVdb(path, box, o);
+  writeVdb(path, box, o);  // overwrite in place
+  const VdbFileReader reader(path);
+  ASSERT_EQ(reader.grids().size(), 1u);
+  EXPECT_EQ(reader.grids()[0].active_voxels, 9u * 4u * 2u);  // centres at multiples of 0.1
+  EXPECT_EQ(reader.floatAt("density", Vec3(0.5, 0.2, 0.1)), 3.0f);
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
+}
+
+TEST_F(VdbIoTest, ErrorsNameThePath) {
+  const SphereDensity sphere(Vec3(0), 1.0, 1.0);
+  VdbWriteOptions o;
+  o.voxel_size = 0.25;
+  const std::string bad = dir_ + "/no/such/dir/x.vdb";
+  try {
+    writeVdb(bad, sphere, o);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(bad), std::string::npos) << e.what();
+  }
+  o.float_grids.push_back({"density", [](const Vec3&) { return 1.f; }});
+  EXPECT_THROW(writeVdb(dir_ + "/y.vdb", sphere, o), InputError);
+  o.float_grids = {{"", [](const Vec3&) { return 1.f; }}};
+  EXPECT_THROW(writeVdb(dir_ + "/y.vdb", sphere, o), InputError);
+  EXPECT_THROW(VdbFileReader(dir_ + "/missing.vdb"), InputError);
+  // A truncated file is reported, not half-read.
+  const std::string good = dir_ + "/good.vdb";
+  o.float_grids.clear();
+  writeVdb(good, sphere, o);
+  const auto size = std::filesystem::file_size(good);
+  std::filesystem::resize_file(good, size - 10);
+  EXPECT_THROW(VdbFileReader{good}, InputError);
+}
+
+}  // namespace
+}  // namespace cloudbake
