@@ -15,8 +15,8 @@ namespace cloudbake {
 /// sigma_s = albedo * sigma_t per channel; the phase function may be chromatic.
 struct Medium {
   DensityFieldPtr density;
-  double extinction = 1.0;   ///< per world unit per unit density, >= 0
-  Rgb albedo{1, 1, 1};       ///< single-scattering albedo per channel, in [0, 1]
+  double extinction = 1.0;  ///< per world unit per unit density, >= 0
+  Rgb albedo{1, 1, 1};      ///< single-scattering albedo per channel, in [0, 1]
   std::shared_ptr<const PhaseFunction> phase;
 };
 

@@ -1,0 +1,85 @@
+#include "core/transport/camera.h"
+
+#include <cmath>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+[[noreturn]] void fail(const Camera& camera, const std::string& field, const std::string& why) {
+  throw InputError("view '" + camera.name + "': camera." + field + ": " + why);
+}
+
+std::string str(const Vec3& v) {
+  std::ostringstream os;
+  os << "[" << v.x << ", " << v.y << ", " << v.z << "]";
+  return os.str();
+}
+
+}  // namespace
+
+void validateCamera(const Camera& c) {
+  if (!isFinite(c.position)) fail(c, "position", "must be finite, got " + str(c.position));
+  if (!isFinite(c.look_at)) fail(c, "look_at", "must be finite, got " + str(c.look_at));
+  if (!isFinite(c.up)) fail(c, "up", "must be finite, got " + str(c.up));
+  const Vec3 view = c.look_at - c.position;
+  const double view_len = length(view);
+  if (!(view_len > 0) || !std::isfinite(view_len)) {
+    fail(c, "look_at", "must differ from camera.position (both " + str(c.position) + ")");
+  }
+  const double up_len = length(c.up);
+  if (!(up_len > 0) || !std::isfinite(up_len)) fail(c, "up", "must be a non-zero vector");
+  // Relative test: |sin(angle between up and view)| below 1e-6 leaves no usable right axis.
+  if (length(cross(view / view_len, c.up / up_len)) < 1e-6) {
+    fail(c, "up", "must not be parallel to the view direction, got " + str(c.up));
+  }
+  if (c.type == Camera::Type::kPerspective) {
+    if (!std::isfinite(c.fov_deg) || !(c.fov_deg > 0) || !(c.fov_deg < 180)) {
+      std::ostringstream os;
+      os << "must be in (0, 180) degrees, got " << c.fov_deg;
+      fail(c, "fov_deg", os.str());
+    }
+  } else if (c.type == Camera::Type::kOrthographic) {
+    if (!std::isfinite(c.width) || !(c.width > 0)) {
+      std::ostringstream os;
+      os << "must be finite and > 0 world units, got " << c.width;
+      fail(c, "width", os.str());
+    }
+  } else {
+    fail(c, "type", "unknown camera type");
+  }
+  if (c.width_px < 1 || c.width_px > kMaxImageSide || c.height_px < 1 ||
+      c.height_px > kMaxImageSide ||
+      static_cast<long long>(c.width_px) * c.height_px > kMaxImagePixels) {
+    std::ostringstream os;
+    os << "must be 1..16384 pixels per side and at most 2^26 pixels, got " << c.width_px << "x"
+       << c.height_px;
+    fail(c, "resolution", os.str());
+  }
+}
+
+CameraRays::CameraRays(const Camera& camera) : camera_(camera) {
+  validateCamera(camera);
+  forward_ = normalize(camera.look_at - camera.position);
+  right_ = normalize(cross(forward_, camera.up));
+  up_ = cross(right_, forward_);
+  const double aspect = static_cast<double>(camera.height_px) / camera.width_px;
+  half_w_ = camera.type == Camera::Type::kPerspective ? std::tan(0.5 * camera.fov_deg * kPi / 180.0)
+                                                      : 0.5 * camera.width;
+  half_h_ = half_w_ * aspect;
+}
+
+Ray CameraRays::generate(double fx, double fy) const {
+  // Film coordinates in [-1, 1], +x right, +y up (pixel rows grow downwards).
+  const double sx = 2.0 * fx / camera_.width_px - 1.0;
+  const double sy = 1.0 - 2.0 * fy / camera_.height_px;
+  if (camera_.type == Camera::Type::kPerspective) {
+    const Vec3 d = forward_ + right_ * (sx * half_w_) + up_ * (sy * half_h_);
+    return {camera_.position, normalize(d)};
+  }
+  return {camera_.position + right_ * (sx * half_w_) + up_ * (sy * half_h_), forward_};
+}
+
+}  // namespace cloudbake

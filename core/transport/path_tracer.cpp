@@ -1,0 +1,302 @@
+#include "core/transport/path_tracer.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/math/rng.h"
+#include "core/transport/camera.h"
+#include "core/transport/sky.h"
+#include "core/transport/tracking.h"
+
+namespace cloudbake {
+namespace {
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+// Russian roulette starts after this many scattering events; earlier orders carry most of the
+// image and are cheap, later ones are rouletted on the throughput (unbiased, Arvo & Kirk 1990).
+constexpr int kRouletteDepth = 3;
+
+template <typename T>
+std::string str(const T& v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+std::string str(const Vec3& v) {
+  std::ostringstream os;
+  os << "[" << v.x << ", " << v.y << ", " << v.z << "]";
+  return os.str();
+}
+
+void validateMedium(const Medium& m) {
+  if (!m.density) throw InputError("medium.density: no density field given");
+  if (!m.phase) throw InputError("medium.phase: no phase function given");
+  if (!std::isfinite(m.extinction) || m.extinction < 0) {
+    throw InputError("medium.extinction: must be finite and >= 0, got " + str(m.extinction));
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (!(m.albedo[c] >= 0 && m.albedo[c] <= 1)) {  // also rejects NaN
+      throw InputError("medium.albedo: each channel must be in [0, 1], got " + str(m.albedo));
+    }
+  }
+  const double max_density = m.density->maxDensity();
+  if (!std::isfinite(max_density) || max_density < 0) {
+    throw InputError("medium.density: maximum density must be finite and >= 0, got " +
+                     str(max_density));
+  }
+  if (!std::isfinite(m.extinction * max_density) ||
+      !std::isfinite(m.extinction * static_cast<double>(m.density->majorants().maxValue()))) {
+    throw InputError("medium.extinction: extinction * max density overflows");
+  }
+}
+
+Vec3 validateSun(const Sun& sun) {
+  if (!isFinite(sun.direction)) {
+    throw InputError("sun.direction: must be finite, got " + str(sun.direction));
+  }
+  const double len = length(sun.direction);
+  if (!(len > 0) || !std::isfinite(len)) {
+    throw InputError("sun.direction: must be a non-zero vector, got " + str(sun.direction));
+  }
+  if (!isFinite(sun.irradiance) || sun.irradiance.x < 0 || sun.irradiance.y < 0 ||
+      sun.irradiance.z < 0) {
+    throw InputError("sun.irradiance: must be finite and >= 0 per channel, got " +
+                     str(sun.irradiance));
+  }
+  return sun.direction / len;
+}
+
+void validateOptions(const PathTracerOptions& o) {
+  if (o.samples_per_pixel < 1 || o.samples_per_pixel > (1 << 24)) {
+    throw InputError("samples_per_pixel: must be in 1..16777216, got " + str(o.samples_per_pixel));
+  }
+  if (o.max_depth < 1) throw InputError("max_depth: must be >= 1, got " + str(o.max_depth));
+  if (o.threads < 0 || o.threads > 4096) {
+    throw InputError("threads: must be in 0..4096 (0 = all), got " + str(o.threads));
+  }
+  if (o.tile_size < 1 || o.tile_size > 4096) {
+    throw InputError("tile_size: must be in 1..4096, got " + str(o.tile_size));
+  }
+}
+
+inline double powerHeuristic(double pdf_a, double pdf_b) {
+  const double a2 = pdf_a * pdf_a, b2 = pdf_b * pdf_b;
+  return a2 > 0 ? a2 / (a2 + b2) : 0.0;
+}
+
+/// Per-sample estimates of the layers (radiance) and of 1 - transmittance.
+struct PathSample {
+  Rgb sun, sky, single, multiple, background;
+  double alpha = 0;
+};
+
+/// The per-path estimator: delta tracking to real collisions; at each, next-event estimation
+/// of the sun (delta light, shadowed by ratio tracking) and of the sky (one light sample, MIS
+/// with phase sampling by the power heuristic, Veach 1997), then phase sampling for the next
+/// direction. Throughput carries sigma_s/sigma_t = albedo per channel and value/pdf per channel
+/// of a chromatic phase function; the real/null decision uses the grey sigma_t, so no spectral
+/// MIS is needed.
+class Integrator {
+ public:
+  Integrator(const Medium& medium, const Vec3& sun_dir, const Rgb& sun_e, const SkyLight& sky,
+             int max_depth)
+      : field_(*medium.density),
+        phase_(*medium.phase),
+        extinction_(medium.extinction),
+        albedo_(medium.albedo),
+        sun_dir_(sun_dir),
+        sun_e_(sun_e),
+        sun_on_(maxComponent(sun_e) > 0),
+        sky_(sky),
+        max_depth_(max_depth) {}
+
+  void trace(Ray ray, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
+    Rgb beta(1.0);
+    double phase_pdf = 0;            // pdf of the phase sample that produced `ray` (depth > 0)
+    for (int depth = 0;; ++depth) {  // depth = scattering events so far
+      const Collision c = deltaTrack(field_, lookup, extinction_, ray, 0, kInfinity, rng);
+      if (!c.hit) {
+        if (depth == 0) {
+          out->background = sky_.radiance(ray.d);
+        } else if (!sky_.black()) {
+          const double w = powerHeuristic(phase_pdf, sky_.pdf(ray.d));
+          add(out, /*from_sun=*/false, depth, beta * sky_.radiance(ray.d) * w);
+        }
+        return;
+      }
+      if (depth == 0) out->alpha = 1.0;
+      if (depth >= max_depth_) return;
+      beta *= albedo_;
+      if (!(maxComponent(beta) > 0)) return;  // pure absorber: nothing scatters
+      const int order = depth + 1;
+      const Vec3 wo = ray.d;
+
+      if (sun_on_) {
+        const Rgb f = phase_.eval(dot(wo, sun_dir_));
+        if (maxComponent(f) > 0) {
+          const double tr =
+              ratioTrack(field_, lookup, extinction_, {c.p, sun_dir_}, 0, kInfinity, rng);
+          if (tr > 0) add(out, true, order, beta * f * sun_e_ * tr);
+        }
+      }
+      if (!sky_.black()) {
+        const double u1 = rng.uniform(), u2 = rng.uniform();
+        const SkySample s = sky_.sample(u1, u2);
+        if (s.pdf > 0 && maxComponent(s.radiance) > 0) {
+          const double cos_theta = dot(wo, s.wi);
+          const Rgb f = phase_.eval(cos_theta);
+          if (maxComponent(f) > 0) {
+            const double tr =
+                ratioTrack(field_, lookup, extinction_, {c.p, s.wi}, 0, kInfinity, rng);
+            if (tr > 0) {
+              const double w = powerHeuristic(s.pdf, phase_.pdf(cos_theta));
+              add(out, false, order, beta * f * s.radiance * (tr * w / s.pdf));
+            }
+          }
+        }
+      }
+
+      const double u1 = rng.uniform(), u2 = rng.uniform();
+      const PhaseSample ps = phase_.sample(wo, u1, u2);
+      if (!(ps.pdf > 0)) return;
+      beta *= ps.value / ps.pdf;
+      phase_pdf = ps.pdf;
+      ray = {c.p, ps.wi};
+      if (order >= kRouletteDepth) {
+        const double q = std::min(1.0, maxComponent(beta));
+        if (q < 1.0) {
+          if (!(rng.uniform() < q)) return;
+          beta /= q;
+        }
+      }
+    }
+  }
+
+ private:
+  static void add(PathSample* out, bool from_sun, int order, const Rgb& l) {
+    (from_sun ? out->sun : out->sky) += l;
+    (order == 1 ? out->single : out->multiple) += l;
+  }
+
+  const DensityField& field_;
+  const PhaseFunction& phase_;
+  double extinction_;
+  Rgb albedo_;
+  Vec3 sun_dir_;
+  Rgb sun_e_;
+  bool sun_on_;
+  const SkyLight& sky_;
+  int max_depth_;
+};
+
+void store(Image& im, int x, int y, const Rgb& v, double scale) {
+  float* p = im.at(x, y);
+  p[0] = static_cast<float>(v.x * scale);
+  p[1] = static_cast<float>(v.y * scale);
+  p[2] = static_cast<float>(v.z * scale);
+}
+
+}  // namespace
+
+RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& sky,
+                              const Camera& camera, const PathTracerOptions& options,
+                              const ProgressFn& progress) {
+  validateMedium(medium);
+  const Vec3 sun_dir = validateSun(sun);
+  validateOptions(options);
+  const CameraRays rays(camera);
+  const SkyLight sky_light(sky);
+  const Integrator integrator(medium, sun_dir, sun.irradiance, sky_light, options.max_depth);
+
+  const int w = camera.width_px, h = camera.height_px, ts = options.tile_size;
+  const int tiles_x = (w + ts - 1) / ts, tiles_y = (h + ts - 1) / ts;
+  const int tiles = tiles_x * tiles_y;
+  const int spp = options.samples_per_pixel;
+  const double inv_spp = 1.0 / spp;
+
+  RenderLayers out;
+  out.beauty = Image(w, h, 4);
+  out.sun = Image(w, h, 3);
+  out.sky = Image(w, h, 3);
+  out.single = Image(w, h, 3);
+  out.multiple = Image(w, h, 3);
+
+  std::atomic<bool> cancelled{false};
+  std::atomic<int> tiles_done{0};
+  std::mutex progress_mutex;
+  int reported = 0;
+
+  auto render_tile = [&](int tile) {
+    const int x0 = (tile % tiles_x) * ts, y0 = (tile / tiles_x) * ts;
+    const int x1 = std::min(x0 + ts, w), y1 = std::min(y0 + ts, h);
+    const int tw = x1 - x0;
+    std::vector<PathSample> acc(size_t(tw) * (y1 - y0));
+    const auto lookup = medium.density->lookup();
+    Rng rng;
+    for (int s = 0; s < spp; ++s) {
+      if (cancelled.load(std::memory_order_relaxed)) return;
+      // One stream per (tile, sample): the image does not depend on which thread runs a tile.
+      rng.setSeed(mixBits(options.seed, mixBits(uint64_t(tile), uint64_t(s))),
+                  mixBits(uint64_t(tile), options.seed));
+      for (int y = y0; y < y1; ++y) {
+        for (int x = x0; x < x1; ++x) {
+          const double fx = x + rng.uniform(), fy = y + rng.uniform();
+          PathSample ps;
+          integrator.trace(rays.generate(fx, fy), *lookup, rng, &ps);
+          PathSample& a = acc[size_t(y - y0) * tw + (x - x0)];
+          a.sun += ps.sun;
+          a.sky += ps.sky;
+          a.single += ps.single;
+          a.multiple += ps.multiple;
+          a.background += ps.background;
+          a.alpha += ps.alpha;
+        }
+      }
+    }
+    for (int y = y0; y < y1; ++y) {
+      for (int x = x0; x < x1; ++x) {
+        const PathSample& a = acc[size_t(y - y0) * tw + (x - x0)];
+        store(out.beauty, x, y, a.sun + a.sky + a.background, inv_spp);
+        out.beauty.at(x, y)[3] = static_cast<float>(a.alpha * inv_spp);
+        store(out.sun, x, y, a.sun, inv_spp);
+        store(out.sky, x, y, a.sky, inv_spp);
+        store(out.single, x, y, a.single, inv_spp);
+        store(out.multiple, x, y, a.multiple, inv_spp);
+      }
+    }
+    const int done = ++tiles_done;
+    if (progress) {
+      std::lock_guard<std::mutex> lock(progress_mutex);
+      reported = std::max(reported, done);  // keep the reported fraction monotonic
+      if (!cancelled.load() && !progress(double(reported) / tiles)) cancelled = true;
+    }
+  };
+
+  auto run = [&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, tiles, 1), [&](const tbb::blocked_range<int>& r) {
+      for (int t = r.begin(); t != r.end(); ++t) {
+        if (cancelled.load(std::memory_order_relaxed)) return;
+        render_tile(t);
+      }
+    });
+  };
+  if (options.threads > 0) {
+    tbb::task_arena arena(options.threads);
+    arena.execute(run);
+  } else {
+    run();
+  }
+  if (cancelled) throw Cancelled("path tracing of view '" + camera.name + "' cancelled");
+  return out;
+}
+
+}  // namespace cloudbake
