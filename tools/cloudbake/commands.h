@@ -17,4 +17,11 @@ enum ExitCode : int {
   kCancelled = 6,
 };
 
+/// `cloudbake mie`: Lorenz-Mie efficiencies of one sphere (cmd_mie.cpp).
+void addMieCommand(CLI::App& app, int* exit_code);
+/// `cloudbake phase`: tabulate/plot a phase function (cmd_phase.cpp).
+void addPhaseCommand(CLI::App& app, int* exit_code);
+/// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
+void addRenderCommand(CLI::App& app, int* exit_code);
+
 }  // namespace cloudbake::tool

@@ -11,7 +11,9 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("cloudbake ") + CLOUDBAKE_VERSION);
   int exit_code = kOk;
-  (void)exit_code;
+  addMieCommand(app, &exit_code);
+  addPhaseCommand(app, &exit_code);
+  addRenderCommand(app, &exit_code);
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,36 @@
+// Turns a validated ShotSpec into what the renderers consume: medium, lights, cameras.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/shot/shot.h"
+#include "core/transport/scene.h"
+#include "core/volume/density_field.h"
+
+namespace cloudbake {
+
+/// A shot's renderable scene. `cameras` are in the shot's view order, named as the views.
+struct Scene {
+  Medium medium;
+  Sun sun;  ///< irradiance 0 when the shot has no sun
+  Sky sky;
+  std::vector<Camera> cameras;
+};
+
+/// Builds the density field of a single-frame volume: analytic box/sphere (exact), a VDB grid,
+/// a voxelised mesh or a Perlin cloud. Loading errors from the factories come back as
+/// InputError prefixed with `source` and the volume's JSON pointer ("shot.json: /volume/vdb:
+/// ..."). A `sequence` volume throws InputError (use buildSequenceFrame).
+DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source = "shot.json");
+
+/// Frame `frame` (0-based, < frames) of a `paths` sequence: that frame's VDB grid. Throws
+/// InputError for an out-of-range frame and for procedural sequences (not supported yet).
+DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame,
+                                   const std::string& source = "shot.json");
+
+/// Medium (density, extinction, albedo, phase function), sun, sky and cameras of a shot.
+/// Throws InputError (with `source` and the JSON pointer) when a part cannot be built.
+Scene buildScene(const ShotSpec& shot, const std::string& source = "shot.json");
+
+}  // namespace cloudbake

@@ -1,0 +1,107 @@
+// In-memory form of a shot file (docs/shot-format.md): what to bake, how to light it, what to
+// render. Produced by parseShot(); turned into a renderable scene by buildScene().
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "core/math/vec3.h"
+#include "core/phase/phase_factory.h"
+#include "core/transport/scene.h"
+#include "core/volume/sources.h"
+
+namespace cloudbake {
+
+/// Homogeneous box: corners in world units (min < max on every axis), density >= 0.
+struct BoxVolumeSpec {
+  Vec3 min, max;
+  double density = 1.0;
+};
+
+/// Homogeneous sphere: centre (world), radius > 0 (world units), density >= 0.
+struct SphereVolumeSpec {
+  Vec3 center;
+  double radius = 1.0;
+  double density = 1.0;
+};
+
+/// A float grid in an OpenVDB file; `path` is absolute after parsing.
+using VdbVolumeSpec = VdbSourceOptions;
+
+/// A voxelised triangle mesh (OBJ/PLY); `path` is absolute after parsing. Exactly one of
+/// voxel_size / resolution is non-zero.
+using MeshVolumeSpec = MeshSourceOptions;
+
+/// A procedural cloud. Only type "perlin_cloud" (seed 004) exists in format v1.
+struct ProceduralVolumeSpec {
+  std::string type = "perlin_cloud";
+  PerlinCloudOptions perlin;
+};
+
+/// An animated volume: either one VDB file per frame (`paths`, absolute after parsing; `frames`
+/// equals paths.size()) or a procedural cloud evolving over `frames` frames.
+struct SequenceVolumeSpec {
+  std::vector<std::string> paths;
+  std::string grid = "density";
+  std::optional<ProceduralVolumeSpec> procedural;
+  int frames = 0;
+};
+
+/// `volume`: exactly one source.
+using VolumeSpec = std::variant<BoxVolumeSpec, SphereVolumeSpec, VdbVolumeSpec, MeshVolumeSpec,
+                                ProceduralVolumeSpec, SequenceVolumeSpec>;
+
+/// `medium`: sigma_t = extinction * density per world unit; sigma_s = albedo * sigma_t.
+struct MediumSpec {
+  double extinction = 1.0;  ///< per world unit per unit density, in [0, 1e6]
+  Rgb albedo{1, 1, 1};      ///< single-scattering albedo per channel, in [0, 1]
+  PhaseSpec phase;
+};
+
+/// `lighting`: an optional sun (has_sun false: no sun) and a sky (default: black).
+struct LightingSpec {
+  bool has_sun = false;
+  Sun sun;  ///< direction is unit length after parsing
+  Sky sky;  ///< map_path is absolute after parsing
+};
+
+/// `bake`: the method and its quality knobs.
+struct BakeSpec {
+  enum class Method { kPathtrace, kSingle, kPointcloud, kPrecomputed, kAuto };
+  Method method = Method::kPathtrace;
+  int samples = 64;  ///< samples per pixel (pathtrace), 1..1e6
+  uint64_t seed = 1;
+  std::optional<int> max_depth;  ///< scattering events per path; unset: method default
+  /// The method's own knobs (every key of `bake` other than method/samples/seed/max_depth) as
+  /// compact JSON text with sorted keys, e.g. {"passes":8,"points":65536}. Validated by the
+  /// parser against the documented knobs of `method`; interpreted by the method itself.
+  std::string options_json = "{}";
+};
+
+/// `outputs`: which files a render writes.
+struct OutputSpec {
+  bool exr = true;            ///< DIR/<view>.exr per view
+  bool vdb = false;           ///< DIR/bake.vdb
+  double vdb_voxel_size = 0;  ///< world units; required for box/sphere volumes when vdb
+};
+
+/// A whole shot, validated. `views` holds the cameras with their names and pixel sizes.
+struct ShotSpec {
+  int version = 1;
+  std::string name = "shot";
+  VolumeSpec volume;
+  MediumSpec medium;
+  LightingSpec lighting;
+  BakeSpec bake;
+  std::vector<Camera> views;
+  OutputSpec outputs;
+};
+
+/// Shot-format names of the enums, as written in files.
+const char* methodName(BakeSpec::Method method);
+const char* volumeTypeName(const VolumeSpec& volume);
+
+}  // namespace cloudbake
