@@ -1,14 +1,222 @@
 #include "server/bake_service.h"
 
-namespace cloudbake::server {
+#include <spdlog/spdlog.h>
 
-grpc::Status BakeServiceImpl::GetServerInfo(grpc::ServerContext* /*context*/,
-                                            const cloudbake::v1::GetServerInfoRequest* /*request*/,
-                                            cloudbake::v1::ServerInfo* reply) {
-  reply->set_version(CLOUDBAKE_VERSION);
-  reply->add_methods("pathtrace");
-  reply->set_worker_threads(options_.worker_threads);
-  return grpc::Status::OK;
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "core/error.h"
+#include "core/job/job_errors.h"
+#include "server/convert.h"
+#include "server/status_mapping.h"
+
+namespace cloudbake::server {
+namespace {
+constexpr uint32_t kDefaultChunk = 256 * 1024;
+constexpr uint32_t kMinChunk = 64 * 1024;
+constexpr uint32_t kMaxChunk = 1024 * 1024;
+}  // namespace
+
+grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest*,
+                                            v1::ServerInfo* reply) {
+  return guarded("GetServerInfo", [&] {
+    const JobManagerOptions& o = jobs_.options();
+    reply->set_version(CLOUDBAKE_VERSION);
+    reply->add_methods("pathtrace");
+    reply->set_worker_threads(o.worker_threads);
+    reply->set_max_concurrent_jobs(o.max_concurrent_jobs);
+    reply->set_queue_bound(uint32_t(o.queue_bound));
+    reply->set_max_upload_bytes(o.max_upload_bytes);
+    reply->set_max_image_pixels(uint64_t(o.limits.max_image_pixels));
+    reply->set_max_views(uint32_t(o.limits.max_views));
+    reply->set_max_samples(uint64_t(o.limits.max_samples));
+    toProto(jobs_.stats(), reply->mutable_stats());
+    return grpc::Status::OK;
+  });
+}
+
+grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
+                                          grpc::ServerReader<v1::UploadAssetRequest>* reader,
+                                          v1::UploadAssetResponse* reply) {
+  return guarded("UploadAsset", [&] {
+    v1::UploadAssetRequest msg;
+    if (!reader->Read(&msg)) throw InputError("upload: no messages (expected a header first)");
+    if (!msg.has_header()) throw InputError("upload: the first message must be a header");
+    const v1::AssetHeader header = msg.header();
+    reply->set_sha256(header.sha256());
+    reply->set_size(header.size());
+    if (!jobs_.assets().find(header.sha256()).empty()) {
+      reply->set_already_present(true);  // the client may stop sending
+      return grpc::Status::OK;
+    }
+    AssetStore::Writer writer(jobs_.assets(), header.sha256(), header.size());
+    while (reader->Read(&msg)) {
+      if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled");
+      if (!msg.has_data() && msg.has_header()) {
+        throw InputError("upload: only the first message may be a header");
+      }
+      if (msg.data().size() > kMaxChunk) {
+        throw InputError("upload: data messages must be at most 1 MiB, got " +
+                         std::to_string(msg.data().size()) + " bytes");
+      }
+      writer.write(msg.data().data(), msg.data().size());
+    }
+    writer.finish();
+    spdlog::info("asset {} stored ({} bytes, '{}')", header.sha256(), header.size(),
+                 header.name().substr(0, 256));
+    return grpc::Status::OK;
+  });
+}
+
+grpc::Status BakeServiceImpl::SubmitJob(Ctx*, const v1::SubmitJobRequest* request,
+                                        v1::SubmitJobResponse* reply) {
+  return guarded("SubmitJob", [&] {
+    const SubmitInput input = fromProto(*request);
+    if (request->dry_run()) {
+      toProto(jobs_.plan(input), reply->mutable_plan());
+    } else {
+      const JobRecord record = jobs_.submit(input);
+      spdlog::info("job {}: submitted ('{}')", record.id, record.shot_name);
+      toProto(record, reply->mutable_job());
+    }
+    return grpc::Status::OK;
+  });
+}
+
+grpc::Status BakeServiceImpl::WatchJob(Ctx* ctx, const v1::WatchJobRequest* request,
+                                       grpc::ServerWriter<v1::JobEvent>* writer) {
+  return guarded("WatchJob", [&] {
+    checkJobId(request->job_id());
+    uint64_t after = request->after_seq();
+    for (;;) {
+      if (ctx->IsCancelled()) {
+        return grpc::Status(grpc::StatusCode::CANCELLED, "watch cancelled by the client");
+      }
+      JobRecord record;
+      const std::vector<JobEvent> events =
+          jobs_.events(request->job_id(), after, std::chrono::milliseconds(500), &record);
+      for (size_t i = 0; i < events.size(); ++i) {
+        v1::JobEvent e;
+        toProto(events[i], &e);
+        const bool last = i + 1 == events.size() && record.terminal();
+        if (last) toProto(record, e.mutable_job());
+        if (!writer->Write(e)) return grpc::Status(grpc::StatusCode::CANCELLED, "client gone");
+        after = events[i].seq;
+      }
+      if (record.terminal()) {
+        if (events.empty()) {  // resumed after the end: repeat the final state
+          v1::JobEvent e;
+          e.set_seq(after);
+          e.set_state(toProto(record.state));
+          e.set_stage(record.stage);
+          e.set_fraction(record.fraction);
+          e.set_message(record.error);
+          toProto(record, e.mutable_job());
+          writer->Write(e);
+        }
+        return grpc::Status::OK;
+      }
+    }
+  });
+}
+
+grpc::Status BakeServiceImpl::GetJob(Ctx*, const v1::GetJobRequest* request, v1::Job* reply) {
+  return guarded("GetJob", [&] {
+    checkJobId(request->job_id());
+    toProto(jobs_.get(request->job_id()), reply);
+    return grpc::Status::OK;
+  });
+}
+
+grpc::Status BakeServiceImpl::ListJobs(Ctx*, const v1::ListJobsRequest* request,
+                                       v1::ListJobsResponse* reply) {
+  return guarded("ListJobs", [&] {
+    for (const JobRecord& r : jobs_.list(fromProto(request->state()), request->limit())) {
+      toProto(r, reply->add_jobs());
+    }
+    return grpc::Status::OK;
+  });
+}
+
+grpc::Status BakeServiceImpl::CancelJob(Ctx*, const v1::CancelJobRequest* request, v1::Job* reply) {
+  return guarded("CancelJob", [&] {
+    checkJobId(request->job_id());
+    toProto(jobs_.cancel(request->job_id()), reply);
+    spdlog::info("job {}: cancel requested", request->job_id());
+    return grpc::Status::OK;
+  });
+}
+
+grpc::Status BakeServiceImpl::FetchResult(Ctx* ctx, const v1::FetchResultRequest* request,
+                                          grpc::ServerWriter<v1::ResultChunk>* writer) {
+  return guarded("FetchResult", [&] {
+    checkJobId(request->job_id());
+    uint32_t chunk = request->chunk_size() == 0 ? kDefaultChunk : request->chunk_size();
+    if (chunk < kMinChunk || chunk > kMaxChunk) {
+      throw InputError("chunk_size: must be 0 (default 262144) or in [65536, 1048576], got " +
+                       std::to_string(request->chunk_size()));
+    }
+    const OutputFile file = jobs_.output(request->job_id(), request->name());
+    std::ifstream in(file.path, std::ios::binary);
+    in.seekg(0, std::ios::end);
+    if (!in || uint64_t(in.tellg()) != file.size) {
+      throw std::runtime_error(file.path + ": missing or not of the recorded size " +
+                               std::to_string(file.size));
+    }
+    if (request->offset() > file.size) {
+      return grpc::Status(grpc::StatusCode::OUT_OF_RANGE,
+                          "offset: " + std::to_string(request->offset()) + " is past the end (" +
+                              std::to_string(file.size) + " bytes)");
+    }
+    in.seekg(std::streamoff(request->offset()));
+    std::vector<char> buffer(chunk);  // constant memory whatever the file size
+    uint64_t offset = request->offset();
+    do {
+      if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "fetch cancelled");
+      const uint64_t n = std::min<uint64_t>(chunk, file.size - offset);
+      in.read(buffer.data(), std::streamsize(n));
+      if (uint64_t(in.gcount()) != n) throw std::runtime_error(file.path + ": short read");
+      v1::ResultChunk c;
+      c.set_name(file.name);
+      c.set_offset(offset);
+      c.set_total_size(file.size);
+      c.set_sha256(file.sha256);
+      c.set_data(buffer.data(), n);
+      if (!writer->Write(c)) return grpc::Status(grpc::StatusCode::CANCELLED, "client gone");
+      offset += n;
+    } while (offset < file.size);
+    return grpc::Status::OK;
+  });
+}
+
+grpc::Status BakeServiceImpl::RenderView(Ctx*, const v1::RenderViewRequest* request,
+                                         v1::SubmitJobResponse* reply) {
+  return guarded("RenderView", [&] {
+    checkJobId(request->job_id());
+    std::string sun;
+    if (request->sun_irradiance_size() != 0) {
+      if (request->sun_irradiance_size() != 3) {
+        throw InputError("sun_irradiance: must be empty or [r, g, b], got " +
+                         std::to_string(request->sun_irradiance_size()) + " values");
+      }
+      std::ostringstream text;
+      text.precision(17);
+      for (int i = 0; i < 3; ++i) {
+        const double v = request->sun_irradiance(i);
+        if (!std::isfinite(v)) {
+          throw InputError("sun_irradiance[" + std::to_string(i) + "]: must be finite");
+        }
+        text << (i == 0 ? "[" : ",") << v;
+      }
+      text << "]";
+      sun = text.str();
+    }
+    const JobRecord record = jobs_.render(request->job_id(), request->views_json(), sun);
+    toProto(record, reply->mutable_job());
+    return grpc::Status::OK;
+  });
 }
 
 }  // namespace cloudbake::server

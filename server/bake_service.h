@@ -1,24 +1,31 @@
-// gRPC handlers of cloudbake.v1.BakeService: validate, convert, call core, map status.
+// gRPC handlers of cloudbake.v1.BakeService: validate, convert, call core/job, map status.
 #pragma once
 
 #include "cloudbake/v1/bake_service.grpc.pb.h"
+#include "core/job/job_manager.h"
 
 namespace cloudbake::server {
 
-/// Dependencies and settings of the service, passed in rather than read from globals.
-struct BakeServiceOptions {
-  unsigned worker_threads = 0;  ///< 0: one per hardware thread
-};
-
+/// The handlers; the JobManager (queue, caches, store) is owned by the caller.
 class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
  public:
-  explicit BakeServiceImpl(BakeServiceOptions options) : options_(options) {}
-  grpc::Status GetServerInfo(grpc::ServerContext* context,
-                             const cloudbake::v1::GetServerInfoRequest* request,
-                             cloudbake::v1::ServerInfo* reply) override;
+  explicit BakeServiceImpl(JobManager& jobs) : jobs_(jobs) {}
+  using Ctx = grpc::ServerContext;
+  grpc::Status GetServerInfo(Ctx*, const v1::GetServerInfoRequest*, v1::ServerInfo*) override;
+  grpc::Status UploadAsset(Ctx*, grpc::ServerReader<v1::UploadAssetRequest>*,
+                           v1::UploadAssetResponse*) override;
+  grpc::Status SubmitJob(Ctx*, const v1::SubmitJobRequest*, v1::SubmitJobResponse*) override;
+  grpc::Status WatchJob(Ctx*, const v1::WatchJobRequest*,
+                        grpc::ServerWriter<v1::JobEvent>*) override;
+  grpc::Status GetJob(Ctx*, const v1::GetJobRequest*, v1::Job*) override;
+  grpc::Status ListJobs(Ctx*, const v1::ListJobsRequest*, v1::ListJobsResponse*) override;
+  grpc::Status CancelJob(Ctx*, const v1::CancelJobRequest*, v1::Job*) override;
+  grpc::Status FetchResult(Ctx*, const v1::FetchResultRequest*,
+                           grpc::ServerWriter<v1::ResultChunk>*) override;
+  grpc::Status RenderView(Ctx*, const v1::RenderViewRequest*, v1::SubmitJobResponse*) override;
 
  private:
-  BakeServiceOptions options_;
+  JobManager& jobs_;
 };
 
 }  // namespace cloudbake::server

@@ -1,65 +1,182 @@
 // cloudbake-server: serves cloudbake.v1.BakeService, the standard health service and reflection.
+// Flags and environment variables are documented in docs/api.md ("Server").
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <spdlog/pattern_formatter.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdlib>
+#include <string_view>
 #include <thread>
 
+#include "core/error.h"
 #include "server/bake_service.h"
+#include "tools/cloudbake/commands.h"
 
 namespace {
-
-std::string envOr(const char* name, const std::string& fallback) {
-  const char* v = std::getenv(name);
-  return v && *v ? std::string(v) : fallback;
-}
 
 grpc::Server* g_server = nullptr;
 
 void onSignal(int) {
   // Shutdown() is not async-signal-safe, so hand it to a detached thread.
-  if (g_server) std::thread([] { g_server->Shutdown(); }).detach();
+  // With a deadline: open WatchJob streams are cancelled after it instead of blocking exit.
+  if (g_server) {
+    std::thread([] {
+      g_server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+    }).detach();
+  }
+}
+
+// `%*` in the JSON log pattern: the message as a JSON string body (quotes, backslashes and
+// control characters escaped), so every line parses whatever a message contains.
+class JsonMessageFlag : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&,
+              spdlog::memory_buf_t& dest) override {
+    static const char* kHex = "0123456789abcdef";
+    for (char ch : std::string_view(msg.payload.data(), msg.payload.size())) {
+      const auto c = static_cast<unsigned char>(ch);
+      if (c == '"' || c == '\\') {
+        dest.push_back('\\');
+        dest.push_back(ch);
+      } else if (c < 0x20) {
+        const char esc[] = {'\\', 'u', '0', '0', kHex[c >> 4], kHex[c & 15]};
+        dest.append(esc, esc + 6);
+      } else {
+        dest.push_back(ch);
+      }
+    }
+  }
+  std::unique_ptr<custom_flag_formatter> clone() const override {
+    return spdlog::details::make_unique<JsonMessageFlag>();
+  }
+};
+
+std::string defaultStateDir() {
+  const char* xdg = std::getenv("XDG_STATE_HOME");
+  if (xdg && *xdg) return std::string(xdg) + "/cloudbake";
+  const char* home = std::getenv("HOME");
+  return std::string(home && *home ? home : "/tmp") + "/.local/state/cloudbake";
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"cloudbake-server: cloud-lighting bake service (gRPC)"};
-  std::string listen = envOr("CLOUDBAKE_LISTEN", "127.0.0.1:50051");
-  unsigned threads = 0;
-  std::string log_level = envOr("CLOUDBAKE_LOG_LEVEL", "info");
-  app.add_option("--listen", listen, "HOST:PORT to listen on (env CLOUDBAKE_LISTEN)");
-  app.add_option("--threads", threads, "worker threads (0: all hardware threads)");
-  app.add_option("--log-level", log_level, "trace|debug|info|warn|error (env CLOUDBAKE_LOG_LEVEL)");
+  std::string listen = "127.0.0.1:50051";
+  std::string log_level = "info";
+  bool log_json = false;
+  cloudbake::JobManagerOptions o;
+  o.state_dir = defaultStateDir();
+  uint64_t max_image_pixels = uint64_t(o.limits.max_image_pixels);
+  uint64_t max_samples = uint64_t(o.limits.max_samples);
+  unsigned max_views = unsigned(o.limits.max_views);
+  app.add_option("--listen", listen, "HOST:PORT to listen on (port 0: any free port)")
+      ->envname("CLOUDBAKE_LISTEN")
+      ->capture_default_str();
+  app.add_option("--cache-dir", o.state_dir,
+                 "folder for the job store, result cache and uploaded assets")
+      ->envname("CLOUDBAKE_CACHE_DIR")
+      ->capture_default_str();
+  app.add_option("--cache-size", o.cache_max_bytes,
+                 "bound of the result cache (bytes, or with a unit: 512MB, 2GB; 0: unbounded)")
+      ->envname("CLOUDBAKE_CACHE_SIZE")
+      ->transform(CLI::AsSizeValue(false))
+      ->capture_default_str();
+  app.add_option("--threads", o.worker_threads, "threads of each job's TBB arena (0: all cores)")
+      ->envname("CLOUDBAKE_THREADS")
+      ->check(CLI::Range(0u, 4096u))
+      ->capture_default_str();
+  app.add_option("--max-concurrent-jobs", o.max_concurrent_jobs, "jobs running at once")
+      ->envname("CLOUDBAKE_MAX_CONCURRENT_JOBS")
+      ->check(CLI::Range(1u, 256u))
+      ->capture_default_str();
+  app.add_option("--queue-bound", o.queue_bound,
+                 "queued jobs beyond which submits fail with RESOURCE_EXHAUSTED")
+      ->envname("CLOUDBAKE_QUEUE_BOUND")
+      ->check(CLI::Range(size_t(1), size_t(100000)))
+      ->capture_default_str();
+  app.add_option("--max-upload-bytes", o.max_upload_bytes, "largest asset upload")
+      ->envname("CLOUDBAKE_MAX_UPLOAD_BYTES")
+      ->transform(CLI::AsSizeValue(false))
+      ->capture_default_str();
+  app.add_option("--max-image-pixels", max_image_pixels, "largest view (width x height)")
+      ->envname("CLOUDBAKE_MAX_IMAGE_PIXELS")
+      ->check(CLI::Range(uint64_t(1), uint64_t(1) << 26))
+      ->capture_default_str();
+  app.add_option("--max-views", max_views, "most views per shot")
+      ->envname("CLOUDBAKE_MAX_VIEWS")
+      ->check(CLI::Range(1u, 256u))
+      ->capture_default_str();
+  app.add_option("--max-samples", max_samples, "most samples per pixel")
+      ->envname("CLOUDBAKE_MAX_SAMPLES")
+      ->check(CLI::Range(uint64_t(1), uint64_t(1000000)))
+      ->capture_default_str();
+  app.add_option("--log-level", log_level, "trace|debug|info|warn|error")
+      ->envname("CLOUDBAKE_LOG_LEVEL")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
+      ->capture_default_str();
+  app.add_flag("--log-json", log_json, "log one JSON object per line")
+      ->envname("CLOUDBAKE_LOG_JSON");
   app.set_version_flag("--version", std::string("cloudbake-server ") + CLOUDBAKE_VERSION);
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : cloudbake::tool::kBadInput;
+  }
+  o.limits.max_image_pixels = int64_t(max_image_pixels);
+  o.limits.max_samples = int64_t(max_samples);
+  o.limits.max_views = int(max_views);
+
+  // Logs go to stderr; stdout stays free for tools that wrap the server.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("cloudbake-server"));
   spdlog::set_level(spdlog::level::from_str(log_level));
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  if (log_json) {
+    auto formatter = std::make_unique<spdlog::pattern_formatter>(spdlog::pattern_time_type::utc);
+    formatter->add_flag<JsonMessageFlag>('*').set_pattern(
+        R"({"time":"%Y-%m-%dT%H:%M:%S.%fZ","level":"%l","thread":%t,"message":"%*"})");
+    spdlog::set_formatter(std::move(formatter));
+  }
+
+  std::unique_ptr<cloudbake::JobManager> jobs;
+  try {
+    jobs = std::make_unique<cloudbake::JobManager>(o);
+  } catch (const std::exception& e) {
+    spdlog::error("cannot open state folder {}: {}", o.state_dir, e.what());
+    return cloudbake::tool::kFailure;
+  }
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  cloudbake::server::BakeServiceImpl service({threads});
+  cloudbake::server::BakeServiceImpl service(*jobs);
   grpc::ServerBuilder builder;
   int bound_port = 0;
+  // Without this gRPC sets SO_REUSEPORT and a second server on the same port starts silently,
+  // sharing connections with the first.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(listen, grpc::InsecureServerCredentials(), &bound_port);
   builder.RegisterService(&service);
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || bound_port == 0) {
     spdlog::error("cannot listen on {}", listen);
-    return 4;
+    return cloudbake::tool::kUnavailable;
   }
   g_server = server.get();
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   // Report the bound port (useful with port 0, which lets the OS pick one).
   const std::string host = listen.substr(0, listen.rfind(':'));
-  spdlog::info("cloudbake-server {} listening on {}:{} ({} worker threads)", CLOUDBAKE_VERSION,
-               host, bound_port, threads);
+  spdlog::info("cloudbake-server {} listening on {}:{} (state {}, {} runner(s), queue bound {})",
+               CLOUDBAKE_VERSION, host, bound_port, o.state_dir, o.max_concurrent_jobs,
+               o.queue_bound);
   server->Wait();
+  // Streams (WatchJob) end when the job manager stops: stop it before the server is destroyed.
+  jobs.reset();
   spdlog::info("cloudbake-server stopped");
   return 0;
 }

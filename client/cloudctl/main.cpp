@@ -1,27 +1,533 @@
-// cloudctl: command-line client of cloudbake-server. Usage: cloudctl [--server HOST:PORT] COMMAND.
+// cloudctl: command-line client of cloudbake-server (docs/cli.md, docs/api.md).
+// Usage: cloudctl [--server HOST:PORT] [--timeout S] [--json] COMMAND ...
 #include <grpcpp/grpcpp.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
 
 #include "cloudbake/v1/bake_service.grpc.pb.h"
+#include "core/error.h"
+#include "core/job/sha256.h"
 #include "tools/cloudbake/commands.h"
 
 namespace {
-
+namespace fs = std::filesystem;
+namespace v1 = cloudbake::v1;
+using Json = nlohmann::json;
 using cloudbake::tool::ExitCode;
 
-int exitCodeFor(const grpc::Status& s) {
-  switch (s.error_code()) {
-    case grpc::StatusCode::OK: return ExitCode::kOk;
-    case grpc::StatusCode::INVALID_ARGUMENT: return ExitCode::kBadInput;
-    case grpc::StatusCode::NOT_FOUND: return ExitCode::kNotFound;
+constexpr size_t kUploadChunk = 1 << 20;
+
+/// An error with the exit code it maps to; main() prints it once.
+struct CliError {
+  int code;
+  std::string message;
+};
+
+int exitCodeFor(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK:
+      return ExitCode::kOk;
+    case grpc::StatusCode::INVALID_ARGUMENT:
+    case grpc::StatusCode::OUT_OF_RANGE:
+      return ExitCode::kBadInput;
+    case grpc::StatusCode::NOT_FOUND:
+      return ExitCode::kNotFound;
     case grpc::StatusCode::UNAVAILABLE:
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return ExitCode::kUnavailable;
-    case grpc::StatusCode::CANCELLED: return ExitCode::kCancelled;
-    default: return ExitCode::kFailure;
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return ExitCode::kUnavailable;  // retry later
+    case grpc::StatusCode::CANCELLED:
+      return ExitCode::kCancelled;
+    case grpc::StatusCode::FAILED_PRECONDITION:
+      return ExitCode::kJobFailed;
+    default:
+      return ExitCode::kFailure;
+  }
+}
+
+const char* statusName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::INVALID_ARGUMENT:
+      return "invalid argument";
+    case grpc::StatusCode::NOT_FOUND:
+      return "not found";
+    case grpc::StatusCode::UNAVAILABLE:
+      return "server unavailable";
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+      return "deadline exceeded";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return "server busy";
+    case grpc::StatusCode::FAILED_PRECONDITION:
+      return "failed precondition";
+    case grpc::StatusCode::CANCELLED:
+      return "cancelled";
+    case grpc::StatusCode::OUT_OF_RANGE:
+      return "out of range";
+    default:
+      return "error";
+  }
+}
+
+void check(const grpc::Status& s, const std::string& what) {
+  if (!s.ok()) {
+    throw CliError{exitCodeFor(s.error_code()),
+                   what + ": " + statusName(s.error_code()) + ": " + s.error_message()};
+  }
+}
+
+const char* stateName(v1::JobState s) {
+  switch (s) {
+    case v1::QUEUED:
+      return "QUEUED";
+    case v1::RUNNING:
+      return "RUNNING";
+    case v1::SUCCEEDED:
+      return "SUCCEEDED";
+    case v1::FAILED:
+      return "FAILED";
+    case v1::CANCELLED:
+      return "CANCELLED";
+    default:
+      return "UNKNOWN";
+  }
+}
+
+bool terminal(v1::JobState s) {
+  return s == v1::SUCCEEDED || s == v1::FAILED || s == v1::CANCELLED;
+}
+
+Json jobJson(const v1::Job& j) {
+  Json outputs = Json::array();
+  for (const auto& o : j.outputs()) {
+    outputs.push_back({{"name", o.name()}, {"size", o.size()}, {"sha256", o.sha256()}});
+  }
+  return {{"id", j.id()},
+          {"state", stateName(j.state())},
+          {"shot_name", j.shot_name()},
+          {"method", j.method()},
+          {"views", std::vector<std::string>(j.views().begin(), j.views().end())},
+          {"stage", j.stage()},
+          {"fraction", j.fraction()},
+          {"error", j.error()},
+          {"created_unix", j.created_unix()},
+          {"started_unix", j.started_unix()},
+          {"finished_unix", j.finished_unix()},
+          {"views_rendered", j.views_rendered()},
+          {"views_cached", j.views_cached()},
+          {"outputs", outputs}};
+}
+
+/// Exit code of a finished job: bad input in the shot's assets (found while running) is 2.
+int jobExitCode(const v1::Job& j) {
+  switch (j.state()) {
+    case v1::SUCCEEDED:
+      return ExitCode::kOk;
+    case v1::CANCELLED:
+      return ExitCode::kCancelled;
+    case v1::FAILED:
+      return j.error_is_input() ? ExitCode::kBadInput : ExitCode::kJobFailed;
+    default:
+      return ExitCode::kFailure;
+  }
+}
+
+struct Client {
+  std::string server;
+  double timeout_s = 10;
+  bool json = false;
+  std::shared_ptr<grpc::Channel> channel;
+  std::unique_ptr<v1::BakeService::Stub> stub;
+
+  void connect() {
+    grpc::ChannelArguments args;
+    args.SetMaxReceiveMessageSize(4 << 20);
+    channel = grpc::CreateCustomChannel(server, grpc::InsecureChannelCredentials(), args);
+    if (!channel->WaitForConnected(deadline())) {
+      throw CliError{ExitCode::kUnavailable, server +
+                                                 ": server unavailable (no connection within " +
+                                                 std::to_string(int(std::ceil(timeout_s))) + " s)"};
+    }
+    stub = v1::BakeService::NewStub(channel);
+  }
+  std::chrono::system_clock::time_point deadline() const {
+    return std::chrono::system_clock::now() +
+           std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
+  }
+  void shortCall(grpc::ClientContext* ctx) const { ctx->set_deadline(deadline()); }
+};
+
+// ---- progress ----------------------------------------------------------------------------
+
+class Progress {
+ public:
+  explicit Progress(bool quiet) : quiet_(quiet), tty_(isatty(fileno(stderr)) != 0) {}
+  void event(const v1::JobEvent& e) {
+    if (quiet_) return;
+    const int percent = int(std::floor(std::clamp(e.fraction(), 0.0, 1.0) * 100));
+    std::string eta = e.eta_seconds() >= 0 && !terminal(e.state())
+                          ? " ETA " + std::to_string(int(std::ceil(e.eta_seconds()))) + " s"
+                          : "";
+    if (tty_) {
+      const int filled = percent / 5;
+      std::fprintf(stderr, "\r[%s%s] %3d%% %-9s %-8s%s\033[K",
+                   std::string(size_t(filled), '#').c_str(),
+                   std::string(size_t(20 - filled), '.').c_str(), percent, stateName(e.state()),
+                   e.stage().c_str(), eta.c_str());
+      if (!e.message().empty() || terminal(e.state())) {
+        std::fprintf(stderr, "\r\033[K%s\n", line(e, percent).c_str());
+      }
+    } else if (!e.message().empty() || percent / 10 > last_decile_ || terminal(e.state())) {
+      std::fprintf(stderr, "%s%s\n", line(e, percent).c_str(), eta.c_str());
+      last_decile_ = std::max(last_decile_, percent / 10);
+    }
+    std::fflush(stderr);
+  }
+
+ private:
+  static std::string line(const v1::JobEvent& e, int percent) {
+    return std::to_string(percent) + "% " + stateName(e.state()) + " " + e.stage() +
+           (e.message().empty() ? "" : ": " + e.message());
+  }
+  bool quiet_, tty_;
+  int last_decile_ = -1;
+};
+
+// ---- uploads -----------------------------------------------------------------------------
+
+// Files a shot names (shot format v1): only these keys hold paths.
+void collectPaths(Json& shot, std::vector<Json*>* out) {
+  auto add = [&](Json& v) {
+    if (v.is_string()) out->push_back(&v);
+  };
+  if (!shot.is_object()) return;
+  if (shot.contains("volume") && shot["volume"].is_object()) {
+    Json& vol = shot["volume"];
+    for (const char* kind : {"vdb", "mesh"}) {
+      if (vol.contains(kind) && vol[kind].is_object() && vol[kind].contains("path")) {
+        add(vol[kind]["path"]);
+      }
+    }
+    if (vol.contains("sequence") && vol["sequence"].is_object() &&
+        vol["sequence"].contains("paths") && vol["sequence"]["paths"].is_array()) {
+      for (Json& p : vol["sequence"]["paths"]) add(p);
+    }
+  }
+  if (shot.contains("lighting") && shot["lighting"].is_object() &&
+      shot["lighting"].contains("sky") && shot["lighting"]["sky"].is_object() &&
+      shot["lighting"]["sky"].contains("map")) {
+    add(shot["lighting"]["sky"]["map"]);
+  }
+}
+
+std::string upload(Client& c, const std::string& path, bool quiet) {
+  const std::string sha = cloudbake::sha256File(path);
+  const uint64_t size = fs::file_size(path);
+  grpc::ClientContext ctx;
+  v1::UploadAssetResponse reply;
+  auto writer = c.stub->UploadAsset(&ctx, &reply);
+  v1::UploadAssetRequest msg;
+  msg.mutable_header()->set_sha256(sha);
+  msg.mutable_header()->set_size(size);
+  msg.mutable_header()->set_name(fs::path(path).filename().string());
+  bool open = writer->Write(msg);
+  std::ifstream in(path, std::ios::binary);
+  std::string buf(kUploadChunk, '\0');
+  while (open && in) {
+    in.read(buf.data(), std::streamsize(buf.size()));
+    const auto n = size_t(in.gcount());
+    if (n == 0) break;
+    msg.set_data(buf.data(), n);
+    open = writer->Write(msg);  // false: the server answered early (content already held)
+  }
+  writer->WritesDone();
+  check(writer->Finish(), "upload " + path);
+  if (!c.json && !quiet) {
+    std::fprintf(stderr, "%s: %s (%llu bytes)\n", path.c_str(),
+                 reply.already_present() ? "already on the server" : "uploaded",
+                 static_cast<unsigned long long>(size));
+  }
+  return sha;
+}
+
+// ---- fetch -------------------------------------------------------------------------------
+
+/// Downloads one output to DIR/<name>, resuming DIR/<name>.part, verifying size and SHA-256.
+std::string fetchOne(Client& c, const std::string& job, const v1::OutputFile& file,
+                     const std::string& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (!fs::is_directory(dir)) {
+    throw CliError{ExitCode::kBadInput, "--out: cannot create folder '" + dir + "'"};
+  }
+  if (file.name().find('/') != std::string::npos || file.name().empty() || file.name() == "." ||
+      file.name() == "..") {
+    throw CliError{ExitCode::kFailure, "server sent an unsafe output name '" + file.name() + "'"};
+  }
+  const fs::path final_path = fs::path(dir) / file.name();
+  const fs::path part = final_path.string() + ".part";
+  uint64_t offset = fs::exists(part) ? fs::file_size(part) : 0;
+  if (offset > file.size()) {
+    fs::remove(part);
+    offset = 0;
+  }
+  if (offset < file.size() || file.size() == 0) {
+    grpc::ClientContext ctx;
+    v1::FetchResultRequest req;
+    req.set_job_id(job);
+    req.set_name(file.name());
+    req.set_offset(offset);
+    auto reader = c.stub->FetchResult(&ctx, req);
+    std::ofstream out(part, std::ios::binary | std::ios::app);
+    v1::ResultChunk chunk;
+    while (reader->Read(&chunk)) {
+      if (chunk.offset() != offset) {
+        throw CliError{ExitCode::kFailure, "fetch " + file.name() + ": chunk out of order"};
+      }
+      out.write(chunk.data().data(), std::streamsize(chunk.data().size()));
+      offset += chunk.data().size();
+    }
+    out.close();
+    check(reader->Finish(), "fetch " + file.name());
+  }
+  const std::string got = cloudbake::sha256File(part.string());
+  if (fs::file_size(part) != file.size() || got != file.sha256()) {
+    fs::remove(part);
+    throw CliError{ExitCode::kFailure, "fetch " + file.name() + ": checksum mismatch (expected " +
+                                           file.sha256() + ", got " + got +
+                                           "); the partial file was removed"};
+  }
+  fs::rename(part, final_path);
+  return final_path.string();
+}
+
+v1::Job getJob(Client& c, const std::string& id) {
+  grpc::ClientContext ctx;
+  c.shortCall(&ctx);
+  v1::GetJobRequest req;
+  req.set_job_id(id);
+  v1::Job job;
+  check(c.stub->GetJob(&ctx, req, &job), "job " + id);
+  return job;
+}
+
+/// Fetches every output of a job; prints paths (or a JSON object with --json).
+int fetchAll(Client& c, const v1::Job& job, const std::string& dir, const std::string& only) {
+  if (job.state() != v1::SUCCEEDED) {
+    throw CliError{jobExitCode(job) == 0 ? ExitCode::kJobFailed : jobExitCode(job),
+                   "job " + job.id() + " is " + stateName(job.state()) +
+                       (job.error().empty() ? "" : ": " + job.error())};
+  }
+  Json files = Json::array();
+  bool any = false;
+  for (const auto& f : job.outputs()) {
+    if (!only.empty() && f.name() != only) continue;
+    any = true;
+    const std::string path = fetchOne(c, job.id(), f, dir);
+    files.push_back(
+        {{"name", f.name()}, {"path", path}, {"size", f.size()}, {"sha256", f.sha256()}});
+    if (!c.json) std::cout << path << "\n";
+  }
+  if (!any && !only.empty()) {
+    throw CliError{ExitCode::kNotFound, "job " + job.id() + " has no output '" + only + "'"};
+  }
+  if (c.json) {
+    Json j = jobJson(job);
+    j["files"] = files;
+    std::cout << j.dump() << "\n";
+  }
+  return ExitCode::kOk;
+}
+
+/// Streams events until the job finishes; returns its final record. Reconnects (resuming
+/// after the last event) when the stream breaks while the server is still reachable.
+v1::Job watch(Client& c, const std::string& id, bool quiet) {
+  Progress progress(quiet || c.json);
+  uint64_t after = 0;
+  for (int attempt = 0;; ++attempt) {
+    grpc::ClientContext ctx;
+    v1::WatchJobRequest req;
+    req.set_job_id(id);
+    req.set_after_seq(after);
+    auto reader = c.stub->WatchJob(&ctx, req);
+    v1::JobEvent e;
+    while (reader->Read(&e)) {
+      progress.event(e);
+      after = std::max(after, e.seq());
+      if (e.has_job() && terminal(e.job().state())) {
+        ctx.TryCancel();
+        reader->Finish();
+        return e.job();
+      }
+    }
+    const grpc::Status s = reader->Finish();
+    if (s.error_code() != grpc::StatusCode::UNAVAILABLE || attempt >= 3) {
+      check(s, "watch " + id);
+      return getJob(c, id);
+    }
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+  }
+}
+
+int finishJob(Client& c, const v1::Job& job, const std::string& out_dir) {
+  if (job.state() == v1::SUCCEEDED && !out_dir.empty()) return fetchAll(c, job, out_dir, "");
+  if (c.json)
+    std::cout << jobJson(job).dump() << "\n";
+  else if (job.state() == v1::SUCCEEDED) {
+    std::cout << job.id() << " SUCCEEDED";
+    for (const auto& f : job.outputs()) std::cout << " " << f.name();
+    std::cout << "\n";
+  }
+  if (job.state() != v1::SUCCEEDED) {
+    throw CliError{jobExitCode(job), "job " + job.id() + " " + stateName(job.state()) +
+                                         (job.error().empty() ? "" : ": " + job.error())};
+  }
+  return ExitCode::kOk;
+}
+
+// ---- commands ----------------------------------------------------------------------------
+
+struct SubmitArgs {
+  std::string shot;
+  std::string out;
+  bool wait = false, detach = false, dry_run = false, quiet = false;
+  int samples = -1;
+  double sun_tolerance_deg = 0;
+  bool allow_outside = false;
+};
+
+int cmdSubmit(Client& c, const SubmitArgs& a) {
+  if (a.wait && a.detach)
+    throw CliError{ExitCode::kBadInput, "--wait and --detach exclude each other"};
+  if (!fs::exists(a.shot)) throw CliError{ExitCode::kNotFound, a.shot + ": file not found"};
+  if (!fs::is_regular_file(a.shot)) throw CliError{ExitCode::kBadInput, a.shot + ": not a file"};
+  std::string text;
+  try {
+    text = [&] {
+      std::ifstream in(a.shot, std::ios::binary);
+      return std::string(std::istreambuf_iterator<char>(in), {});
+    }();
+  } catch (const std::exception& e) {
+    throw CliError{ExitCode::kBadInput, a.shot + ": cannot read: " + e.what()};
+  }
+  c.connect();
+  v1::SubmitJobRequest req;
+  req.set_shot_json(text);
+  req.set_dry_run(a.dry_run);
+  if (a.samples != -1) req.set_samples(a.samples);
+  req.set_sun_tolerance_deg(a.sun_tolerance_deg);
+  // The server validates the shot; here we only find the files to send. Text that is not JSON
+  // goes as it is, for the server's parser to report where it breaks.
+  Json shot = Json::parse(text, nullptr, false);
+  if (!shot.is_discarded()) {
+    std::vector<Json*> paths;
+    collectPaths(shot, &paths);
+    const fs::path base = fs::absolute(a.shot).parent_path();
+    bool rewritten = false;
+    for (Json* node : paths) {
+      const std::string p = node->get<std::string>();
+      fs::path rel = fs::path(p).lexically_normal();
+      const bool outside = rel.is_absolute() || (!rel.empty() && *rel.begin() == "..");
+      // Absolute or escaping paths are not sent unless asked for: the server rejects them,
+      // naming the field.
+      if (p.empty() || (outside && !a.allow_outside)) continue;
+      const fs::path local = outside && rel.is_absolute() ? rel : base / rel;
+      if (!fs::exists(local)) {
+        throw CliError{ExitCode::kNotFound,
+                       a.shot + ": '" + p + "' (" + local.string() + "): file not found"};
+      }
+      if (!fs::is_regular_file(local)) {
+        throw CliError{ExitCode::kBadInput, a.shot + ": '" + p + "': not a regular file"};
+      }
+      const std::string sha = upload(c, local.string(), a.quiet);
+      if (outside) {
+        // Sent under a name inside the shot's folder, which the shot text now uses.
+        rel = fs::path("outside") / sha.substr(0, 16) / local.filename();
+        *node = rel.string();
+        rewritten = true;
+      }
+      v1::AssetRef* ref = req.add_assets();
+      ref->set_path(rel.string());
+      ref->set_sha256(sha);
+    }
+    if (rewritten) req.set_shot_json(shot.dump(2));
+  }
+  grpc::ClientContext ctx;
+  c.shortCall(&ctx);
+  v1::SubmitJobResponse reply;
+  try {
+    check(c.stub->SubmitJob(&ctx, req, &reply), a.shot);
+  } catch (CliError& e) {
+    if (!a.allow_outside && e.message.find("is outside the allowed") != std::string::npos) {
+      e.message += " (cloudctl submit --allow-outside uploads such files)";
+    }
+    throw;
+  }
+  if (a.dry_run) {
+    const v1::JobPlan& p = reply.plan();
+    if (c.json) {
+      Json views = Json::array();
+      for (const auto& v : p.views()) views.push_back({{"name", v.name()}, {"cached", v.cached()}});
+      std::cout << Json{{"shot_name", p.shot_name()},
+                        {"method", p.method()},
+                        {"views", views},
+                        {"vdb", p.vdb()},
+                        {"pixel_samples", p.pixel_samples()},
+                        {"bake_key", p.bake_key()}}
+                       .dump()
+                << "\n";
+    } else {
+      std::cout << "shot '" << p.shot_name() << "', method " << p.method() << "\n";
+      for (const auto& v : p.views()) {
+        std::cout << "  view '" << v.name()
+                  << "': " << (v.cached() ? "cached (no scattering computed)" : "path trace")
+                  << "\n";
+      }
+      if (p.vdb()) std::cout << "  bake.vdb: density grid\n";
+      std::cout << "  estimated cost: " << p.pixel_samples() << " paths\n";
+      std::cout << "  bake key: " << p.bake_key() << "\n";
+    }
+    return ExitCode::kOk;
+  }
+  const v1::Job& job = reply.job();
+  if (a.detach) {
+    if (c.json)
+      std::cout << jobJson(job).dump() << "\n";
+    else
+      std::cout << job.id() << "\n";
+    return ExitCode::kOk;
+  }
+  if (!c.json && !a.quiet) std::fprintf(stderr, "job %s submitted\n", job.id().c_str());
+  return finishJob(c, watch(c, job.id(), a.quiet), a.out);
+}
+
+void printJob(const Client& c, const v1::Job& j) {
+  if (c.json) {
+    std::cout << jobJson(j).dump() << "\n";
+    return;
+  }
+  std::cout << "id:       " << j.id() << "\nstate:    " << stateName(j.state())
+            << "\nshot:     " << j.shot_name() << " (" << j.method() << ")\nstage:    " << j.stage()
+            << " " << int(std::round(j.fraction() * 100)) << "%\n";
+  if (!j.error().empty()) std::cout << "error:    " << j.error() << "\n";
+  std::cout << "views:    " << j.views_rendered() << " rendered, " << j.views_cached()
+            << " from cache\n";
+  for (const auto& o : j.outputs()) {
+    std::cout << "output:   " << o.name() << " " << o.size() << " bytes sha256 " << o.sha256()
+              << "\n";
   }
 }
 
@@ -29,44 +535,189 @@ int exitCodeFor(const grpc::Status& s) {
 
 int main(int argc, char** argv) {
   CLI::App app{"cloudctl: client of cloudbake-server"};
+  Client c;
   const char* env_server = std::getenv("CLOUDBAKE_SERVER");
-  std::string server = env_server && *env_server ? env_server : "127.0.0.1:50051";
-  double timeout_s = 10;
-  bool json = false;
-  app.add_option("--server", server, "HOST:PORT of cloudbake-server (env CLOUDBAKE_SERVER)");
-  app.add_option("--timeout", timeout_s, "deadline in seconds for short calls")->check(
-      CLI::PositiveNumber);
-  app.add_flag("--json", json, "machine-readable output on stdout");
+  c.server = env_server && *env_server ? env_server : "127.0.0.1:50051";
+  app.add_option("--server", c.server, "HOST:PORT of cloudbake-server (env CLOUDBAKE_SERVER)");
+  app.add_option("--timeout", c.timeout_s, "deadline in seconds for connecting and short calls")
+      ->check(CLI::PositiveNumber);
+  app.add_flag("--json", c.json, "machine-readable output on stdout (logs stay on stderr)");
   app.set_version_flag("--version", std::string("cloudctl ") + CLOUDBAKE_VERSION);
   app.require_subcommand(1);
-  auto* health = app.add_subcommand("health", "check that the server is serving");
-  auto* info = app.add_subcommand("info", "print the server's version and bake methods");
-  CLI11_PARSE(app, argc, argv);
+  app.fallthrough();  // --json, --server, --timeout also after the command
 
-  auto channel = grpc::CreateChannel(server, grpc::InsecureChannelCredentials());
-  auto deadline = std::chrono::system_clock::now() +
-                  std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
-  if (health->parsed() || info->parsed()) {
-    auto stub = cloudbake::v1::BakeService::NewStub(channel);
-    grpc::ClientContext ctx;
-    ctx.set_deadline(deadline);
-    cloudbake::v1::ServerInfo reply;
-    const grpc::Status s = stub->GetServerInfo(&ctx, {}, &reply);
-    if (!s.ok()) {
-      std::cerr << "cloudctl: " << server << ": " << s.error_message() << "\n";
-      return exitCodeFor(s);
+  auto* health = app.add_subcommand("health", "check that the server is serving");
+  auto* info = app.add_subcommand("info", "the server's version, methods, limits and counters");
+
+  SubmitArgs sa;
+  auto* submit = app.add_subcommand("submit", "submit a shot; by default wait and download");
+  submit->add_option("shot", sa.shot, "shot file (JSON, format v1)")->required();
+  submit->add_option("--out", sa.out, "download DIR/<view>.exr and DIR/bake.vdb here");
+  submit->add_flag("--wait", sa.wait, "wait for the job, showing progress (default)");
+  submit->add_flag("--detach", sa.detach, "print the job id and return at once");
+  submit->add_flag("--dry-run", sa.dry_run, "print the server's plan; bake nothing");
+  submit->add_flag("--quiet", sa.quiet, "no progress on stderr");
+  submit->add_option("--samples", sa.samples, "override bake.samples (1..1000000)");
+  submit->add_flag("--allow-outside", sa.allow_outside,
+                   "also upload files the shot names outside its folder (absolute or ../ paths)");
+  submit->add_option("--sun-tolerance", sa.sun_tolerance_deg,
+                     "reuse a cached bake whose sun direction is within DEG degrees (default 0)");
+
+  std::string job_id, out_dir, name, views_file, state_filter;
+  unsigned limit = 0;
+  std::vector<double> sun;
+  bool quiet = false;
+  auto* status = app.add_subcommand("status", "show a job");
+  status->add_option("job", job_id, "job id")->required();
+  auto* watchc = app.add_subcommand("watch", "follow a job's progress until it ends");
+  watchc->add_option("job", job_id, "job id")->required();
+  auto* list = app.add_subcommand("list", "list jobs, newest first");
+  list->add_option("--state", state_filter, "QUEUED|RUNNING|SUCCEEDED|FAILED|CANCELLED")
+      ->check(CLI::IsMember({"QUEUED", "RUNNING", "SUCCEEDED", "FAILED", "CANCELLED"}));
+  list->add_option("--limit", limit, "at most this many (0: all)");
+  auto* cancel = app.add_subcommand("cancel", "cancel a queued or running job");
+  cancel->add_option("job", job_id, "job id")->required();
+  auto* fetch = app.add_subcommand("fetch", "download a succeeded job's outputs");
+  fetch->add_option("job", job_id, "job id")->required();
+  fetch->add_option("--out", out_dir, "folder (default: current)");
+  fetch->add_option("--name", name, "only this output (e.g. nadir.exr)");
+  auto* render = app.add_subcommand("render", "render new views of a job's shot from the cache");
+  render->add_option("job", job_id, "job id")->required();
+  render->add_option("--views", views_file, "JSON file with an array of shot-format views");
+  render->add_option("--sun", sun, "new sun irradiance R G B")->expected(3);
+  render->add_option("--out", out_dir, "download the new views here");
+  render->add_flag("--quiet", quiet, "no progress on stderr");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? ExitCode::kOk : ExitCode::kBadInput;
+  }
+
+  try {
+    if (health->parsed() || info->parsed()) {
+      c.connect();
+      grpc::ClientContext ctx;
+      c.shortCall(&ctx);
+      v1::ServerInfo reply;
+      check(c.stub->GetServerInfo(&ctx, {}, &reply), c.server);
+      const v1::ServerStats& s = reply.stats();
+      if (c.json) {
+        Json j = {{"server", c.server}, {"serving", true}, {"version", reply.version()}};
+        if (info->parsed()) {
+          j["methods"] = std::vector<std::string>(reply.methods().begin(), reply.methods().end());
+          j["worker_threads"] = reply.worker_threads();
+          j["stats"] = {{"scatter_computations", s.scatter_computations()},
+                        {"views_from_cache", s.views_from_cache()},
+                        {"volume_builds", s.volume_builds()},
+                        {"jobs_submitted", s.jobs_submitted()},
+                        {"jobs_queued", s.jobs_queued()},
+                        {"jobs_running", s.jobs_running()},
+                        {"cache_hits", s.cache_hits()},
+                        {"cache_misses", s.cache_misses()},
+                        {"cache_shared", s.cache_shared()},
+                        {"cache_corrupt_dropped", s.cache_corrupt_dropped()},
+                        {"cache_evicted", s.cache_evicted()},
+                        {"cache_entries", s.cache_entries()},
+                        {"cache_bytes", s.cache_bytes()}};
+        }
+        std::cout << j.dump() << "\n";
+      } else if (health->parsed()) {
+        std::cout << c.server << ": SERVING (cloudbake " << reply.version() << ")\n";
+      } else {
+        std::cout << "version: " << reply.version()
+                  << "\nworker threads: " << reply.worker_threads() << "\nmethods:";
+        for (const auto& m : reply.methods()) std::cout << " " << m;
+        std::cout << "\njobs: " << s.jobs_submitted() << " submitted, " << s.jobs_queued()
+                  << " queued, " << s.jobs_running()
+                  << " running\nscattering computations: " << s.scatter_computations()
+                  << " (views from cache: " << s.views_from_cache()
+                  << ")\ncache: " << s.cache_entries() << " entries, " << s.cache_bytes()
+                  << " bytes, " << s.cache_hits() << " hits, " << s.cache_misses() << " misses\n";
+      }
+      return ExitCode::kOk;
     }
-    if (json) {
-      std::cout << "{\"server\":\"" << server << "\",\"serving\":true,\"version\":\""
-                << reply.version() << "\"}\n";
-    } else if (health->parsed()) {
-      std::cout << server << ": SERVING (cloudbake " << reply.version() << ")\n";
-    } else {
-      std::cout << "version: " << reply.version() << "\nworker threads: "
-                << reply.worker_threads() << "\nmethods:";
-      for (const auto& m : reply.methods()) std::cout << " " << m;
-      std::cout << "\n";
+    if (submit->parsed()) return cmdSubmit(c, sa);
+    c.connect();
+    if (status->parsed()) {
+      printJob(c, getJob(c, job_id));
+      return ExitCode::kOk;
     }
+    if (watchc->parsed()) {
+      const v1::Job job = watch(c, job_id, false);
+      if (c.json)
+        std::cout << jobJson(job).dump() << "\n";
+      else
+        std::cout << job.id() << " " << stateName(job.state()) << "\n";
+      return jobExitCode(job);
+    }
+    if (list->parsed()) {
+      grpc::ClientContext ctx;
+      c.shortCall(&ctx);
+      v1::ListJobsRequest req;
+      if (!state_filter.empty()) {
+        v1::JobState s = v1::JOB_STATE_UNSPECIFIED;
+        v1::JobState_Parse(state_filter, &s);
+        req.set_state(s);
+      }
+      req.set_limit(limit);
+      v1::ListJobsResponse reply;
+      check(c.stub->ListJobs(&ctx, req, &reply), "list");
+      Json jobs = Json::array();
+      for (const auto& j : reply.jobs()) {
+        if (c.json)
+          jobs.push_back(jobJson(j));
+        else {
+          std::printf("%s  %-9s %3d%%  %s\n", j.id().c_str(), stateName(j.state()),
+                      int(std::round(j.fraction() * 100)), j.shot_name().c_str());
+        }
+      }
+      if (c.json) std::cout << jobs.dump() << "\n";
+      return ExitCode::kOk;
+    }
+    if (cancel->parsed()) {
+      grpc::ClientContext ctx;
+      c.shortCall(&ctx);
+      v1::CancelJobRequest req;
+      req.set_job_id(job_id);
+      v1::Job job;
+      check(c.stub->CancelJob(&ctx, req, &job), "cancel " + job_id);
+      if (c.json)
+        std::cout << jobJson(job).dump() << "\n";
+      else {
+        std::cout << job.id() << " "
+                  << (job.state() == v1::RUNNING ? "cancelling" : stateName(job.state())) << "\n";
+      }
+      return ExitCode::kOk;
+    }
+    if (fetch->parsed())
+      return fetchAll(c, getJob(c, job_id), out_dir.empty() ? "." : out_dir, name);
+    if (render->parsed()) {
+      v1::RenderViewRequest req;
+      req.set_job_id(job_id);
+      if (!views_file.empty()) {
+        std::ifstream in(views_file, std::ios::binary);
+        if (!in) throw CliError{ExitCode::kNotFound, views_file + ": file not found"};
+        req.set_views_json(std::string(std::istreambuf_iterator<char>(in), {}));
+      }
+      for (double v : sun) req.add_sun_irradiance(v);
+      grpc::ClientContext ctx;
+      c.shortCall(&ctx);
+      v1::SubmitJobResponse reply;
+      check(c.stub->RenderView(&ctx, req, &reply), "render " + job_id);
+      if (!c.json) std::fprintf(stderr, "job %s submitted\n", reply.job().id().c_str());
+      return finishJob(c, watch(c, reply.job().id(), quiet), out_dir);
+    }
+  } catch (const CliError& e) {
+    std::cerr << "cloudctl: " << e.message << "\n";
+    return e.code;
+  } catch (const cloudbake::InputError& e) {
+    std::cerr << "cloudctl: " << e.what() << "\n";
+    return ExitCode::kBadInput;
+  } catch (const std::exception& e) {
+    std::cerr << "cloudctl: error: " << e.what() << "\n";
+    return ExitCode::kFailure;
   }
   return ExitCode::kOk;
 }

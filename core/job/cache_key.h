@@ -1,0 +1,49 @@
+// Cache keys of a shot's computed parts (docs/DESIGN.md, "Cache").
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/shot/shot.h"
+
+namespace cloudbake {
+
+/// Step of the sun-direction quantisation: each component of the unit direction is rounded to
+/// a multiple of it before hashing, so directions that differ only by float noise share a bake.
+constexpr double kSunDirectionQuantum = 1e-6;
+
+/// Content-addressed keys (hex SHA-256) of the parts of a shot a service can reuse.
+///
+/// - `volume`: the density field: the volume spec with every referenced file replaced by the
+///   SHA-256 of its content (so a renamed or re-uploaded VDB still hits) + code version.
+/// - `bake`: what the scattering depends on: volume key, medium (extinction, albedo, phase),
+///   quantised sun direction, sky, method and every quality knob (samples, seed, max_depth,
+///   method options) + code version. Not in it: views, sun colour/intensity, image size.
+/// - `vdb`: DIR/bake.vdb: volume key + vdb voxel size (pathtrace bakes no light grids).
+/// - `views[i]`: one rendered view: bake key + that camera and its pixel size; plus the sun
+///   irradiance only when `sun_scaled` is false.
+///
+/// `sun_scaled` is true when the shot has a sun with non-zero irradiance and a black sky: then
+/// every rendered channel is linear in the sun irradiance per channel (the path tracer's random
+/// decisions do not depend on it), so a view is rendered once at unit irradiance and scaled, and
+/// a new sun colour or intensity recomputes nothing.
+struct ShotCacheKeys {
+  std::string volume;
+  std::string bake;
+  /// The bake key's material without the sun direction: bakes that differ only in their light
+  /// direction share it (used to find a cached bake within a direction tolerance).
+  std::string family;
+  std::string vdb;
+  std::vector<std::string> views;
+  bool sun_scaled = false;
+};
+
+/// Keys of a validated shot (files it names must exist: they are hashed, with an in-memory
+/// memo keyed by path, size and modification time). Throws InputError when a file cannot be
+/// read.
+ShotCacheKeys computeCacheKeys(const ShotSpec& shot);
+
+/// Rounds each component of `direction` (normalised first) to kSunDirectionQuantum.
+Vec3 quantiseDirection(const Vec3& direction);
+
+}  // namespace cloudbake

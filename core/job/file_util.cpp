@@ -1,0 +1,76 @@
+#include "core/job/file_util.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "core/error.h"
+
+namespace cloudbake {
+namespace fs = std::filesystem;
+
+std::string uniqueSuffix() {
+  static std::atomic<unsigned long> counter{0};
+  const auto now = std::chrono::steady_clock::now().time_since_epoch().count();
+  std::ostringstream s;
+  s << getpid() << "-" << now << "-" << counter.fetch_add(1);
+  return s.str();
+}
+
+void writeFileAtomic(const std::string& path, const std::string& data) {
+  const std::string tmp = path + ".tmp." + uniqueSuffix();
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw std::runtime_error(path + ": cannot create: " + std::strerror(errno));
+  size_t done = 0;
+  while (done < data.size()) {
+    const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const std::string err = std::strerror(errno);
+      ::close(fd);
+      ::unlink(tmp.c_str());
+      throw std::runtime_error(path + ": write failed: " + err);
+    }
+    done += size_t(n);
+  }
+  // fsync before rename: otherwise a crash can leave the new name pointing at empty data.
+  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+    ::unlink(tmp.c_str());
+    throw std::runtime_error(path + ": sync failed: " + std::strerror(errno));
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string err = std::strerror(errno);
+    ::unlink(tmp.c_str());
+    throw std::runtime_error(path + ": rename failed: " + err);
+  }
+}
+
+std::string readWholeFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path + ": cannot open for reading");
+  std::ostringstream s;
+  s << in.rdbuf();
+  if (in.bad()) throw InputError(path + ": read error");
+  return s.str();
+}
+
+void linkOrCopy(const std::string& from, const std::string& to) {
+  std::error_code ec;
+  fs::create_directories(fs::path(to).parent_path(), ec);
+  fs::remove(to, ec);
+  fs::create_hard_link(from, to, ec);
+  if (!ec) return;
+  fs::copy_file(from, to, fs::copy_options::overwrite_existing, ec);
+  if (ec)
+    throw std::runtime_error("cannot link or copy " + from + " to " + to + ": " + ec.message());
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,567 @@
+#include "core/job/job_manager.h"
+
+#include <fcntl.h>
+#include <spdlog/spdlog.h>
+#include <sys/file.h>
+#include <tbb/task_arena.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/job/file_util.h"
+#include "core/job/job_errors.h"
+#include "core/job/run_shot.h"
+#include "core/shot/shot_parser.h"
+
+namespace cloudbake {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+namespace {
+
+constexpr size_t kMaxEventsKept = 1000;
+constexpr const char* kSubmittedFile = "submitted.json";
+
+double unixNow() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// A client-chosen asset path becomes a path under the job's input folder: it must stay inside.
+std::string checkAssetPath(const std::string& path, size_t index) {
+  const std::string field = "assets[" + std::to_string(index) + "].path";
+  if (path.empty()) throw InputError(field + ": must not be empty");
+  if (path.size() > 1024) throw InputError(field + ": longer than 1024 characters");
+  if (path.find('\0') != std::string::npos) throw InputError(field + ": contains a NUL byte");
+  const fs::path p(path);
+  if (p.is_absolute()) {
+    throw InputError(field + ": '" + path + "' must be relative to the shot's folder");
+  }
+  const fs::path norm = p.lexically_normal();
+  if (norm.empty() || *norm.begin() == ".." || norm == "." || norm.filename().empty()) {
+    throw InputError(field + ": '" + path + "' escapes the shot's folder");
+  }
+  return norm.string();
+}
+
+// Error messages reach clients: show paths under a job's input folder as the client wrote them
+// (relative to the shot's folder), not as server-internal absolute paths.
+std::string clientPaths(std::string message, const std::string& input_dir) {
+  std::error_code ec;
+  const std::string canonical = fs::weakly_canonical(input_dir, ec).string();
+  for (const std::string& prefix : {input_dir, canonical}) {
+    if (prefix.empty()) continue;
+    for (size_t at; (at = message.find(prefix + "/")) != std::string::npos;) {
+      message.erase(at, prefix.size() + 1);
+    }
+    for (size_t at; (at = message.find(prefix)) != std::string::npos;) {
+      message.replace(at, prefix.size(), "<shot folder>");
+    }
+  }
+  return message;
+}
+
+}  // namespace
+
+struct JobManager::Job {
+  JobRecord record;
+  ShotSpec shot;
+  double sun_tolerance_deg = 0;
+  std::atomic<bool> cancel{false};
+  bool shutdown = false;  // cancelled because the manager stops, not by a client
+  std::deque<JobEvent> events;
+  uint64_t next_seq = 1;
+  std::chrono::steady_clock::time_point started;
+  double last_fraction = -1;
+  std::string last_message;
+};
+
+struct JobManager::Prepared {
+  ShotSpec shot;
+  ShotCacheKeys keys;
+  SubmitInput input;
+};
+
+JobManager::JobManager(JobManagerOptions options) : options_(std::move(options)) {
+  if (options_.state_dir.empty()) throw InputError("state_dir: must not be empty");
+  fs::create_directories(options_.state_dir);
+  // One process per state folder: two would share queue files and cache entries unsafely.
+  const std::string lock_path = (fs::path(options_.state_dir) / "LOCK").string();
+  lock_fd_ = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (lock_fd_ < 0 || ::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+    if (lock_fd_ >= 0) ::close(lock_fd_);
+    throw std::runtime_error("state folder " + options_.state_dir +
+                             " is in use by another cloudbake-server process");
+  }
+  store_ = std::make_unique<JobStore>((fs::path(options_.state_dir) / "jobs").string());
+  cache_ = std::make_unique<BakeCache>((fs::path(options_.state_dir) / "cache").string(),
+                                       options_.cache_max_bytes);
+  assets_ = std::make_unique<AssetStore>((fs::path(options_.state_dir) / "assets").string(),
+                                         options_.max_upload_bytes);
+  directions_ =
+      std::make_unique<DirectionIndex>((fs::path(options_.state_dir) / "directions").string());
+  std::error_code ec;
+  fs::remove_all(fs::path(options_.state_dir) / "tmp", ec);
+  fs::create_directories(fs::path(options_.state_dir) / "tmp");
+
+  for (JobRecord& record : store_->loadAll()) {
+    auto job = std::make_shared<Job>();
+    job->record = record;
+    if (record.state == JobState::kRunning) {
+      // Its outputs may be half-written: never serve them.
+      job->record.state = JobState::kFailed;
+      job->record.error = "interrupted: the server stopped while this job was running; resubmit";
+      job->record.finished = unixNow();
+      job->record.outputs.clear();
+      fs::remove_all(store_->outputDir(record.id), ec);
+      store_->save(job->record);
+    } else if (record.state == JobState::kQueued) {
+      try {
+        const Json s = Json::parse(
+            readWholeFile((fs::path(store_->jobDir(record.id)) / kSubmittedFile).string()));
+        SubmitInput input;
+        input.shot_json = s.at("shot_json").get<std::string>();
+        input.assets = s.at("assets").get<std::vector<std::pair<std::string, std::string>>>();
+        input.samples = s.at("samples").get<int>();
+        input.sun_tolerance_deg = s.value("sun_tolerance_deg", 0.0);
+        job->shot = prepare(input, store_->jobDir(record.id)).shot;
+        job->sun_tolerance_deg = input.sun_tolerance_deg;
+        queue_.push_back(job);
+      } catch (const std::exception& e) {
+        spdlog::error("job {}: cannot requeue after restart: {}", record.id, e.what());
+        job->record.state = JobState::kFailed;
+        job->record.error = "could not be resumed after a server restart; resubmit";
+        job->record.finished = unixNow();
+        store_->save(job->record);
+      }
+    }
+    pushEventLocked(
+        *job, job->record.stage.empty() ? "restored" : job->record.stage, job->record.fraction,
+        job->record.error.empty() ? "restored after server restart" : job->record.error);
+    jobs_[record.id] = job;
+  }
+  if (!jobs_.empty()) {
+    spdlog::info("job store: {} job(s) restored, {} requeued", jobs_.size(), queue_.size());
+  }
+  const unsigned runners = std::max(1u, options_.max_concurrent_jobs);
+  for (unsigned i = 0; i < runners; ++i) runners_.emplace_back([this] { runnerLoop(); });
+}
+
+JobManager::~JobManager() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+    for (auto& [id, job] : jobs_) {
+      if (job->record.state == JobState::kRunning) {
+        job->shutdown = true;
+        job->cancel = true;
+      }
+    }
+  }
+  cv_.notify_all();
+  for (std::thread& t : runners_) t.join();
+  ::close(lock_fd_);  // releases the flock
+}
+
+JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::string& dir) {
+  Prepared p;
+  p.input = input;
+  const std::string input_dir = (fs::path(dir) / "input").string();
+  fs::create_directories(input_dir);
+  for (size_t i = 0; i < input.assets.size(); ++i) {
+    const std::string rel = checkAssetPath(input.assets[i].first, i);
+    const std::string& sha = input.assets[i].second;
+    if (!isSha256Hex(sha)) {
+      throw InputError("assets[" + std::to_string(i) + "].sha256: must be 64 lowercase hex digits");
+    }
+    const std::string stored = assets_->find(sha);
+    if (stored.empty()) {
+      throw NotFoundError("assets[" + std::to_string(i) + "]: '" + rel + "' (sha256 " + sha +
+                          ") has not been uploaded; call UploadAsset first");
+    }
+    linkOrCopy(stored, (fs::path(input_dir) / rel).string());
+  }
+  ParseOptions po;
+  po.allowed_roots = {input_dir};
+  po.source_name = "shot.json";
+  try {
+    p.shot = parseShot(input.shot_json, input_dir, po);
+  } catch (const MissingFileError& e) {
+    throw MissingFileError(clientPaths(e.what(), input_dir));
+  } catch (const InputError& e) {
+    throw InputError(clientPaths(e.what(), input_dir));
+  }
+  if (input.samples != -1) {
+    if (input.samples < 1 || input.samples > 1000000) {
+      throw InputError("samples: must be in [1, 1000000] or unset, got " +
+                       std::to_string(input.samples));
+    }
+    p.shot.bake.samples = input.samples;
+  }
+  if (!(input.sun_tolerance_deg >= 0 && input.sun_tolerance_deg <= 90)) {
+    throw InputError("sun_tolerance_deg: must be in [0, 90] degrees, got " +
+                     std::to_string(input.sun_tolerance_deg));
+  }
+  checkRunnable(p.shot, "shot.json");
+  const JobLimits& lim = options_.limits;
+  if (lim.max_views > 0 && p.shot.views.size() > size_t(lim.max_views)) {
+    throw InputError("shot.json: /views: " + std::to_string(p.shot.views.size()) +
+                     " views exceed this server's limit of " + std::to_string(lim.max_views));
+  }
+  for (size_t i = 0; i < p.shot.views.size(); ++i) {
+    const Camera& c = p.shot.views[i];
+    const int64_t pixels = int64_t(c.width_px) * c.height_px;
+    if (lim.max_image_pixels > 0 && pixels > lim.max_image_pixels) {
+      throw InputError(
+          "shot.json: /views/" + std::to_string(i) + "/resolution: " + std::to_string(pixels) +
+          " pixels exceed this server's limit of " + std::to_string(lim.max_image_pixels));
+    }
+  }
+  if (lim.max_samples > 0 && p.shot.bake.samples > lim.max_samples) {
+    throw InputError("shot.json: /bake/samples: " + std::to_string(p.shot.bake.samples) +
+                     " exceeds this server's limit of " + std::to_string(lim.max_samples));
+  }
+  p.keys = computeCacheKeys(p.shot);
+  return p;
+}
+
+JobPlan JobManager::plan(const SubmitInput& input) {
+  const std::string dir = (fs::path(options_.state_dir) / "tmp" / uniqueSuffix()).string();
+  struct Cleanup {
+    std::string dir;
+    ~Cleanup() {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  } cleanup{dir};
+  const Prepared p = prepare(input, dir);
+  JobPlan plan;
+  plan.shot_name = p.shot.name;
+  plan.method = methodName(p.shot.bake.method);
+  plan.bake_key = p.keys.bake;
+  plan.vdb = p.shot.outputs.vdb;
+  if (p.shot.outputs.exr) {
+    for (size_t i = 0; i < p.shot.views.size(); ++i) {
+      const Camera& c = p.shot.views[i];
+      const bool cached = cache_->lookup(p.keys.views[i]).has_value();
+      plan.views.push_back(c.name);
+      plan.view_cached.push_back(cached);
+      if (!cached) plan.pixel_samples += double(c.width_px) * c.height_px * p.shot.bake.samples;
+    }
+  }
+  return plan;
+}
+
+JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const std::string& id) {
+  auto job = std::make_shared<Job>();
+  job->shot = std::move(prepared.shot);
+  job->sun_tolerance_deg = prepared.input.sun_tolerance_deg;
+  JobRecord& r = job->record;
+  r.id = id;
+  r.shot_name = job->shot.name;
+  r.method = methodName(job->shot.bake.method);
+  for (const Camera& c : job->shot.views) r.views.push_back(c.name);
+  r.created = unixNow();
+  r.stage = "queued";
+  const Json submitted = {{"shot_json", prepared.input.shot_json},
+                          {"assets", prepared.input.assets},
+                          {"samples", prepared.input.samples},
+                          {"sun_tolerance_deg", prepared.input.sun_tolerance_deg}};
+  writeFileAtomic((fs::path(dir) / kSubmittedFile).string(), submitted.dump());
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (stopping_) throw ResourceExhaustedError("the server is shutting down; retry on restart");
+  if (queue_.size() >= options_.queue_bound) {
+    throw ResourceExhaustedError("the job queue is full (" + std::to_string(queue_.size()) +
+                                 " jobs waiting, bound " + std::to_string(options_.queue_bound) +
+                                 "); retry later");
+  }
+  saveLocked(*job);  // durable before the client hears of it
+  pushEventLocked(*job, "queued", 0, "queued at position " + std::to_string(queue_.size() + 1));
+  jobs_[id] = job;
+  queue_.push_back(job);
+  ++submitted_;
+  cv_.notify_all();
+  return r;
+}
+
+JobRecord JobManager::submit(const SubmitInput& input) {
+  {
+    // Fail fast before linking assets and hashing volumes; enqueue checks again.
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (queue_.size() >= options_.queue_bound) {
+      throw ResourceExhaustedError("the job queue is full (" + std::to_string(queue_.size()) +
+                                   " jobs waiting, bound " + std::to_string(options_.queue_bound) +
+                                   "); retry later");
+    }
+  }
+  const std::string id = newJobId();
+  const std::string dir = store_->jobDir(id);
+  try {
+    Prepared p = prepare(input, dir);
+    return enqueue(std::move(p), dir, id);
+  } catch (...) {
+    store_->remove(id);
+    throw;
+  }
+}
+
+JobRecord JobManager::render(const std::string& job_id, const std::string& views_json,
+                             const std::string& sun_irradiance_json) {
+  const std::shared_ptr<Job> old = find(job_id);
+  SubmitInput input;
+  try {
+    const Json s =
+        Json::parse(readWholeFile((fs::path(store_->jobDir(job_id)) / kSubmittedFile).string()));
+    input.shot_json = s.at("shot_json").get<std::string>();
+    input.assets = s.at("assets").get<std::vector<std::pair<std::string, std::string>>>();
+    input.samples = s.at("samples").get<int>();
+    input.sun_tolerance_deg = s.value("sun_tolerance_deg", 0.0);
+  } catch (const std::exception& e) {
+    spdlog::error("job {}: cannot read its submission: {}", job_id, e.what());
+    throw FailedPreconditionError("job " + job_id + " has no stored submission to render from");
+  }
+  Json shot = Json::parse(input.shot_json);  // it parsed when the job was submitted
+  if (!views_json.empty()) {
+    const Json views = Json::parse(views_json, nullptr, false);
+    if (views.is_discarded() || !views.is_array()) {
+      throw InputError("views_json: must be a JSON array of shot-format views");
+    }
+    shot["views"] = views;
+  }
+  if (!sun_irradiance_json.empty()) {
+    const Json e = Json::parse(sun_irradiance_json, nullptr, false);
+    if (e.is_discarded()) throw InputError("sun_irradiance_json: not valid JSON");
+    if (!shot.contains("lighting") || !shot["lighting"].contains("sun")) {
+      throw InputError("sun_irradiance_json: the shot of job " + job_id + " has no sun");
+    }
+    shot["lighting"]["sun"]["irradiance"] = e;
+  }
+  input.shot_json = shot.dump();
+  return submit(input);
+}
+
+std::shared_ptr<JobManager::Job> JobManager::find(const std::string& id) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = jobs_.find(id);
+  if (it == jobs_.end()) throw NotFoundError("job '" + id.substr(0, 64) + "' not found");
+  return it->second;
+}
+
+JobRecord JobManager::get(const std::string& id) const {
+  auto job = find(id);
+  std::lock_guard<std::mutex> lock(mutex_);
+  return job->record;
+}
+
+std::vector<JobRecord> JobManager::list(std::optional<JobState> state, size_t limit) const {
+  std::vector<JobRecord> out;
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (const auto& [id, job] : jobs_) {
+    if (!state || job->record.state == *state) out.push_back(job->record);
+  }
+  std::sort(out.begin(), out.end(), [](const JobRecord& a, const JobRecord& b) {
+    return a.created != b.created ? a.created > b.created : a.id > b.id;
+  });
+  if (limit > 0 && out.size() > limit) out.resize(limit);
+  return out;
+}
+
+JobRecord JobManager::cancel(const std::string& id) {
+  auto job = find(id);
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (job->record.state == JobState::kQueued) {
+    queue_.erase(std::remove(queue_.begin(), queue_.end(), job), queue_.end());
+    job->record.state = JobState::kCancelled;
+    job->record.finished = unixNow();
+    job->record.stage = "cancelled";
+    saveLocked(*job);
+    pushEventLocked(*job, "cancelled", job->record.fraction, "cancelled while queued");
+  } else if (job->record.state == JobState::kRunning) {
+    job->cancel = true;  // the runner records the final state when the work has stopped
+  }
+  return job->record;
+}
+
+std::vector<JobEvent> JobManager::events(const std::string& id, uint64_t after,
+                                         std::chrono::milliseconds wait, JobRecord* record) const {
+  auto job = find(id);
+  std::unique_lock<std::mutex> lock(mutex_);
+  auto ready = [&] {
+    return stopping_ || job->record.terminal() ||
+           (!job->events.empty() && job->events.back().seq > after);
+  };
+  cv_.wait_for(lock, wait, ready);
+  std::vector<JobEvent> out;
+  for (const JobEvent& e : job->events) {
+    if (e.seq > after) out.push_back(e);
+  }
+  if (record) *record = job->record;
+  return out;
+}
+
+OutputFile JobManager::output(const std::string& id, const std::string& name) const {
+  auto job = find(id);
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (job->record.state != JobState::kSucceeded) {
+    throw FailedPreconditionError("job " + id + " is " + jobStateName(job->record.state) +
+                                  "; results exist only for SUCCEEDED jobs");
+  }
+  for (const OutputFile& f : job->record.outputs) {
+    if (f.name == name) {
+      OutputFile out = f;
+      out.path = (fs::path(store_->outputDir(id)) / f.name).string();
+      return out;
+    }
+  }
+  std::string names;
+  for (const OutputFile& f : job->record.outputs) names += (names.empty() ? "" : ", ") + f.name;
+  throw NotFoundError("job " + id + " has no output '" + name.substr(0, 256) +
+                      "' (it has: " + names + ")");
+}
+
+JobManagerStats JobManager::stats() const {
+  JobManagerStats s;
+  s.scatter_computations = scatter_computations_;
+  s.views_from_cache = views_from_cache_;
+  s.volume_builds = volumes_.builds();
+  s.jobs_submitted = submitted_;
+  s.cache = cache_->stats();
+  std::lock_guard<std::mutex> lock(mutex_);
+  s.queued = queue_.size();
+  s.running = running_;
+  return s;
+}
+
+void JobManager::saveLocked(const Job& job) {
+  try {
+    store_->save(job.record);
+  } catch (const std::exception& e) {
+    spdlog::error("job {}: cannot save record: {}", job.record.id, e.what());
+  }
+}
+
+void JobManager::pushEventLocked(Job& job, const std::string& stage, double fraction,
+                                 const std::string& message) {
+  JobEvent e;
+  e.seq = job.next_seq++;
+  e.time = unixNow();
+  e.state = job.record.state;
+  e.stage = stage;
+  e.fraction = fraction;
+  if (job.record.state == JobState::kRunning && fraction > 0.01) {
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - job.started).count();
+    e.eta_s = elapsed / fraction * (1 - fraction);
+  } else if (job.record.terminal()) {
+    e.eta_s = 0;
+  }
+  e.message = message;
+  job.events.push_back(e);
+  while (job.events.size() > kMaxEventsKept) job.events.pop_front();
+  job.last_fraction = fraction;
+  job.last_message = message;
+  cv_.notify_all();
+}
+
+void JobManager::runnerLoop() {
+  for (;;) {
+    std::shared_ptr<Job> job;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+      if (stopping_) return;
+      job = queue_.front();
+      queue_.pop_front();
+      ++running_;
+    }
+    runJob(job);
+    std::lock_guard<std::mutex> lock(mutex_);
+    --running_;
+  }
+}
+
+void JobManager::runJob(const std::shared_ptr<Job>& job) {
+  const std::string& id = job->record.id;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    job->record.state = JobState::kRunning;
+    job->record.started = unixNow();
+    job->record.stage = "build";
+    job->started = std::chrono::steady_clock::now();
+    saveLocked(*job);
+    pushEventLocked(*job, "build", 0, "started");
+  }
+  spdlog::info("job {}: started ('{}', {} view(s))", id, job->record.shot_name,
+               job->record.views.size());
+  RunOptions ro;
+  ro.out_dir = store_->outputDir(id);
+  ro.cache = cache_.get();
+  ro.volumes = &volumes_;
+  ro.directions = directions_.get();
+  ro.sun_tolerance_deg = job->sun_tolerance_deg;
+  ro.progress = [this, job](const RunProgress& p) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    job->record.stage = p.stage;
+    job->record.fraction = p.fraction;
+    if (p.message != job->last_message || p.fraction >= job->last_fraction + 0.01) {
+      pushEventLocked(*job, p.stage, p.fraction,
+                      p.message == job->last_message ? std::string() : p.message);
+      job->last_message = p.message;
+    }
+    return !job->cancel.load();
+  };
+  RunResult result;
+  JobState final_state = JobState::kSucceeded;
+  std::string error;
+  bool error_is_input = false;
+  try {
+    const int threads =
+        options_.worker_threads > 0 ? int(options_.worker_threads) : tbb::task_arena::automatic;
+    tbb::task_arena arena(threads);
+    arena.execute([&] { result = runShot(job->shot, ro); });
+  } catch (const Cancelled&) {
+    final_state = job->shutdown ? JobState::kFailed : JobState::kCancelled;
+    error = job->shutdown ? "interrupted by server shutdown; resubmit" : "cancelled";
+  } catch (const InputError& e) {
+    final_state = JobState::kFailed;
+    error = clientPaths(e.what(), store_->inputDir(id));
+    error_is_input = true;
+  } catch (const std::exception& e) {
+    final_state = JobState::kFailed;
+    error = "internal error while running the job (details in the server log, job " + id + ")";
+    spdlog::error("job {}: {}", id, e.what());
+  }
+  scatter_computations_ += uint64_t(result.views_rendered);
+  views_from_cache_ += uint64_t(result.views_cached);
+  if (final_state != JobState::kSucceeded) {
+    std::error_code ec;
+    fs::remove_all(ro.out_dir, ec);
+    result.files.clear();
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  JobRecord& r = job->record;
+  r.state = final_state;
+  r.finished = unixNow();
+  r.error = error;
+  r.error_is_input = error_is_input;
+  r.views_rendered = result.views_rendered;
+  r.views_cached = result.views_cached;
+  r.stage = jobStateName(final_state);
+  if (final_state == JobState::kSucceeded) r.fraction = 1;
+  for (OutputFile f : result.files) {
+    f.path.clear();
+    r.outputs.push_back(f);
+  }
+  saveLocked(*job);
+  pushEventLocked(*job, "done", r.fraction,
+                  final_state == JobState::kSucceeded
+                      ? "succeeded in " + std::to_string(result.seconds) + " s (" +
+                            std::to_string(result.views_rendered) + " view(s) rendered, " +
+                            std::to_string(result.views_cached) + " from cache)"
+                      : error);
+  spdlog::info("job {}: {}{}", id, jobStateName(final_state), error.empty() ? "" : ": " + error);
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,164 @@
+// The job pool behind cloudbake-server: validation, a bounded queue, runners each executing a
+// job in its own tbb::task_arena, progress events, cancellation, durable records, the caches.
+// Independent of gRPC so it can be tested (and embedded) on its own.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "core/job/asset_store.h"
+#include "core/job/bake_cache.h"
+#include "core/job/cache_key.h"
+#include "core/job/direction_index.h"
+#include "core/job/job_record.h"
+#include "core/job/volume_cache.h"
+#include "core/shot/shot.h"
+
+namespace cloudbake {
+
+/// Service limits on one job, on top of the shot format's own bounds. 0: no limit.
+struct JobLimits {
+  int64_t max_image_pixels = int64_t(1) << 22;  ///< per view (4 Mpixel)
+  int max_views = 64;
+  int64_t max_samples = 1 << 16;  ///< samples per pixel
+  int64_t max_frames = 1;         ///< animated volumes (not supported yet)
+};
+
+/// Settings of a JobManager. Everything durable lives under `state_dir`: jobs/, cache/,
+/// assets/.
+struct JobManagerOptions {
+  std::string state_dir;
+  unsigned worker_threads = 0;       ///< threads of each job's task_arena; 0: all hardware
+  unsigned max_concurrent_jobs = 1;  ///< runners
+  size_t queue_bound = 16;           ///< queued (not running) jobs; more: ResourceExhausted
+  uint64_t cache_max_bytes = uint64_t(1) << 30;
+  uint64_t max_upload_bytes = uint64_t(1) << 30;
+  JobLimits limits;
+};
+
+/// A shot as a client submits it: JSON text (format v1) and the files it names, by path
+/// relative to the shot's folder and content hash of an uploaded asset.
+struct SubmitInput {
+  std::string shot_json;
+  std::vector<std::pair<std::string, std::string>> assets;  ///< (relative path, sha256)
+  int samples = -1;                                         ///< override; -1: the shot's
+  /// Reuse a cached render whose sun direction is within this angle (degrees; 0: exact only).
+  double sun_tolerance_deg = 0;
+};
+
+/// What a submit would do (dry run): per view whether its render is cached.
+struct JobPlan {
+  std::string shot_name;
+  std::string method;
+  std::vector<std::string> views;
+  std::vector<bool> view_cached;
+  bool vdb = false;
+  bool volume_cached = false;
+  double pixel_samples = 0;  ///< paths to trace for the views not cached (cost estimate)
+  std::string bake_key;
+};
+
+/// One progress event of a job. `seq` increases by one per job from 1; `eta_s` < 0: unknown.
+struct JobEvent {
+  uint64_t seq = 0;
+  double time = 0;
+  JobState state = JobState::kQueued;
+  std::string stage;
+  double fraction = 0;
+  double eta_s = -1;
+  std::string message;
+};
+
+/// Counters the service exposes (tests assert on `scatter_computations`).
+struct JobManagerStats {
+  uint64_t scatter_computations = 0;  ///< views path-traced (not served from the cache)
+  uint64_t views_from_cache = 0;
+  uint64_t volume_builds = 0;
+  uint64_t jobs_submitted = 0;
+  size_t queued = 0, running = 0;
+  BakeCacheStats cache;
+};
+
+class JobManager {
+ public:
+  /// Opens the state folder (locking it: a second manager on it throws std::runtime_error),
+  /// loads job records (a job that was RUNNING when the previous
+  /// process died is marked FAILED; QUEUED jobs are queued again) and starts the runners.
+  explicit JobManager(JobManagerOptions options);
+  /// Stops the runners: running jobs are cancelled and recorded as FAILED ("interrupted by
+  /// server shutdown"); queued jobs stay queued on disk for the next start.
+  ~JobManager();
+  JobManager(const JobManager&) = delete;
+  JobManager& operator=(const JobManager&) = delete;
+
+  /// Validates and queues. Throws InputError (bad shot; message names the field),
+  /// NotFoundError (an asset not uploaded), ResourceExhaustedError (queue full).
+  JobRecord submit(const SubmitInput& input);
+  /// Validates and plans without queueing (same errors as submit, except queue full).
+  JobPlan plan(const SubmitInput& input);
+  /// A new job rendering `views_json` (a JSON array of shot-format views) of job `job_id`'s
+  /// shot, optionally with a new sun irradiance (JSON [r,g,b]; empty: unchanged). Reuses the
+  /// job's assets; cached parts are not recomputed.
+  JobRecord render(const std::string& job_id, const std::string& views_json,
+                   const std::string& sun_irradiance_json);
+
+  /// Throws NotFoundError.
+  JobRecord get(const std::string& id) const;
+  /// Newest first; `state` filters when set; at most `limit` (0: all).
+  std::vector<JobRecord> list(std::optional<JobState> state, size_t limit) const;
+  /// Cancels a queued or running job (a running one stops within about a second). Cancelling
+  /// a finished job is a no-op that returns its record. Throws NotFoundError.
+  JobRecord cancel(const std::string& id);
+  /// Events with seq > `after`, waiting up to `wait` for one when there is none and the job is
+  /// not finished. `record` receives the job's record. Throws NotFoundError.
+  std::vector<JobEvent> events(const std::string& id, uint64_t after,
+                               std::chrono::milliseconds wait, JobRecord* record) const;
+  /// Absolute path and description of output `name` of a SUCCEEDED job. Throws NotFoundError
+  /// (job or name), FailedPreconditionError (job not succeeded).
+  OutputFile output(const std::string& id, const std::string& name) const;
+
+  AssetStore& assets() { return *assets_; }
+  JobManagerStats stats() const;
+  const JobManagerOptions& options() const { return options_; }
+
+ private:
+  struct Job;
+  struct Prepared;
+  Prepared prepare(const SubmitInput& input, const std::string& dir);
+  std::shared_ptr<Job> find(const std::string& id) const;
+  void pushEventLocked(Job& job, const std::string& stage, double fraction,
+                       const std::string& message);
+  void saveLocked(const Job& job);
+  void runnerLoop();
+  void runJob(const std::shared_ptr<Job>& job);
+  JobRecord enqueue(Prepared prepared, const std::string& dir, const std::string& id);
+
+  JobManagerOptions options_;
+  std::unique_ptr<JobStore> store_;
+  std::unique_ptr<BakeCache> cache_;
+  std::unique_ptr<AssetStore> assets_;
+  VolumeCache volumes_;
+  std::unique_ptr<DirectionIndex> directions_;
+  mutable std::mutex mutex_;
+  mutable std::condition_variable cv_;  // queue changes and new events
+  std::map<std::string, std::shared_ptr<Job>> jobs_;
+  std::deque<std::shared_ptr<Job>> queue_;
+  size_t running_ = 0;
+  bool stopping_ = false;
+  std::vector<std::thread> runners_;
+  int lock_fd_ = -1;
+  std::atomic<uint64_t> scatter_computations_{0}, views_from_cache_{0}, submitted_{0};
+};
+
+}  // namespace cloudbake

@@ -1,0 +1,147 @@
+#include "core/job/job_record.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <random>
+
+#include "core/job/file_util.h"
+
+namespace cloudbake {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+const char* jobStateName(JobState state) {
+  switch (state) {
+    case JobState::kQueued:
+      return "QUEUED";
+    case JobState::kRunning:
+      return "RUNNING";
+    case JobState::kSucceeded:
+      return "SUCCEEDED";
+    case JobState::kFailed:
+      return "FAILED";
+    case JobState::kCancelled:
+      return "CANCELLED";
+  }
+  return "UNKNOWN";
+}
+
+namespace {
+
+JobState stateFromName(const std::string& name) {
+  for (JobState s : {JobState::kQueued, JobState::kRunning, JobState::kSucceeded, JobState::kFailed,
+                     JobState::kCancelled}) {
+    if (name == jobStateName(s)) return s;
+  }
+  throw std::runtime_error("unknown job state '" + name + "'");
+}
+
+Json toJson(const JobRecord& r) {
+  Json outputs = Json::array();
+  for (const OutputFile& f : r.outputs) {
+    outputs.push_back({{"name", f.name}, {"size", f.size}, {"sha256", f.sha256}});
+  }
+  return {{"id", r.id},
+          {"state", jobStateName(r.state)},
+          {"shot_name", r.shot_name},
+          {"method", r.method},
+          {"views", r.views},
+          {"created", r.created},
+          {"started", r.started},
+          {"finished", r.finished},
+          {"stage", r.stage},
+          {"fraction", r.fraction},
+          {"error", r.error},
+          {"error_is_input", r.error_is_input},
+          {"outputs", outputs},
+          {"views_rendered", r.views_rendered},
+          {"views_cached", r.views_cached}};
+}
+
+JobRecord fromJson(const Json& j) {
+  JobRecord r;
+  r.id = j.at("id").get<std::string>();
+  r.state = stateFromName(j.at("state").get<std::string>());
+  r.shot_name = j.at("shot_name").get<std::string>();
+  r.method = j.at("method").get<std::string>();
+  r.views = j.at("views").get<std::vector<std::string>>();
+  r.created = j.at("created").get<double>();
+  r.started = j.at("started").get<double>();
+  r.finished = j.at("finished").get<double>();
+  r.stage = j.at("stage").get<std::string>();
+  r.fraction = j.at("fraction").get<double>();
+  r.error = j.at("error").get<std::string>();
+  r.error_is_input = j.at("error_is_input").get<bool>();
+  for (const Json& f : j.at("outputs")) {
+    OutputFile o;
+    o.name = f.at("name").get<std::string>();
+    o.size = f.at("size").get<uint64_t>();
+    o.sha256 = f.at("sha256").get<std::string>();
+    r.outputs.push_back(o);
+  }
+  r.views_rendered = j.at("views_rendered").get<int>();
+  r.views_cached = j.at("views_cached").get<int>();
+  return r;
+}
+
+}  // namespace
+
+JobStore::JobStore(std::string root) : root_(std::move(root)) { fs::create_directories(root_); }
+
+std::string JobStore::jobDir(const std::string& id) const {
+  return (fs::path(root_) / id).string();
+}
+std::string JobStore::inputDir(const std::string& id) const {
+  return (fs::path(root_) / id / "input").string();
+}
+std::string JobStore::outputDir(const std::string& id) const {
+  return (fs::path(root_) / id / "out").string();
+}
+
+void JobStore::save(const JobRecord& record) const {
+  fs::create_directories(jobDir(record.id));
+  writeFileAtomic((fs::path(jobDir(record.id)) / "job.json").string(), toJson(record).dump(1));
+}
+
+std::vector<JobRecord> JobStore::loadAll() const {
+  std::vector<JobRecord> records;
+  for (const auto& dir : fs::directory_iterator(root_)) {
+    if (!dir.is_directory() || !isJobId(dir.path().filename().string())) continue;
+    const fs::path file = dir.path() / "job.json";
+    try {
+      records.push_back(fromJson(Json::parse(readWholeFile(file.string()))));
+    } catch (const std::exception& e) {
+      // A job folder without a readable record was never acknowledged to a client.
+      spdlog::warn("job store: skipping {}: {}", dir.path().string(), e.what());
+    }
+  }
+  std::sort(records.begin(), records.end(), [](const JobRecord& a, const JobRecord& b) {
+    return a.created != b.created ? a.created < b.created : a.id < b.id;
+  });
+  return records;
+}
+
+void JobStore::remove(const std::string& id) const {
+  std::error_code ec;
+  fs::remove_all(jobDir(id), ec);
+}
+
+std::string newJobId() {
+  static thread_local std::mt19937_64 rng{std::random_device{}()};
+  static const char* kHex = "0123456789abcdef";
+  std::string id = "j";
+  uint64_t v = rng();
+  for (int i = 0; i < 16; ++i) id.push_back(kHex[(v >> (4 * i)) & 15]);
+  return id;
+}
+
+bool isJobId(const std::string& id) {
+  if (id.size() != 17 || id[0] != 'j') return false;
+  return std::all_of(id.begin() + 1, id.end(),
+                     [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
+}
+
+}  // namespace cloudbake

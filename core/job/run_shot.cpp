@@ -1,0 +1,336 @@
+#include "core/job/run_shot.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <utility>
+
+#include "core/error.h"
+#include "core/io/exr_io.h"
+#include "core/io/png_writer.h"
+#include "core/io/vdb_io.h"
+#include "core/job/bake_cache.h"
+#include "core/job/cache_key.h"
+#include "core/job/direction_index.h"
+#include "core/job/file_util.h"
+#include "core/job/sha256.h"
+#include "core/job/volume_cache.h"
+#include "core/shot/scene_builder.h"
+#include "core/transport/path_tracer.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+
+constexpr const char* kCachedViewFile = "view.exr";
+constexpr const char* kCachedVdbFile = "bake.vdb";
+
+// A number with `digits` decimals, for progress messages ("2.58 s" rather than "2.581958 s").
+std::string fixed(double value, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
+  return buf;
+}
+
+double secondsSince(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+uint8_t srgbByte(double linear) {
+  const double c = std::clamp(linear, 0.0, 1.0);
+  const double s = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+  return static_cast<uint8_t>(std::lround(s * 255.0));
+}
+
+// Preview only: exposure puts the 99th percentile of luminance at 0.8, then sRGB encoding (as
+// `cloudbake render --png`). The EXR stays the authoritative, unexposed radiance.
+void writePreviewPng(const std::string& path, const Image& beauty) {
+  std::vector<double> lum;
+  lum.reserve(size_t(beauty.width) * beauty.height);
+  for (int y = 0; y < beauty.height; ++y) {
+    for (int x = 0; x < beauty.width; ++x) {
+      const float* p = beauty.at(x, y);
+      lum.push_back(0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]);
+    }
+  }
+  const size_t k = std::min(lum.size() - 1, size_t(0.99 * double(lum.size())));
+  std::nth_element(lum.begin(), lum.begin() + std::ptrdiff_t(k), lum.end());
+  const double exposure = lum[k] > 0 && std::isfinite(lum[k]) ? 0.8 / lum[k] : 1.0;
+  std::vector<uint8_t> px(size_t(beauty.width) * beauty.height * 3);
+  for (int y = 0; y < beauty.height; ++y) {
+    for (int x = 0; x < beauty.width; ++x) {
+      const float* p = beauty.at(x, y);
+      for (int c = 0; c < 3; ++c) {
+        px[(size_t(y) * beauty.width + x) * 3 + c] = srgbByte(exposure * p[c]);
+      }
+    }
+  }
+  writePng(path, beauty.width, beauty.height, 3, px);
+}
+
+// Multiplies the RGB channels of a layer by the sun irradiance (alpha untouched).
+void scaleRgb(Image& image, const Rgb& e) {
+  const double s[3] = {e.x, e.y, e.z};
+  for (size_t i = 0; i < image.data.size(); ++i) {
+    const int c = int(i % size_t(image.channels));
+    if (c < 3) image.data[i] = float(image.data[i] * s[c]);
+  }
+}
+
+const char* const kLayerNames[] = {"", "sun", "sky", "single", "multiple"};
+
+std::vector<ExrLayer> toExrLayers(RenderLayers&& layers) {
+  return {{"", std::move(layers.beauty)},
+          {"sun", std::move(layers.sun)},
+          {"sky", std::move(layers.sky)},
+          {"single", std::move(layers.single)},
+          {"multiple", std::move(layers.multiple)}};
+}
+
+std::vector<ExrLayer> readLayers(const std::string& path) {
+  ExrContents contents = readExr(path);
+  std::vector<ExrLayer> layers;
+  for (const char* name : kLayerNames) {
+    auto it = contents.layers.find(name);
+    if (it == contents.layers.end()) {
+      throw std::runtime_error(path + ": cached view lacks layer '" + name + "'");
+    }
+    layers.push_back({name, std::move(it->second)});
+  }
+  return layers;
+}
+
+OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
+  OutputFile f;
+  f.name = name;
+  f.path = (fs::path(out_dir) / name).string();
+  f.size = fs::file_size(f.path);
+  f.sha256 = sha256File(f.path);
+  return f;
+}
+
+}  // namespace
+
+void checkRunnable(const ShotSpec& shot, const std::string& source) {
+  if (shot.bake.method != BakeSpec::Method::kPathtrace) {
+    throw InputError(source + ": /bake/method: '" + methodName(shot.bake.method) +
+                     "' is not implemented in this version (use 'pathtrace')");
+  }
+  if (std::holds_alternative<SequenceVolumeSpec>(shot.volume)) {
+    throw InputError(source +
+                     ": /volume/sequence: animated volumes are not supported by method "
+                     "'pathtrace' yet");
+  }
+}
+
+RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
+  const auto t_start = std::chrono::steady_clock::now();
+  if (opt.threads < 0 || opt.threads > 4096) {
+    throw InputError("threads: must be in [0, 4096] (0 = all cores), got " +
+                     std::to_string(opt.threads));
+  }
+  if (!(opt.sun_tolerance_deg >= 0 && opt.sun_tolerance_deg <= 90)) {
+    throw InputError("sun_tolerance_deg: must be in [0, 90] degrees, got " +
+                     std::to_string(opt.sun_tolerance_deg));
+  }
+  if (opt.samples != -1 && (opt.samples < 1 || opt.samples > 1000000)) {
+    throw InputError("samples: must be in [1, 1000000], got " + std::to_string(opt.samples));
+  }
+  ShotSpec shot = shot_in;
+  if (opt.samples != -1) shot.bake.samples = opt.samples;
+  checkRunnable(shot, opt.source);
+
+  std::error_code ec;
+  fs::create_directories(opt.out_dir, ec);
+  if (ec || !fs::is_directory(opt.out_dir)) {
+    throw InputError("out: cannot create folder '" + opt.out_dir + "'" +
+                     (ec ? ": " + ec.message() : ""));
+  }
+
+  const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
+  const double total = std::max(1, n_views + (shot.outputs.vdb ? 1 : 0));
+  RunProgress progress;
+  auto report = [&](const std::string& stage, double done, const std::string& message) {
+    progress.stage = stage;
+    progress.fraction = std::clamp(done / total, 0.0, 1.0);
+    progress.message = message;
+    if (opt.progress && !opt.progress(progress)) throw Cancelled();
+  };
+  auto should_stop = [&] { return opt.progress && !opt.progress(progress); };
+
+  RunResult result;
+  report("build", 0, "building " + std::string(volumeTypeName(shot.volume)) + " volume");
+  const ShotCacheKeys keys = opt.cache || opt.volumes ? computeCacheKeys(shot) : ShotCacheKeys{};
+
+  // The scene (and its density field, the expensive part) is built only when something is
+  // computed; with a volume cache the field comes from memory when an earlier job built it.
+  std::optional<Scene> scene;
+  auto needScene = [&]() -> const Scene& {
+    if (scene) return *scene;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (opt.volumes) {
+      ShotSpec light = shot;
+      light.volume = BoxVolumeSpec{{0, 0, 0}, {1, 1, 1}, 0.0};  // cheap stand-in, replaced below
+      Scene s = buildScene(light, opt.source);
+      s.medium.density = opt.volumes->getOrBuild(
+          keys.volume, [&] { return buildVolume(shot.volume, opt.source); }, &result.volume_cached);
+      scene = std::move(s);
+    } else {
+      scene = buildScene(shot, opt.source);
+    }
+    // Built lazily, inside whichever stage first needs it: keep that stage and fraction.
+    report(progress.stage, progress.fraction * total,
+           "built " + scene->medium.density->describe() + " in " +
+               fixed(secondsSince(t0), 2) + " s" +
+               (result.volume_cached ? " (volume from memory cache)" : ""));
+    return *scene;
+  };
+  // Validate the medium, lights and cameras up front even when everything is cached, so bad
+  // input fails the same way with and without a cache.
+  if (!opt.cache) needScene();
+
+  PathTracerOptions pt;
+  pt.samples_per_pixel = shot.bake.samples;
+  pt.seed = shot.bake.seed;
+  if (shot.bake.max_depth) pt.max_depth = *shot.bake.max_depth;
+  pt.threads = opt.threads;
+
+  for (int i = 0; i < n_views; ++i) {
+    const Camera& camera = shot.views[size_t(i)];
+    const std::string label = "view '" + camera.name + "' " + std::to_string(camera.width_px) +
+                              "x" + std::to_string(camera.height_px) + ", " +
+                              std::to_string(pt.samples_per_pixel) + " spp";
+    progress.view = camera.name;
+    progress.view_fraction = 0;
+    report("render", i, label);
+    const auto t0 = std::chrono::steady_clock::now();
+    auto render = [&](const Sun& sun) {
+      const Scene& s = needScene();
+      return renderPathTraced(s.medium, sun, s.sky, s.cameras[size_t(i)], pt, [&](double f) {
+        progress.view_fraction = f;
+        progress.fraction = std::clamp((i + f) / total, 0.0, 1.0);
+        return !opt.progress || opt.progress(progress);
+      });
+    };
+    std::vector<ExrLayer> layers;
+    bool from_cache = false;
+    if (opt.cache) {
+      bool computed = false;
+      std::string entry;
+      // Tolerance reuse: a cached render of a nearby sun direction (closest first). The entry is
+      // read at once; if it vanished meanwhile (eviction) the view is rendered as usual.
+      if (opt.directions && opt.sun_tolerance_deg > 0 && shot.lighting.has_sun &&
+          !opt.cache->lookup(keys.views[size_t(i)])) {
+        const Vec3 own = quantiseDirection(shot.lighting.sun.direction);
+        for (const Vec3& d : opt.directions->near(keys.family, own, opt.sun_tolerance_deg)) {
+          ShotSpec alt = shot;
+          alt.lighting.sun.direction = d;
+          const ShotCacheKeys alt_keys = computeCacheKeys(alt);
+          if (auto found = opt.cache->lookup(alt_keys.views[size_t(i)])) {
+            try {
+              layers = readLayers((fs::path(*found) / kCachedViewFile).string());
+              entry = *found;
+              ++result.views_reused_direction;
+              result.reused_angle_deg = std::max(result.reused_angle_deg, angleDeg(d, own));
+              break;
+            } catch (const std::exception&) {
+              layers.clear();
+            }
+          }
+        }
+      }
+      if (entry.empty()) {
+        entry = opt.cache->getOrCompute(
+            keys.views[size_t(i)],
+            [&](const std::string& staging) {
+              Sun sun = needScene().sun;
+              if (keys.sun_scaled) sun.irradiance = Rgb(1.0);
+              writeExr((fs::path(staging) / kCachedViewFile).string(), toExrLayers(render(sun)),
+                       {{"cloudbake:units",
+                         keys.sun_scaled ? "radiance per unit sun irradiance" : "radiance"}});
+              computed = true;
+            },
+            should_stop);
+        layers = readLayers((fs::path(entry) / kCachedViewFile).string());
+        if (computed && opt.directions && shot.lighting.has_sun) {
+          opt.directions->add(keys.family, quantiseDirection(shot.lighting.sun.direction));
+        }
+      }
+      if (keys.sun_scaled) {
+        for (ExrLayer& layer : layers) scaleRgb(layer.image, shot.lighting.sun.irradiance);
+      }
+      from_cache = !computed;
+      (computed ? result.views_rendered : result.views_cached) += 1;
+    } else {
+      layers = toExrLayers(render(scene->sun));
+      ++result.views_rendered;
+    }
+    const std::string name = camera.name + ".exr";
+    const std::string path = (fs::path(opt.out_dir) / name).string();
+    const std::map<std::string, std::string> attributes = {
+        {"cloudbake:shot", shot.name},
+        {"cloudbake:view", camera.name},
+        {"cloudbake:method", methodName(shot.bake.method)},
+        {"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
+        {"cloudbake:seed", std::to_string(pt.seed)},
+        {"cloudbake:units", "radiance, units of sun irradiance per sr"}};
+    writeExr(path, layers, attributes);
+    result.files.push_back(describeOutput(opt.out_dir, name));
+    progress.view_fraction = 1;
+    report("render", i + 1,
+           label +
+               (from_cache ? (result.views_reused_direction > 0
+                                  ? ": from the cached bake of a sun direction " +
+                                        fixed(result.reused_angle_deg, 2) + " deg away, in "
+                                  : ": from cache in ")
+                           : ": rendered in ") +
+               fixed(secondsSince(t0), 2) + " s");
+    if (opt.png) {
+      const std::string png_name = camera.name + ".png";
+      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path));
+      result.files.push_back(describeOutput(opt.out_dir, png_name));
+    }
+  }
+  progress.view.clear();
+
+  if (shot.outputs.vdb) {
+    report("vdb", n_views, "writing bake.vdb");
+    auto write = [&](const std::string& path) {
+      const Scene& s = needScene();
+      VdbWriteOptions vdb;
+      vdb.voxel_size = shot.outputs.vdb_voxel_size;
+      vdb.file_metadata = {{"cloudbake:shot", shot.name},
+                           {"cloudbake:method", methodName(shot.bake.method)},
+                           {"cloudbake:volume", s.medium.density->describe()}};
+      writeVdb(path, *s.medium.density, vdb);
+    };
+    const std::string path = (fs::path(opt.out_dir) / kCachedVdbFile).string();
+    if (opt.cache) {
+      // The shot name is in the file's metadata, so it is part of this entry's key.
+      bool computed = false;
+      const std::string entry = opt.cache->getOrCompute(
+          sha256Hex(keys.vdb + "/" + shot.name + "/" + methodName(shot.bake.method)),
+          [&](const std::string& staging) {
+            write((fs::path(staging) / kCachedVdbFile).string());
+            computed = true;
+          },
+          should_stop);
+      result.vdb_cached = !computed;
+      // A copy, not a link: the job's file must not change if the cache entry is tampered with.
+      const std::string tmp = path + ".tmp." + uniqueSuffix();
+      fs::copy_file((fs::path(entry) / kCachedVdbFile), tmp, fs::copy_options::overwrite_existing);
+      fs::rename(tmp, path);
+    } else {
+      write(path);
+    }
+    result.files.push_back(describeOutput(opt.out_dir, kCachedVdbFile));
+  }
+  result.seconds = secondsSince(t_start);
+  report("done", total, "done in " + fixed(result.seconds, 2) + " s");
+  return result;
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,414 @@
+// Unit tests of core/job: SHA-256, cache keys, the bake cache (atomicity, verification, LRU,
+// single flight), runShot (outputs, cache reuse, cancellation) and the durable job store.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+#include <vector>
+
+#include "core/error.h"
+#include "core/io/exr_io.h"
+#include "core/io/vdb_io.h"
+#include "core/job/bake_cache.h"
+#include "core/job/cache_key.h"
+#include "core/job/direction_index.h"
+#include "core/job/file_util.h"
+#include "core/job/job_manager.h"
+#include "core/job/run_shot.h"
+#include "core/job/sha256.h"
+#include "core/job/volume_cache.h"
+#include "core/shot/shot_parser.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+
+fs::path freshDir(const std::string& name) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("cloudbake_job_test_" + name + "_" + uniqueSuffix());
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::string tinyShot(const std::string& extra_sun = "[1, 1, 1]", int width = 8,
+                     const std::string& camera_y = "-5") {
+  return R"({"version": 1, "name": "tiny",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": 2, "albedo": 0.9, "phase": {"type": "hg", "g": 0.5}},
+    "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": )" +
+         extra_sun + R"(}},
+    "bake": {"method": "pathtrace", "samples": 2, "seed": 3},
+    "views": [{"name": "front", "camera": {"type": "orthographic", "position": [0, )" +
+         camera_y + R"(, 0], "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5},
+               "resolution": [)" +
+         std::to_string(width) + R"(, 8]}],
+    "outputs": {"exr": true, "vdb": true, "vdb_voxel_size": 0.25}})";
+}
+
+ShotSpec parse(const std::string& text) { return parseShot(text, ""); }
+
+TEST(Sha256, KnownVectors) {
+  // FIPS 180-2 appendix B.1 and the empty message.
+  EXPECT_EQ(sha256Hex("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(sha256Hex(""), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  Sha256 h;  // incremental == one shot
+  h.update("a");
+  h.update("bc");
+  EXPECT_EQ(h.hexDigest(), sha256Hex("abc"));
+  EXPECT_TRUE(isSha256Hex(sha256Hex("x")));
+  EXPECT_FALSE(isSha256Hex("ABC"));
+  EXPECT_THROW(sha256File("/nonexistent/file"), InputError);
+}
+
+TEST(CacheKey, ViewSunColourAndImageSizeAreNotInTheBakeKey) {
+  const ShotCacheKeys a = computeCacheKeys(parse(tinyShot()));
+  const ShotCacheKeys colour = computeCacheKeys(parse(tinyShot("[3, 2, 1]")));
+  const ShotCacheKeys size = computeCacheKeys(parse(tinyShot("[1, 1, 1]", 16)));
+  const ShotCacheKeys view = computeCacheKeys(parse(tinyShot("[1, 1, 1]", 8, "-7")));
+  EXPECT_EQ(a.bake, colour.bake);
+  EXPECT_EQ(a.bake, size.bake);
+  EXPECT_EQ(a.bake, view.bake);
+  EXPECT_TRUE(a.sun_scaled);
+  // Sun colour does not change the render key either (renders are scaled); view and size do.
+  EXPECT_EQ(a.views, colour.views);
+  EXPECT_NE(a.views, size.views);
+  EXPECT_NE(a.views, view.views);
+  EXPECT_EQ(a.volume, view.volume);
+}
+
+TEST(CacheKey, PhysicsAndQualityKnobsAreInTheBakeKey) {
+  const std::string base = tinyShot();
+  const std::string bake = computeCacheKeys(parse(base)).bake;
+  auto keyWith = [&](const std::string& from, const std::string& to) {
+    std::string s = base;
+    const size_t at = s.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    s.replace(at, from.size(), to);
+    return computeCacheKeys(parse(s)).bake;
+  };
+  EXPECT_NE(bake, keyWith(R"("albedo": 0.9)", R"("albedo": 0.8)"));
+  EXPECT_NE(bake, keyWith(R"("g": 0.5)", R"("g": 0.6)"));
+  EXPECT_NE(bake, keyWith(R"("samples": 2)", R"("samples": 3)"));
+  EXPECT_NE(bake, keyWith(R"("seed": 3)", R"("seed": 4)"));
+  EXPECT_NE(bake, keyWith(R"("radius": 1)", R"("radius": 0.9)"));
+  EXPECT_NE(bake, keyWith(R"("direction": [0, 0, 1])", R"("direction": [0, 0.1, 1])"));
+  // Float noise below the quantum shares the bake.
+  EXPECT_EQ(bake, keyWith(R"("direction": [0, 0, 1])", R"("direction": [1e-9, 0, 1])"));
+}
+
+TEST(CacheKey, FilesAreKeyedByContentNotPath) {
+  const fs::path dir = freshDir("key");
+  const std::string sky = R"({"version": 1, "volume": {"sphere": {"center": [0,0,0], "radius": 1}},
+    "medium": {"extinction": 1, "albedo": 1, "phase": {"type": "isotropic"}},
+    "lighting": {"sky": {"map": "MAP", "scale": 1}},
+    "views": [{"name": "v", "camera": {"type": "perspective", "position": [0,-5,0],
+      "look_at": [0,0,0], "up": [0,0,1], "fov_deg": 30}, "resolution": [4, 4]}]})";
+  Image img(4, 2, 3);
+  for (float& v : img.data) v = 0.5f;
+  writeExr((dir / "a.exr").string(), {{"", img}});
+  fs::copy_file(dir / "a.exr", dir / "b.exr");
+  auto keyFor = [&](const std::string& name) {
+    std::string s = sky;
+    s.replace(s.find("MAP"), 3, name);
+    return computeCacheKeys(parseShot(s, dir.string())).bake;
+  };
+  EXPECT_EQ(keyFor("a.exr"), keyFor("b.exr"));
+  img.data[0] = 0.25f;
+  writeExr((dir / "b.exr").string(), {{"", img}});
+  EXPECT_NE(keyFor("a.exr"), keyFor("b.exr"));
+  fs::remove_all(dir);
+}
+
+TEST(BakeCache, ComputesOnceThenHitsAndSurvivesReopen) {
+  const fs::path dir = freshDir("cache");
+  int computed = 0;
+  auto fill = [&](const std::string& staging) {
+    ++computed;
+    writeFileAtomic(staging + "/a.txt", "hello");
+  };
+  {
+    BakeCache cache(dir.string(), 0);
+    const std::string p1 = cache.getOrCompute("k1", fill);
+    const std::string p2 = cache.getOrCompute("k1", fill);
+    EXPECT_EQ(p1, p2);
+    EXPECT_EQ(computed, 1);
+    EXPECT_EQ(readWholeFile(p1 + "/a.txt"), "hello");
+    EXPECT_EQ(cache.stats().hits, 1u);
+  }
+  BakeCache reopened(dir.string(), 0);
+  EXPECT_TRUE(reopened.lookup("k1").has_value());
+  EXPECT_EQ(reopened.stats().entries, 1u);
+  fs::remove_all(dir);
+}
+
+TEST(BakeCache, CorruptEntryIsDroppedAndRebuiltNeverServed) {
+  const fs::path dir = freshDir("corrupt");
+  BakeCache cache(dir.string(), 0);
+  int computed = 0;
+  auto fill = [&](const std::string& staging) {
+    ++computed;
+    writeFileAtomic(staging + "/a.txt", "original content");
+  };
+  const std::string entry = cache.getOrCompute("k", fill);
+  {
+    std::ofstream f(entry + "/a.txt", std::ios::binary | std::ios::in);
+    f.seekp(3);
+    f.put('X');  // same size, different bytes: only the checksum can tell
+  }
+  EXPECT_FALSE(cache.lookup("k").has_value());
+  EXPECT_EQ(cache.stats().corrupt, 1u);
+  const std::string again = cache.getOrCompute("k", fill);
+  EXPECT_EQ(computed, 2);
+  EXPECT_EQ(readWholeFile(again + "/a.txt"), "original content");
+  // A crash mid-compute leaves only staging debris, removed on open; never an entry.
+  fs::create_directories(dir / "staging" / "debris");
+  fs::create_directories(dir / "entries" / "half");  // no manifest
+  BakeCache reopened(dir.string(), 0);
+  EXPECT_FALSE(fs::exists(dir / "staging" / "debris"));
+  EXPECT_FALSE(reopened.lookup("half").has_value());
+  EXPECT_TRUE(reopened.lookup("k").has_value());
+  fs::remove_all(dir);
+}
+
+TEST(BakeCache, EvictsLeastRecentlyUsedUnderTheSizeBound) {
+  const fs::path dir = freshDir("lru");
+  BakeCache cache(dir.string(), 2500);  // room for two 1000-byte entries (+ manifests)
+  auto fill = [](const std::string& staging) {
+    writeFileAtomic(staging + "/data", std::string(1000, 'x'));
+  };
+  cache.getOrCompute("a", fill);
+  cache.getOrCompute("b", fill);
+  cache.getOrCompute("a", fill);  // a is now the most recent
+  cache.getOrCompute("c", fill);  // evicts b
+  EXPECT_TRUE(cache.lookup("a").has_value());
+  EXPECT_FALSE(cache.lookup("b").has_value());
+  EXPECT_TRUE(cache.lookup("c").has_value());
+  EXPECT_EQ(cache.stats().evicted, 1u);
+  EXPECT_LE(cache.stats().bytes, 2500u);
+  fs::remove_all(dir);
+}
+
+TEST(BakeCache, SingleFlightForConcurrentIdenticalRequests) {
+  const fs::path dir = freshDir("flight");
+  BakeCache cache(dir.string(), 0);
+  std::atomic<int> computed{0};
+  std::vector<std::thread> threads;
+  std::vector<std::string> paths(8);
+  for (int i = 0; i < 8; ++i) {
+    threads.emplace_back([&, i] {
+      paths[size_t(i)] = cache.getOrCompute("same", [&](const std::string& staging) {
+        ++computed;
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+        writeFileAtomic(staging + "/r", "result");
+      });
+    });
+  }
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(computed.load(), 1);
+  for (const std::string& p : paths) EXPECT_EQ(p, paths[0]);
+  fs::remove_all(dir);
+}
+
+TEST(BakeCache, CancelledLeaderHandsOverToAWaiter) {
+  const fs::path dir = freshDir("handover");
+  BakeCache cache(dir.string(), 0);
+  std::atomic<bool> leader_started{false};
+  std::thread leader([&] {
+    EXPECT_THROW(cache.getOrCompute("k",
+                                    [&](const std::string&) {
+                                      leader_started = true;
+                                      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+                                      throw Cancelled();
+                                    }),
+                 Cancelled);
+  });
+  while (!leader_started) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string p = cache.getOrCompute(
+      "k", [](const std::string& staging) { writeFileAtomic(staging + "/r", "waiter"); });
+  leader.join();
+  EXPECT_EQ(readWholeFile(p + "/r"), "waiter");
+  fs::remove_all(dir);
+}
+
+TEST(RunShot, WritesViewsAndVdbAsCloudbakeRender) {
+  const fs::path dir = freshDir("run");
+  RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  std::vector<std::string> stages;
+  opt.progress = [&](const RunProgress& p) {
+    EXPECT_GE(p.fraction, 0.0);
+    EXPECT_LE(p.fraction, 1.0);
+    if (stages.empty() || stages.back() != p.stage) stages.push_back(p.stage);
+    return true;
+  };
+  const RunResult r = runShot(parse(tinyShot()), opt);
+  ASSERT_EQ(r.files.size(), 2u);
+  EXPECT_EQ(r.files[0].name, "front.exr");
+  EXPECT_EQ(r.files[1].name, "bake.vdb");
+  EXPECT_EQ(r.views_rendered, 1);
+  EXPECT_EQ(r.files[0].sha256, sha256File(r.files[0].path));
+  const ExrContents exr = readExr(r.files[0].path);
+  EXPECT_EQ(exr.width, 8);
+  for (const char* layer : {"", "sun", "sky", "single", "multiple"}) {
+    EXPECT_TRUE(exr.layers.count(layer)) << layer;
+  }
+  EXPECT_EQ(exr.attributes.at("cloudbake:view"), "front");
+  VdbFileReader vdb(r.files[1].path);
+  EXPECT_EQ(vdb.grids().at(0).name, "density");
+  EXPECT_EQ(stages.front(), "build");
+  EXPECT_EQ(stages.back(), "done");
+  fs::remove_all(dir);
+}
+
+TEST(RunShot, CachedSunColourChangeIsScaledNotRecomputed) {
+  const fs::path dir = freshDir("scaled");
+  BakeCache cache((dir / "cache").string(), 0);
+  VolumeCache volumes;
+  RunOptions opt;
+  opt.cache = &cache;
+  opt.volumes = &volumes;
+  opt.out_dir = (dir / "a").string();
+  const RunResult a = runShot(parse(tinyShot("[1, 1, 1]")), opt);
+  opt.out_dir = (dir / "b").string();
+  const RunResult b = runShot(parse(tinyShot("[3, 2, 0.5]")), opt);
+  EXPECT_EQ(a.views_rendered, 1);
+  EXPECT_EQ(b.views_rendered, 0);
+  EXPECT_EQ(b.views_cached, 1);
+  EXPECT_TRUE(b.vdb_cached);
+  EXPECT_EQ(volumes.builds(), 1u);
+  const Image ia = readExr(a.files[0].path).layers.at("");
+  const Image ib = readExr(b.files[0].path).layers.at("");
+  double total = 0;
+  for (size_t i = 0; i < ia.data.size(); ++i) {
+    const int c = int(i % 4);
+    const double scale = c == 0 ? 3 : c == 1 ? 2 : c == 2 ? 0.5 : 1;  // alpha unscaled
+    EXPECT_NEAR(ib.data[i], ia.data[i] * scale, 1e-6 * (1 + std::abs(ia.data[i] * scale)));
+    total += ia.data[i];
+  }
+  EXPECT_GT(total, 0);  // not a blank image
+  // Without a cache the direct render agrees (same seed, linear in the irradiance).
+  RunOptions direct;
+  direct.out_dir = (dir / "c").string();
+  const RunResult c = runShot(parse(tinyShot("[3, 2, 0.5]")), direct);
+  const Image ic = readExr(c.files[0].path).layers.at("");
+  for (size_t i = 0; i < ic.data.size(); ++i) {
+    EXPECT_NEAR(ic.data[i], ib.data[i], 1e-5 * (1 + std::abs(ic.data[i])));
+  }
+  fs::remove_all(dir);
+}
+
+TEST(RunShot, ProgressReturningFalseCancels) {
+  const fs::path dir = freshDir("cancel");
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  int calls = 0;
+  opt.progress = [&](const RunProgress& p) { return p.stage != "render" || ++calls < 3; };
+  std::string shot = tinyShot("[1, 1, 1]", 64);
+  shot.replace(shot.find("\"samples\": 2"), 12, "\"samples\": 64");
+  EXPECT_THROW(runShot(parse(shot), opt), Cancelled);
+  fs::remove_all(dir);
+}
+
+TEST(RunShot, RejectsMethodsNotImplemented) {
+  std::string shot = tinyShot();
+  shot.replace(shot.find("\"pathtrace\""), 11, "\"single\"");
+  RunOptions opt;
+  opt.out_dir = freshDir("method").string();
+  try {
+    runShot(parse(shot), opt);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/bake/method"), std::string::npos) << e.what();
+  }
+  fs::remove_all(opt.out_dir);
+}
+
+TEST(JobStore, RecordsRoundTripAndIdsAreChecked) {
+  const fs::path dir = freshDir("store");
+  JobStore store(dir.string());
+  JobRecord r;
+  r.id = newJobId();
+  EXPECT_TRUE(isJobId(r.id));
+  EXPECT_FALSE(isJobId("../etc"));
+  r.state = JobState::kSucceeded;
+  r.shot_name = "s";
+  r.views = {"a", "b"};
+  r.outputs.push_back({"a.exr", "", 12, sha256Hex("x")});
+  store.save(r);
+  const std::vector<JobRecord> all = store.loadAll();
+  ASSERT_EQ(all.size(), 1u);
+  EXPECT_EQ(all[0].id, r.id);
+  EXPECT_EQ(all[0].state, JobState::kSucceeded);
+  EXPECT_EQ(all[0].outputs.at(0).sha256, sha256Hex("x"));
+  EXPECT_EQ(all[0].views, r.views);
+  fs::remove_all(dir);
+}
+
+TEST(JobManager, RunningJobFoundAfterACrashIsMarkedFailed) {
+  const fs::path dir = freshDir("crash");
+  {
+    JobStore store((dir / "jobs").string());
+    JobRecord r;
+    r.id = newJobId();
+    r.state = JobState::kRunning;
+    store.save(r);
+  }
+  JobManagerOptions o;
+  o.state_dir = dir.string();
+  JobManager jobs(o);
+  const std::vector<JobRecord> all = jobs.list(std::nullopt, 0);
+  ASSERT_EQ(all.size(), 1u);
+  EXPECT_EQ(all[0].state, JobState::kFailed);
+  EXPECT_NE(all[0].error.find("interrupted"), std::string::npos);
+  EXPECT_THROW(jobs.output(all[0].id, "x.exr"), std::exception);
+  // A second manager on the same folder is refused.
+  EXPECT_THROW(JobManager second(o), std::runtime_error);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace cloudbake
+
+namespace cloudbake {
+namespace {
+
+TEST(RunShot, SunDirectionToleranceReusesANearbyBakeOnlyWhenAsked) {
+  const fs::path dir = freshDir("tolerance");
+  BakeCache cache((dir / "cache").string(), 0);
+  DirectionIndex directions((dir / "dirs").string());
+  RunOptions opt;
+  opt.cache = &cache;
+  opt.directions = &directions;
+  opt.out_dir = (dir / "a").string();
+  const RunResult a = runShot(parse(tinyShot()), opt);
+  EXPECT_EQ(a.views_rendered, 1);
+  std::string tilted = tinyShot();
+  tilted.replace(tilted.find("\"direction\": [0, 0, 1]"), 22, "\"direction\": [0.01, 0, 1]");
+  opt.out_dir = (dir / "b").string();
+  const RunResult exact = runShot(parse(tilted), opt);  // tolerance 0: its own render
+  EXPECT_EQ(exact.views_rendered, 1);
+  std::string tilted2 = tinyShot();
+  tilted2.replace(tilted2.find("\"direction\": [0, 0, 1]"), 22, "\"direction\": [0, 0.012, 1]");
+  opt.sun_tolerance_deg = 1;  // 0.69 deg from [0,0,1], 0.89 deg from [0.01,0,1]
+  opt.out_dir = (dir / "c").string();
+  const RunResult near = runShot(parse(tilted2), opt);
+  EXPECT_EQ(near.views_rendered, 0);
+  EXPECT_EQ(near.views_reused_direction, 1);
+  EXPECT_NEAR(near.reused_angle_deg, 0.6875, 1e-3);  // the closest one
+  EXPECT_EQ(readExr((dir / "c/front.exr").string()).layers.at("").data,
+            readExr((dir / "a/front.exr").string()).layers.at("").data);
+  opt.sun_tolerance_deg = 0.5;  // too far now
+  opt.out_dir = (dir / "d").string();
+  EXPECT_EQ(runShot(parse(tilted2), opt).views_rendered, 1);
+  EXPECT_NEAR(angleDeg({0, 0, 1}, {1, 0, 0}), 90, 1e-12);
+  opt.sun_tolerance_deg = std::nan("");
+  EXPECT_THROW(runShot(parse(tilted2), opt), InputError);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace cloudbake
