@@ -99,6 +99,8 @@ void writeVdb(const std::string& path, const DensityField& density,
     grids.push_back(g);
   }
   openvdb::MetaMap file_meta;
+  // Every file says which cloudbake wrote it (DESIGN.md: outputs carry the code version).
+  file_meta.insertMeta("cloudbake:version", openvdb::StringMetadata(CLOUDBAKE_VERSION));
   for (const auto& [k, v] : options.file_metadata)
     file_meta.insertMeta(k, openvdb::StringMetadata(v));
 

@@ -42,6 +42,7 @@ TEST_F(VdbIoTest, RoundTripsDensityExtraGridsAndMetadata) {
 
   const VdbFileReader reader(path);
   EXPECT_EQ(reader.fileMetadata().at("creator"), "cloudbake test");
+  EXPECT_EQ(reader.fileMetadata().at("cloudbake:version"), CLOUDBAKE_VERSION);
   ASSERT_EQ(reader.grids().size(), 3u);
   // Grid order in the file is OpenVDB's choice; look them up by name.
   auto grid = [&](const std::string& name) {
