@@ -17,6 +17,20 @@ namespace {
 constexpr uint32_t kDefaultChunk = 256 * 1024;
 constexpr uint32_t kMinChunk = 64 * 1024;
 constexpr uint32_t kMaxChunk = 1024 * 1024;
+// How long WatchJob waits for an event before looking at the call again: bounds how long a
+// stream outlives its client's deadline or cancellation.
+constexpr std::chrono::milliseconds kWatchPoll(200);
+
+/// The status of a call its client gave up on: DEADLINE_EXCEEDED once its deadline passed here,
+/// else CANCELLED (the client never sees it; it is for the log and interceptors). A client whose
+/// deadline passes first cancels the call itself, so either can mean a client deadline.
+grpc::Status abandoned(const grpc::ServerContext* ctx, const char* rpc) {
+  const bool expired = ctx->deadline() <= std::chrono::system_clock::now();
+  spdlog::debug("{}: stream stopped: the client gave up ({})", rpc,
+                expired ? "deadline exceeded" : "cancelled");
+  return expired ? grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED, "deadline exceeded")
+                 : grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client");
+}
 }  // namespace
 
 grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest*,
@@ -32,6 +46,8 @@ grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest
     reply->set_max_image_pixels(uint64_t(o.limits.max_image_pixels));
     reply->set_max_views(uint32_t(o.limits.max_views));
     reply->set_max_samples(uint64_t(o.limits.max_samples));
+    reply->set_max_voxels(o.limits.max_voxels);
+    reply->set_max_frames(uint64_t(o.limits.max_frames));
     toProto(jobs_.stats(), reply->mutable_stats());
     return grpc::Status::OK;
   });
@@ -53,7 +69,7 @@ grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
     }
     AssetStore::Writer writer(jobs_.assets(), header.sha256(), header.size());
     while (reader->Read(&msg)) {
-      if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "upload cancelled");
+      if (ctx->IsCancelled()) return abandoned(ctx, "UploadAsset");
       if (!msg.has_data() && msg.has_header()) {
         throw InputError("upload: only the first message may be a header");
       }
@@ -63,6 +79,8 @@ grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
       }
       writer.write(msg.data().data(), msg.data().size());
     }
+    // The stream also ends when the client gives up: that is no truncated upload to report.
+    if (ctx->IsCancelled()) return abandoned(ctx, "UploadAsset");
     writer.finish();
     spdlog::info("asset {} stored ({} bytes, '{}')", header.sha256(), header.size(),
                  header.name().substr(0, 256));
@@ -70,9 +88,11 @@ grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
   });
 }
 
-grpc::Status BakeServiceImpl::SubmitJob(Ctx*, const v1::SubmitJobRequest* request,
+grpc::Status BakeServiceImpl::SubmitJob(Ctx* ctx, const v1::SubmitJobRequest* request,
                                         v1::SubmitJobResponse* reply) {
   return guarded("SubmitJob", [&] {
+    // A client that gave up while the request was queued gets no job it cannot learn about.
+    if (ctx->IsCancelled()) return abandoned(ctx, "SubmitJob");
     const SubmitInput input = fromProto(*request);
     if (request->dry_run()) {
       toProto(jobs_.plan(input), reply->mutable_plan());
@@ -91,18 +111,16 @@ grpc::Status BakeServiceImpl::WatchJob(Ctx* ctx, const v1::WatchJobRequest* requ
     checkJobId(request->job_id());
     uint64_t after = request->after_seq();
     for (;;) {
-      if (ctx->IsCancelled()) {
-        return grpc::Status(grpc::StatusCode::CANCELLED, "watch cancelled by the client");
-      }
+      if (ctx->IsCancelled()) return abandoned(ctx, "WatchJob");
       JobRecord record;
       const std::vector<JobEvent> events =
-          jobs_.events(request->job_id(), after, std::chrono::milliseconds(500), &record);
+          jobs_.events(request->job_id(), after, kWatchPoll, &record);
       for (size_t i = 0; i < events.size(); ++i) {
         v1::JobEvent e;
         toProto(events[i], &e);
         const bool last = i + 1 == events.size() && record.terminal();
         if (last) toProto(record, e.mutable_job());
-        if (!writer->Write(e)) return grpc::Status(grpc::StatusCode::CANCELLED, "client gone");
+        if (!writer->Write(e)) return abandoned(ctx, "WatchJob");
         after = events[i].seq;
       }
       if (record.terminal()) {
@@ -174,7 +192,7 @@ grpc::Status BakeServiceImpl::FetchResult(Ctx* ctx, const v1::FetchResultRequest
     std::vector<char> buffer(chunk);  // constant memory whatever the file size
     uint64_t offset = request->offset();
     do {
-      if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "fetch cancelled");
+      if (ctx->IsCancelled()) return abandoned(ctx, "FetchResult");
       const uint64_t n = std::min<uint64_t>(chunk, file.size - offset);
       in.read(buffer.data(), std::streamsize(n));
       if (uint64_t(in.gcount()) != n) throw std::runtime_error(file.path + ": short read");
@@ -184,7 +202,7 @@ grpc::Status BakeServiceImpl::FetchResult(Ctx* ctx, const v1::FetchResultRequest
       c.set_total_size(file.size);
       c.set_sha256(file.sha256);
       c.set_data(buffer.data(), n);
-      if (!writer->Write(c)) return grpc::Status(grpc::StatusCode::CANCELLED, "client gone");
+      if (!writer->Write(c)) return abandoned(ctx, "FetchResult");
       offset += n;
     } while (offset < file.size);
     return grpc::Status::OK;

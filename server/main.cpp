@@ -116,6 +116,17 @@ int main(int argc, char** argv) {
       ->envname("CLOUDBAKE_MAX_SAMPLES")
       ->check(CLI::Range(uint64_t(1), uint64_t(1000000)))
       ->capture_default_str();
+  app.add_option("--max-voxels", o.limits.max_voxels,
+                 "most voxels of a shot's volume (mesh resolution^3 or box, procedural grid, VDB "
+                 "active voxels, bake.vdb grid of a box or sphere; 0: no limit)")
+      ->envname("CLOUDBAKE_MAX_VOXELS")
+      ->check(CLI::Range(uint64_t(0), uint64_t(1) << 40))
+      ->capture_default_str();
+  app.add_option("--max-frames", o.limits.max_frames,
+                 "most frames of an animated volume (volume.sequence; 0: no limit)")
+      ->envname("CLOUDBAKE_MAX_FRAMES")
+      ->check(CLI::Range(int64_t(0), int64_t(100000)))
+      ->capture_default_str();
   app.add_option("--log-level", log_level, "trace|debug|info|warn|error")
       ->envname("CLOUDBAKE_LOG_LEVEL")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
@@ -159,6 +170,11 @@ int main(int argc, char** argv) {
   // Without this gRPC sets SO_REUSEPORT and a second server on the same port starts silently,
   // sharing connections with the first.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  // A fixed 4 MiB receive window per stream instead of BDP auto-tuning: uploads of hundreds of
+  // MB then buffer at most a few MiB in the server (auto-tuning let a fast client grow it by
+  // tens of MiB, docs/api.md "Large files"), and 4 MiB still fills a 100 ms link at 40 MB/s.
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 4 << 20);
   builder.AddListeningPort(listen, grpc::InsecureServerCredentials(), &bound_port);
   builder.RegisterService(&service);
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
@@ -171,9 +187,11 @@ int main(int argc, char** argv) {
   std::signal(SIGTERM, onSignal);
   // Report the bound port (useful with port 0, which lets the OS pick one).
   const std::string host = listen.substr(0, listen.rfind(':'));
-  spdlog::info("cloudbake-server {} listening on {}:{} (state {}, {} runner(s), queue bound {})",
-               CLOUDBAKE_VERSION, host, bound_port, o.state_dir, o.max_concurrent_jobs,
-               o.queue_bound);
+  spdlog::info(
+      "cloudbake-server {} listening on {}:{} (state {}, {} runner(s), queue bound {}, max "
+      "voxels {}, max frames {})",
+      CLOUDBAKE_VERSION, host, bound_port, o.state_dir, o.max_concurrent_jobs, o.queue_bound,
+      o.limits.max_voxels, o.limits.max_frames);
   server->Wait();
   // Streams (WatchJob) end when the job manager stops: stop it before the server is destroyed.
   jobs.reset();

@@ -1,5 +1,6 @@
 // cloudctl: command-line client of cloudbake-server (docs/cli.md, docs/api.md).
 // Usage: cloudctl [--server HOST:PORT] [--timeout S] [--json] COMMAND ...
+#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 #include <unistd.h>
 
@@ -163,12 +164,113 @@ struct Client {
     }
     stub = v1::BakeService::NewStub(channel);
   }
+  /// --deadline: when set, every call of this command (uploads, submit, watch, fetch) ends by
+  /// then with DEADLINE_EXCEEDED (exit code 4); the server stops streaming when it passes.
+  std::optional<std::chrono::system_clock::time_point> command_deadline;
+
   std::chrono::system_clock::time_point deadline() const {
-    return std::chrono::system_clock::now() +
-           std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
+    const auto t = std::chrono::system_clock::now() +
+                   std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
+    return command_deadline ? std::min(t, *command_deadline) : t;
   }
   void shortCall(grpc::ClientContext* ctx) const { ctx->set_deadline(deadline()); }
+  /// Streams have no per-call bound (a bake may take hours), only the command's deadline.
+  void streamCall(grpc::ClientContext* ctx) const {
+    if (command_deadline) ctx->set_deadline(*command_deadline);
+  }
 };
+
+// ---- health ------------------------------------------------------------------------------
+
+/// grpc.health.v1.HealthCheckResponse.ServingStatus values.
+const char* servingStatusName(uint64_t s) {
+  switch (s) {
+    case 0:
+      return "UNKNOWN";
+    case 1:
+      return "SERVING";
+    case 2:
+      return "NOT_SERVING";
+    case 3:
+      return "SERVICE_UNKNOWN";
+    default:
+      return "UNRECOGNISED";
+  }
+}
+
+/// Reads a protobuf base-128 varint at `*at`; false when truncated or longer than 10 bytes.
+bool readVarint(const std::string& b, size_t* at, uint64_t* value) {
+  *value = 0;
+  for (int shift = 0; shift < 70 && *at < b.size(); shift += 7) {
+    const auto byte = static_cast<unsigned char>(b[(*at)++]);
+    *value |= uint64_t(byte & 0x7f) << shift;
+    if (!(byte & 0x80)) return true;
+  }
+  return false;
+}
+
+/// The `status` (field 1, varint) of an encoded HealthCheckResponse; unknown fields are skipped
+/// as protobuf requires. Absent: 0 (UNKNOWN), proto3's default. Throws CliError when malformed.
+uint64_t parseHealthStatus(const std::string& b) {
+  uint64_t status = 0;
+  size_t at = 0;
+  auto bad = [] { return CliError{ExitCode::kFailure, "health: malformed HealthCheckResponse"}; };
+  while (at < b.size()) {
+    uint64_t tag = 0, v = 0;
+    if (!readVarint(b, &at, &tag)) throw bad();
+    switch (tag & 7) {
+      case 0:  // varint
+        if (!readVarint(b, &at, &v)) throw bad();
+        if ((tag >> 3) == 1) status = v;
+        break;
+      case 1:  // 64-bit
+        if (b.size() - at < 8) throw bad();
+        at += 8;
+        break;
+      case 2:  // length-delimited
+        if (!readVarint(b, &at, &v) || v > b.size() - at) throw bad();
+        at += size_t(v);
+        break;
+      case 5:  // 32-bit
+        if (b.size() - at < 4) throw bad();
+        at += 4;
+        break;
+      default:
+        throw bad();
+    }
+  }
+  return status;
+}
+
+/// Calls the standard grpc.health.v1.Health/Check for the whole server (empty `service`, which
+/// encodes to zero bytes) without generated stubs; returns the ServingStatus.
+uint64_t healthCheck(Client& c) {
+  grpc::GenericStub stub(c.channel);
+  grpc::ClientContext ctx;
+  c.shortCall(&ctx);
+  grpc::CompletionQueue cq;
+  grpc::Slice empty;
+  grpc::ByteBuffer request(&empty, 1);
+  auto call = stub.PrepareUnaryCall(&ctx, "/grpc.health.v1.Health/Check", request, &cq);
+  call->StartCall();
+  grpc::ByteBuffer response;
+  grpc::Status status;
+  call->Finish(&response, &status, reinterpret_cast<void*>(1));
+  void* tag = nullptr;
+  bool ok = false;
+  if (!cq.Next(&tag, &ok)) throw CliError{ExitCode::kFailure, "health: no completion"};
+  cq.Shutdown();
+  while (cq.Next(&tag, &ok)) {
+  }
+  check(status, c.server + ": health");
+  std::vector<grpc::Slice> slices;
+  if (!response.Dump(&slices).ok()) throw CliError{ExitCode::kFailure, "health: bad response"};
+  std::string bytes;
+  for (const grpc::Slice& s : slices) {
+    bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+  }
+  return parseHealthStatus(bytes);
+}
 
 // ---- progress ----------------------------------------------------------------------------
 
@@ -237,6 +339,7 @@ std::string upload(Client& c, const std::string& path, bool quiet) {
   const std::string sha = cloudbake::sha256File(path);
   const uint64_t size = fs::file_size(path);
   grpc::ClientContext ctx;
+  c.streamCall(&ctx);
   v1::UploadAssetResponse reply;
   auto writer = c.stub->UploadAsset(&ctx, &reply);
   v1::UploadAssetRequest msg;
@@ -286,6 +389,7 @@ std::string fetchOne(Client& c, const std::string& job, const v1::OutputFile& fi
   }
   if (offset < file.size() || file.size() == 0) {
     grpc::ClientContext ctx;
+    c.streamCall(&ctx);
     v1::FetchResultRequest req;
     req.set_job_id(job);
     req.set_name(file.name());
@@ -359,6 +463,7 @@ v1::Job watch(Client& c, const std::string& id, bool quiet) {
   uint64_t after = 0;
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
+    c.streamCall(&ctx);
     v1::WatchJobRequest req;
     req.set_job_id(id);
     req.set_after_seq(after);
@@ -541,6 +646,11 @@ int main(int argc, char** argv) {
   app.add_option("--server", c.server, "HOST:PORT of cloudbake-server (env CLOUDBAKE_SERVER)");
   app.add_option("--timeout", c.timeout_s, "deadline in seconds for connecting and short calls")
       ->check(CLI::PositiveNumber);
+  double deadline_s = 0;
+  app.add_option("--deadline", deadline_s,
+                 "seconds the whole command may take (uploads, submit, watch, fetch); on expiry "
+                 "exit 4 and the job goes on (default: none)")
+      ->check(CLI::PositiveNumber);
   app.add_flag("--json", c.json, "machine-readable output on stdout (logs stay on stderr)");
   app.set_version_flag("--version", std::string("cloudctl ") + CLOUDBAKE_VERSION);
   app.require_subcommand(1);
@@ -594,9 +704,32 @@ int main(int argc, char** argv) {
     const int code = app.exit(e);
     return code == 0 ? ExitCode::kOk : ExitCode::kBadInput;
   }
+  if (deadline_s > 0) {
+    c.command_deadline = std::chrono::system_clock::now() +
+                         std::chrono::microseconds(static_cast<long>(deadline_s * 1e6));
+  }
 
   try {
-    if (health->parsed() || info->parsed()) {
+    if (health->parsed()) {
+      c.connect();
+      const uint64_t st = healthCheck(c);
+      const bool serving = st == 1;
+      if (c.json) {
+        std::cout << Json{{"server", c.server},
+                          {"serving", serving},
+                          {"status", servingStatusName(st)}}
+                         .dump()
+                  << "\n";
+      } else {
+        std::cout << c.server << ": " << servingStatusName(st) << "\n";
+      }
+      if (!serving) {
+        throw CliError{ExitCode::kUnavailable,
+                       c.server + ": health: " + servingStatusName(st) + " (not SERVING)"};
+      }
+      return ExitCode::kOk;
+    }
+    if (info->parsed()) {
       c.connect();
       grpc::ClientContext ctx;
       c.shortCall(&ctx);
@@ -605,26 +738,30 @@ int main(int argc, char** argv) {
       const v1::ServerStats& s = reply.stats();
       if (c.json) {
         Json j = {{"server", c.server}, {"serving", true}, {"version", reply.version()}};
-        if (info->parsed()) {
-          j["methods"] = std::vector<std::string>(reply.methods().begin(), reply.methods().end());
-          j["worker_threads"] = reply.worker_threads();
-          j["stats"] = {{"scatter_computations", s.scatter_computations()},
-                        {"views_from_cache", s.views_from_cache()},
-                        {"volume_builds", s.volume_builds()},
-                        {"jobs_submitted", s.jobs_submitted()},
-                        {"jobs_queued", s.jobs_queued()},
-                        {"jobs_running", s.jobs_running()},
-                        {"cache_hits", s.cache_hits()},
-                        {"cache_misses", s.cache_misses()},
-                        {"cache_shared", s.cache_shared()},
-                        {"cache_corrupt_dropped", s.cache_corrupt_dropped()},
-                        {"cache_evicted", s.cache_evicted()},
-                        {"cache_entries", s.cache_entries()},
-                        {"cache_bytes", s.cache_bytes()}};
-        }
+        j["methods"] = std::vector<std::string>(reply.methods().begin(), reply.methods().end());
+        j["worker_threads"] = reply.worker_threads();
+        j["limits"] = {{"max_concurrent_jobs", reply.max_concurrent_jobs()},
+                       {"queue_bound", reply.queue_bound()},
+                       {"max_upload_bytes", reply.max_upload_bytes()},
+                       {"max_image_pixels", reply.max_image_pixels()},
+                       {"max_views", reply.max_views()},
+                       {"max_samples", reply.max_samples()},
+                       {"max_voxels", reply.max_voxels()},
+                       {"max_frames", reply.max_frames()}};
+        j["stats"] = {{"scatter_computations", s.scatter_computations()},
+                      {"views_from_cache", s.views_from_cache()},
+                      {"volume_builds", s.volume_builds()},
+                      {"jobs_submitted", s.jobs_submitted()},
+                      {"jobs_queued", s.jobs_queued()},
+                      {"jobs_running", s.jobs_running()},
+                      {"cache_hits", s.cache_hits()},
+                      {"cache_misses", s.cache_misses()},
+                      {"cache_shared", s.cache_shared()},
+                      {"cache_corrupt_dropped", s.cache_corrupt_dropped()},
+                      {"cache_evicted", s.cache_evicted()},
+                      {"cache_entries", s.cache_entries()},
+                      {"cache_bytes", s.cache_bytes()}};
         std::cout << j.dump() << "\n";
-      } else if (health->parsed()) {
-        std::cout << c.server << ": SERVING (cloudbake " << reply.version() << ")\n";
       } else {
         std::cout << "version: " << reply.version()
                   << "\nworker threads: " << reply.worker_threads() << "\nmethods:";
@@ -634,7 +771,13 @@ int main(int argc, char** argv) {
                   << " running\nscattering computations: " << s.scatter_computations()
                   << " (views from cache: " << s.views_from_cache()
                   << ")\ncache: " << s.cache_entries() << " entries, " << s.cache_bytes()
-                  << " bytes, " << s.cache_hits() << " hits, " << s.cache_misses() << " misses\n";
+                  << " bytes, " << s.cache_hits() << " hits, " << s.cache_misses() << " misses\n"
+                  << "limits: " << reply.max_concurrent_jobs() << " concurrent job(s), queue "
+                  << reply.queue_bound() << ", upload " << reply.max_upload_bytes()
+                  << " bytes, image " << reply.max_image_pixels() << " pixels, "
+                  << reply.max_views() << " views, " << reply.max_samples() << " spp, "
+                  << reply.max_voxels() << " voxels, " << reply.max_frames()
+                  << " frames (0: unlimited)\n";
       }
       return ExitCode::kOk;
     }

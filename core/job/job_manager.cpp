@@ -1,6 +1,7 @@
 #include "core/job/job_manager.h"
 
 #include <fcntl.h>
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 #include <sys/file.h>
 #include <tbb/task_arena.h>
@@ -14,6 +15,7 @@
 #include "core/job/file_util.h"
 #include "core/job/job_errors.h"
 #include "core/job/run_shot.h"
+#include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
 
 namespace cloudbake {
@@ -204,8 +206,11 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
     throw InputError("sun_tolerance_deg: must be in [0, 90] degrees, got " +
                      std::to_string(input.sun_tolerance_deg));
   }
-  checkRunnable(p.shot, "shot.json");
   const JobLimits& lim = options_.limits;
+  // Before checkRunnable: a limit is this server's answer whatever the method supports.
+  checkShotFrames(p.shot, lim.max_frames, "shot.json");
+  checkShotVoxels(p.shot, lim.max_voxels, "shot.json");
+  checkRunnable(p.shot, "shot.json");
   if (lim.max_views > 0 && p.shot.views.size() > size_t(lim.max_views)) {
     throw InputError("shot.json: /views: " + std::to_string(p.shot.views.size()) +
                      " views exceed this server's limit of " + std::to_string(lim.max_views));
@@ -501,6 +506,7 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   ro.volumes = &volumes_;
   ro.directions = directions_.get();
   ro.sun_tolerance_deg = job->sun_tolerance_deg;
+  ro.max_voxels = options_.limits.max_voxels;
   ro.progress = [this, job](const RunProgress& p) {
     std::lock_guard<std::mutex> lock(mutex_);
     job->record.stage = p.stage;
@@ -557,7 +563,7 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   saveLocked(*job);
   pushEventLocked(*job, "done", r.fraction,
                   final_state == JobState::kSucceeded
-                      ? "succeeded in " + std::to_string(result.seconds) + " s (" +
+                      ? fmt::format("succeeded in {:.2f} s (", result.seconds) +
                             std::to_string(result.views_rendered) + " view(s) rendered, " +
                             std::to_string(result.views_cached) + " from cache)"
                       : error);

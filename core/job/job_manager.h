@@ -32,7 +32,11 @@ struct JobLimits {
   int64_t max_image_pixels = int64_t(1) << 22;  ///< per view (4 Mpixel)
   int max_views = 64;
   int64_t max_samples = 1 << 16;  ///< samples per pixel
-  int64_t max_frames = 1;         ///< animated volumes (not supported yet)
+  int64_t max_frames = 1000;      ///< frames of an animated volume (sequence)
+  /// Voxels of the volume: a mesh's resolution^3 or box (voxel_size over its bounds), a
+  /// procedural grid, a VDB's active voxels, the bake.vdb grid of a box or sphere. 256 Mi
+  /// voxels are 1 GiB of floats.
+  uint64_t max_voxels = uint64_t(1) << 28;
 };
 
 /// Settings of a JobManager. Everything durable lives under `state_dir`: jobs/, cache/,

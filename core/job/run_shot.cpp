@@ -18,6 +18,7 @@
 #include "core/job/file_util.h"
 #include "core/job/sha256.h"
 #include "core/job/volume_cache.h"
+#include "core/job/volume_limits.h"
 #include "core/shot/scene_builder.h"
 #include "core/transport/path_tracer.h"
 
@@ -171,21 +172,24 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   auto needScene = [&]() -> const Scene& {
     if (scene) return *scene;
     const auto t0 = std::chrono::steady_clock::now();
-    if (opt.volumes) {
-      ShotSpec light = shot;
-      light.volume = BoxVolumeSpec{{0, 0, 0}, {1, 1, 1}, 0.0};  // cheap stand-in, replaced below
-      Scene s = buildScene(light, opt.source);
-      s.medium.density = opt.volumes->getOrBuild(
-          keys.volume, [&] { return buildVolume(shot.volume, opt.source); }, &result.volume_cached);
-      scene = std::move(s);
-    } else {
-      scene = buildScene(shot, opt.source);
-    }
+    // Limits that need the files: checked before voxelising a mesh, and on a loaded VDB
+    // before it enters the memory cache.
+    auto build = [&] {
+      checkMeshVoxels(shot, opt.max_voxels, opt.source);
+      DensityFieldPtr field = buildVolume(shot.volume, opt.source);
+      checkLoadedVoxels(shot, *field, opt.max_voxels, opt.source);
+      return field;
+    };
+    ShotSpec light = shot;
+    light.volume = BoxVolumeSpec{{0, 0, 0}, {1, 1, 1}, 0.0};  // cheap stand-in, replaced below
+    Scene s = buildScene(light, opt.source);
+    s.medium.density =
+        opt.volumes ? opt.volumes->getOrBuild(keys.volume, build, &result.volume_cached) : build();
+    scene = std::move(s);
     // Built lazily, inside whichever stage first needs it: keep that stage and fraction.
     report(progress.stage, progress.fraction * total,
-           "built " + scene->medium.density->describe() + " in " +
-               fixed(secondsSince(t0), 2) + " s" +
-               (result.volume_cached ? " (volume from memory cache)" : ""));
+           "built " + scene->medium.density->describe() + " in " + fixed(secondsSince(t0), 2) +
+               " s" + (result.volume_cached ? " (volume from memory cache)" : ""));
     return *scene;
   };
   // Validate the medium, lights and cameras up front even when everything is cached, so bad

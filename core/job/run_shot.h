@@ -43,6 +43,9 @@ struct RunOptions {
   /// 0 (default): only the exact (quantised) direction.
   DirectionIndex* directions = nullptr;
   double sun_tolerance_deg = 0;
+  /// Voxels a volume may have once its files are read (a mesh given by voxel_size, a VDB's
+  /// active voxels; core/job/volume_limits.h); 0: no limit.
+  uint64_t max_voxels = 0;
 };
 
 /// One file a run wrote: `name` relative to out_dir ("nadir.exr", "bake.vdb").

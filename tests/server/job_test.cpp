@@ -20,6 +20,7 @@
 #include "core/job/run_shot.h"
 #include "core/job/sha256.h"
 #include "core/job/volume_cache.h"
+#include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
 
 namespace cloudbake {
@@ -50,6 +51,60 @@ std::string tinyShot(const std::string& extra_sun = "[1, 1, 1]", int width = 8,
 }
 
 ShotSpec parse(const std::string& text) { return parseShot(text, ""); }
+
+TEST(VolumeLimits, CountsVoxelsAsTheBuildersAllocateThem) {
+  PerlinCloudOptions p;  // 128 along the largest of (2, 2, 1)
+  EXPECT_EQ(perlinCloudVoxels(p), 128u * 128u * 64u);
+  p.size = Vec3(3, 1, 1);
+  p.resolution = 30;
+  EXPECT_EQ(perlinCloudVoxels(p), 30u * 10u * 10u);
+  EXPECT_EQ(boxVoxels(Vec3(2, 2, 1), 0.25), 8.0 * 8 * 4);
+  EXPECT_EQ(boxVoxels(Vec3(2, 2, 1), 0.3), 7.0 * 7 * 4);  // partial voxels count
+  EXPECT_TRUE(std::isinf(boxVoxels(Vec3(1, 1, 1), 1e-300)));
+}
+
+TEST(VolumeLimits, ShotsOverTheLimitNameTheField) {
+  const ShotSpec sphere = parse(tinyShot());  // bake.vdb of 8^3 = 512 voxels
+  EXPECT_NO_THROW(checkShotVoxels(sphere, 512, "shot.json"));
+  EXPECT_NO_THROW(checkShotVoxels(sphere, 0, "shot.json"));  // 0: no limit
+  try {
+    checkShotVoxels(sphere, 511, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("shot.json: /outputs/vdb_voxel_size: voxel size 0.25 "
+                                         "over the volume's bounds gives 512 voxels, over this "
+                                         "server's limit of 511 (--max-voxels)"),
+              std::string::npos)
+        << e.what();
+  }
+  ShotSpec procedural = sphere;
+  procedural.outputs.vdb = false;
+  procedural.volume = ProceduralVolumeSpec{};
+  EXPECT_THROW(checkShotVoxels(procedural, 128 * 128 * 64 - 1, "shot.json"), InputError);
+  EXPECT_NO_THROW(checkShotVoxels(procedural, 128 * 128 * 64, "shot.json"));
+  SequenceVolumeSpec seq;
+  seq.procedural = ProceduralVolumeSpec{};
+  seq.frames = 5;
+  procedural.volume = seq;
+  EXPECT_NO_THROW(checkShotFrames(procedural, 5, "shot.json"));
+  EXPECT_NO_THROW(checkShotFrames(procedural, 0, "shot.json"));
+  try {
+    checkShotFrames(procedural, 4, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "shot.json: /volume/sequence/frames: 5 frames exceed this server's limit of 4 "
+              "(--max-frames)");
+  }
+  try {
+    checkShotVoxels(procedural, 1000, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/volume/sequence/procedural/resolution"),
+              std::string::npos)
+        << e.what();
+  }
+}
 
 TEST(Sha256, KnownVectors) {
   // FIPS 180-2 appendix B.1 and the empty message.

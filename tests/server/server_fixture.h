@@ -2,6 +2,7 @@
 #pragma once
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <signal.h>
@@ -83,15 +84,24 @@ class ServerProc {
     port_ = port ? port : freePort();
     address_ = "127.0.0.1:" + std::to_string(port_);
     std::vector<std::string> args = {CLOUDBAKE_SERVER_BIN, "--listen=" + address_,
-                                     "--cache-dir=" + state_dir_, "--log-level=warn",
-                                     "--threads=2"};
+                                     "--cache-dir=" + state_dir_, "--threads=2"};
+    bool has_level = false;
+    for (const std::string& a : extra) has_level |= a.rfind("--log-level", 0) == 0;
+    if (!has_level) args.push_back("--log-level=warn");
     args.insert(args.end(), extra.begin(), extra.end());
     std::vector<char*> argv;
     for (std::string& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
-    if (posix_spawn(&pid_, CLOUDBAKE_SERVER_BIN, nullptr, nullptr, argv.data(), environ) != 0) {
-      return false;
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    if (!log_path_.empty()) {
+      posix_spawn_file_actions_addopen(&actions, 2, log_path_.c_str(),
+                                       O_WRONLY | O_CREAT | O_APPEND, 0644);
     }
+    const int spawned =
+        posix_spawn(&pid_, CLOUDBAKE_SERVER_BIN, &actions, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    if (spawned != 0) return false;
     for (int i = 0; i < 100; ++i) {
       int status = 0;
       if (waitpid(pid_, &status, WNOHANG) == pid_) {  // exited: it will never answer
@@ -123,6 +133,8 @@ class ServerProc {
     return std::string(CLOUDCTL_BIN) + " --server " + address_ + " --timeout " +
            std::to_string(timeout_s);
   }
+  /// Sends the server's stderr (its log) to `path` from the next start() on.
+  void logTo(std::string path) { log_path_ = std::move(path); }
   const std::string& address() const { return address_; }
   const std::string& stateDir() const { return state_dir_; }
   pid_t pid() const { return pid_; }
@@ -138,9 +150,54 @@ class ServerProc {
 
  private:
   std::string state_dir_;
+  std::string log_path_;
   int port_ = 0;
   pid_t pid_ = -1;
   std::string address_;
+};
+
+/// A shot: a sphere of cloud seen from the front, `w` x `w` pixels at `spp` samples.
+inline std::string sphereShot(int w, int spp, const std::string& irradiance = "[1, 1, 1]",
+                              const std::string& view = "front", double cam_y = -5,
+                              bool vdb = true) {
+  return R"({"version": 1, "name": "sphere",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": 2, "albedo": 0.9, "phase": {"type": "hg", "g": 0.5}},
+    "lighting": {"sun": {"direction": [0.3, 0, 1], "irradiance": )" +
+         irradiance + R"(}},
+    "bake": {"method": "pathtrace", "samples": )" +
+         std::to_string(spp) + R"(, "seed": 7},
+    "views": [{"name": ")" +
+         view + R"(", "camera": {"type": "orthographic", "position": [0, )" +
+         std::to_string(cam_y) +
+         R"(, 0], "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [)" +
+         std::to_string(w) + ", " + std::to_string(w) + R"(]}],
+    "outputs": {"exr": true, "vdb": )" +
+         (vdb ? "true" : "false") + R"(, "vdb_voxel_size": 0.1}})";
+}
+
+/// A temporary folder removed with everything in it at the end.
+class Workspace {
+ public:
+  Workspace() : dir_(tempName("cloudbake_server_test")) {
+    std::filesystem::create_directories(dir_);
+  }
+  ~Workspace() {
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
+  std::string write(const std::string& name, const std::string& text) const {
+    const std::filesystem::path p = std::filesystem::path(dir_) / name;
+    std::filesystem::create_directories(p.parent_path());
+    std::ofstream(p, std::ios::binary) << text;
+    return p.string();
+  }
+  std::string path(const std::string& name) const {
+    return (std::filesystem::path(dir_) / name).string();
+  }
+
+ private:
+  std::string dir_;
 };
 
 }  // namespace cloudbake::testing

@@ -1,5 +1,7 @@
 // Starts cloudbake-server on a free loopback port and drives it with the real cloudctl: submit
 // and fetch, cache hits, single flight, cancellation, bad inputs, queue bound, restarts.
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -19,44 +21,6 @@ namespace cloudbake::testing {
 namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
-
-/// A shot: a sphere of cloud seen from the front, `w` x `w` pixels at `spp` samples.
-std::string sphereShot(int w, int spp, const std::string& irradiance = "[1, 1, 1]",
-                       const std::string& view = "front", double cam_y = -5, bool vdb = true) {
-  return R"({"version": 1, "name": "sphere",
-    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
-    "medium": {"extinction": 2, "albedo": 0.9, "phase": {"type": "hg", "g": 0.5}},
-    "lighting": {"sun": {"direction": [0.3, 0, 1], "irradiance": )" +
-         irradiance + R"(}},
-    "bake": {"method": "pathtrace", "samples": )" +
-         std::to_string(spp) + R"(, "seed": 7},
-    "views": [{"name": ")" +
-         view + R"(", "camera": {"type": "orthographic", "position": [0, )" +
-         std::to_string(cam_y) +
-         R"(, 0], "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [)" +
-         std::to_string(w) + ", " + std::to_string(w) + R"(]}],
-    "outputs": {"exr": true, "vdb": )" +
-         (vdb ? "true" : "false") + R"(, "vdb_voxel_size": 0.1}})";
-}
-
-class Workspace {
- public:
-  Workspace() : dir_(tempName("cloudbake_server_test")) { fs::create_directories(dir_); }
-  ~Workspace() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string write(const std::string& name, const std::string& text) const {
-    const fs::path p = fs::path(dir_) / name;
-    fs::create_directories(p.parent_path());
-    std::ofstream(p, std::ios::binary) << text;
-    return p.string();
-  }
-  std::string path(const std::string& name) const { return (fs::path(dir_) / name).string(); }
-
- private:
-  std::string dir_;
-};
 
 Json infoStats(const ServerProc& server) {
   const CmdResult r = run(server.cloudctl() + " --json info");
@@ -89,6 +53,150 @@ Json waitFor(const ServerProc& server, const std::string& id, Pred pred, double 
   return s;
 }
 
+// ---- raw gRPC (no generated stubs for the standard services) ------------------------------
+
+/// One decoded protobuf field: number, wire type, and the varint value or the bytes.
+struct PbField {
+  uint32_t number = 0;
+  int wire = 0;
+  uint64_t varint = 0;
+  std::string bytes;
+};
+
+bool pbVarint(const std::string& b, size_t* at, uint64_t* v) {
+  *v = 0;
+  for (int shift = 0; shift < 70 && *at < b.size(); shift += 7) {
+    const auto byte = static_cast<unsigned char>(b[(*at)++]);
+    *v |= uint64_t(byte & 0x7f) << shift;
+    if (!(byte & 0x80)) return true;
+  }
+  return false;
+}
+
+/// The top-level fields of an encoded message; fails the test on malformed input.
+std::vector<PbField> pbFields(const std::string& b) {
+  std::vector<PbField> out;
+  size_t at = 0;
+  while (at < b.size()) {
+    uint64_t tag = 0;
+    PbField f;
+    if (!pbVarint(b, &at, &tag)) break;
+    f.number = uint32_t(tag >> 3);
+    f.wire = int(tag & 7);
+    if (f.wire == 0) {
+      if (!pbVarint(b, &at, &f.varint)) break;
+    } else if (f.wire == 2) {
+      uint64_t n = 0;
+      if (!pbVarint(b, &at, &n) || n > b.size() - at) break;
+      f.bytes = b.substr(at, size_t(n));
+      at += size_t(n);
+    } else if (f.wire == 1 || f.wire == 5) {
+      at += f.wire == 1 ? 8 : 4;
+    } else {
+      break;
+    }
+    out.push_back(f);
+  }
+  EXPECT_EQ(at, b.size()) << "malformed protobuf message";
+  return out;
+}
+
+grpc::ByteBuffer toBuffer(const std::string& bytes) {
+  grpc::Slice slice(bytes);
+  return grpc::ByteBuffer(&slice, 1);
+}
+
+std::string fromBuffer(const grpc::ByteBuffer& buffer) {
+  std::vector<grpc::Slice> slices;
+  EXPECT_TRUE(buffer.Dump(&slices).ok());
+  std::string out;
+  for (const grpc::Slice& s : slices)
+    out.append(reinterpret_cast<const char*>(s.begin()), s.size());
+  return out;
+}
+
+/// Waits for the next completion of a one-at-a-time async call; returns its `ok`.
+bool nextOk(grpc::CompletionQueue* cq) {
+  void* tag = nullptr;
+  bool ok = false;
+  return cq->Next(&tag, &ok) && ok;
+}
+
+/// ServerReflectionInfo list_services over a raw bidi stream: the service names it lists.
+std::vector<std::string> reflectionServices(const std::string& address, grpc::Status* status) {
+  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  auto call =
+      stub.PrepareCall(&ctx, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", &cq);
+  std::vector<std::string> names;
+  void* tag = reinterpret_cast<void*>(1);
+  call->StartCall(tag);
+  if (nextOk(&cq)) {
+    // ServerReflectionRequest{list_services: ""}: field 7, wire type 2, length 0.
+    call->Write(toBuffer(std::string("\x3a\x00", 2)), tag);
+    if (nextOk(&cq)) {
+      call->WritesDone(tag);
+      nextOk(&cq);
+      grpc::ByteBuffer reply;
+      call->Read(&reply, tag);
+      if (nextOk(&cq)) {
+        // ServerReflectionResponse.list_services_response (6) -> ListServiceResponse.service (1)
+        // -> ServiceResponse.name (1).
+        for (const PbField& f : pbFields(fromBuffer(reply))) {
+          if (f.number != 6 || f.wire != 2) continue;
+          for (const PbField& svc : pbFields(f.bytes)) {
+            if (svc.number != 1 || svc.wire != 2) continue;
+            for (const PbField& name : pbFields(svc.bytes)) {
+              if (name.number == 1 && name.wire == 2) names.push_back(name.bytes);
+            }
+          }
+        }
+      }
+    }
+  }
+  call->Finish(status, tag);
+  nextOk(&cq);
+  cq.Shutdown();
+  bool ok = false;
+  while (cq.Next(&tag, &ok)) {
+  }
+  return names;
+}
+
+/// grpc.health.v1.Health/Check for `service` over a raw unary call; returns the status field.
+uint64_t healthStatus(const std::string& address, const std::string& service,
+                      grpc::Status* status) {
+  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  // HealthCheckRequest{service}: field 1, wire type 2 (empty service: zero bytes).
+  std::string request;
+  if (!service.empty()) {
+    request = std::string("\x0a", 1) + char(service.size()) + service;
+  }
+  auto call = stub.PrepareUnaryCall(&ctx, "/grpc.health.v1.Health/Check", toBuffer(request), &cq);
+  call->StartCall();
+  grpc::ByteBuffer reply;
+  call->Finish(&reply, status, reinterpret_cast<void*>(1));
+  nextOk(&cq);
+  cq.Shutdown();
+  void* tag = nullptr;
+  bool ok = false;
+  while (cq.Next(&tag, &ok)) {
+  }
+  if (!status->ok()) return 0;
+  uint64_t serving = 0;
+  for (const PbField& f : pbFields(fromBuffer(reply))) {
+    if (f.number == 1 && f.wire == 0) serving = f.varint;
+  }
+  return serving;
+}
+
 class ServerTest : public ::testing::Test {
  protected:
   void SetUp() override { ASSERT_TRUE(server_.start({"--max-concurrent-jobs=4"})); }
@@ -106,7 +214,81 @@ TEST_F(ServerTest, HealthAndInfo) {
   EXPECT_NE(r.out.find("pathtrace"), std::string::npos) << r.out;
   r = run(server_.cloudctl() + " --json health");
   EXPECT_EQ(r.code, 0);
-  EXPECT_TRUE(Json::parse(r.out).at("serving").get<bool>());
+  const Json health = Json::parse(r.out);
+  EXPECT_TRUE(health.at("serving").get<bool>());
+  EXPECT_EQ(health.at("status"), "SERVING");
+  EXPECT_FALSE(health.contains("version")) << "health must not be GetServerInfo";
+}
+
+// The standard services a probe or grpcurl uses, called as they would (no cloudbake stubs).
+TEST_F(ServerTest, StandardHealthServiceAndReflection) {
+  grpc::Status st;
+  EXPECT_EQ(healthStatus(server_.address(), "", &st), 1u) << "SERVING";
+  EXPECT_TRUE(st.ok()) << st.error_message();
+  // Per-service status is not registered: the standard answer is NOT_FOUND.
+  healthStatus(server_.address(), "no.such.Service", &st);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::NOT_FOUND) << st.error_message();
+
+  const std::vector<std::string> services = reflectionServices(server_.address(), &st);
+  EXPECT_TRUE(st.ok()) << st.error_message();
+  auto has = [&](const std::string& name) {
+    return std::find(services.begin(), services.end(), name) != services.end();
+  };
+  EXPECT_TRUE(has("cloudbake.v1.BakeService")) << services.size() << " services";
+  EXPECT_TRUE(has("grpc.health.v1.Health"));
+}
+
+// A streaming call whose client deadline passes ends with DEADLINE_EXCEEDED (cloudctl exit 4)
+// at once, the server's handler stops streaming (its debug log says so), and the job goes on.
+TEST_F(ServerTest, ClientDeadlinesEndStreamsPromptly) {
+  ServerProc logged(ws_.path("logged-state"));
+  const std::string log = ws_.path("server.log");
+  logged.logTo(log);
+  ASSERT_TRUE(logged.start({"--log-level=debug"}));
+  const std::string watched =
+      submitDetached(logged, ws_.write("long0.json", sphereShot(128, 8192)));
+  waitFor(
+      logged, watched, [](const Json& j) { return j.at("state") == "RUNNING"; }, 30);
+  const auto t_watch = std::chrono::steady_clock::now();
+  const CmdResult w = run(logged.cloudctl() + " --deadline 0.3 watch " + watched);
+  EXPECT_EQ(w.code, 4) << w.err;
+  const std::string stopped = "WatchJob: stream stopped: the client gave up";
+  while (slurp(log).find(stopped) == std::string::npos &&
+         std::chrono::steady_clock::now() - t_watch < std::chrono::seconds(3)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  const double handler_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_watch).count();
+  EXPECT_NE(slurp(log).find(stopped), std::string::npos) << slurp(log);
+  EXPECT_LT(handler_s, 1.5) << "the server kept streaming after the client's deadline";
+  std::printf("[ timing ] WatchJob with a 0.3 s deadline: handler stopped %.3f s after the call\n",
+              handler_s);
+  EXPECT_EQ(run(logged.cloudctl() + " cancel " + watched).code, 0);
+  EXPECT_TRUE(logged.stop());
+
+  const std::string id = submitDetached(server_, ws_.write("long.json", sphereShot(128, 8192)));
+  waitFor(
+      server_, id, [](const Json& j) { return j.at("state") == "RUNNING"; }, 30);
+  const auto t0 = std::chrono::steady_clock::now();
+  const CmdResult r = run(server_.cloudctl() + " --deadline 0.3 watch " + id);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(r.code, 4) << r.err;  // kUnavailable: deadline exceeded
+  EXPECT_NE(r.err.find("deadline exceeded"), std::string::npos) << r.err;
+  EXPECT_LT(took, 2.0);
+  // submit --wait with a deadline: the same, and the job stays (the deadline bounds the call,
+  // not the job).
+  const std::string shot = ws_.write("long2.json", sphereShot(128, 8192, "[1, 1, 1]", "front", -6));
+  const CmdResult s =
+      run(server_.cloudctl() + " --json --deadline 0.5 submit " + shot + " --quiet");
+  EXPECT_EQ(s.code, 4) << s.err;
+  EXPECT_EQ(status(server_, id).at("state"), "RUNNING");
+  // The server is free of the abandoned streams: it answers and cancels normally.
+  EXPECT_EQ(run(server_.cloudctl() + " health").code, 0);
+  EXPECT_EQ(run(server_.cloudctl() + " cancel " + id).code, 0);
+  for (const Json& j : Json::parse(run(server_.cloudctl() + " --json list").out)) {
+    run(server_.cloudctl() + " cancel " + j.at("id").get<std::string>());
+  }
+  EXPECT_EQ(run(server_.cloudctl() + " watch " + id).code, 6);
 }
 
 TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
@@ -280,6 +462,27 @@ std::string replaced(std::string s, const std::string& from, const std::string& 
   return s;
 }
 
+/// Submits each case with cloudctl from its own folder `<prefix><i>/` and checks the exit code
+/// and the one-line message; the server must keep serving after each.
+void expectBadCases(const ServerProc& server, const Workspace& ws,
+                    const std::vector<BadCase>& cases, const std::string& prefix) {
+  int index = 0;
+  for (const BadCase& c : cases) {
+    const std::string dir = prefix + std::to_string(index++);
+    for (const auto& [name, bytes] : c.files) ws.write(dir + "/" + name, bytes);
+    const std::string shot = ws.write(dir + "/shot.json", c.shot);
+    const CmdResult r =
+        run(server.cloudctl(30) + " submit " + shot + " --quiet --out " + ws.path(dir + "/out"));
+    EXPECT_EQ(r.code, c.code) << c.label << ": " << r.err;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.label << ": " << r.err;
+    EXPECT_EQ(r.err.find("internal"), std::string::npos) << c.label << ": " << r.err;
+    EXPECT_EQ(r.err.find(server.stateDir()), std::string::npos)
+        << c.label << " leaks a server path: " << r.err;
+    EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << c.label << ": one line: " << r.err;
+    EXPECT_EQ(run(server.cloudctl() + " health").code, 0) << "after " << c.label;
+  }
+}
+
 TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
   const std::string base = sphereShot(8, 1);
   const std::string vol =
@@ -347,22 +550,8 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
        {{"cut.vdb", vdb_bytes.substr(0, vdb_bytes.size() / 3)}}},
   };
   ASSERT_GE(cases.size(), 20u);
-  int index = 0;
-  for (const BadCase& c : cases) {
-    const std::string dir = "bad" + std::to_string(index++);
-    for (const auto& [name, bytes] : c.files) ws_.write(dir + "/" + name, bytes);
-    ws_.write("outside.vdb", vdb_bytes);
-    const std::string shot = ws_.write(dir + "/shot.json", c.shot);
-    const CmdResult r =
-        run(server_.cloudctl(30) + " submit " + shot + " --quiet --out " + ws_.path(dir + "/out"));
-    EXPECT_EQ(r.code, c.code) << c.label << ": " << r.err;
-    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.label << ": " << r.err;
-    EXPECT_EQ(r.err.find("internal"), std::string::npos) << c.label << ": " << r.err;
-    EXPECT_EQ(r.err.find(server_.stateDir()), std::string::npos)
-        << c.label << " leaks a server path: " << r.err;
-    EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << c.label << ": one line: " << r.err;
-    EXPECT_EQ(run(server_.cloudctl() + " health").code, 0) << "after " << c.label;
-  }
+  ws_.write("outside.vdb", vdb_bytes);
+  expectBadCases(server_, ws_, cases, "bad");
   // The escaping path is accepted when the client is asked to upload it (rewritten inside).
   const CmdResult outside = run(server_.cloudctl() + " submit " + ws_.path("bad22/shot.json") +
                                 " --allow-outside --quiet --out " + ws_.path("bad22/out"));
@@ -375,6 +564,81 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
   EXPECT_EQ(run(server_.cloudctl() + " submit " + ws_.path("no-such-shot.json")).code, 3);
   EXPECT_EQ(run(server_.cloudctl() + " frobnicate").code, 2);
   EXPECT_EQ(run(server_.cloudctl() + " health").code, 0);
+}
+
+// --max-voxels and --max-frames: each volume kind over the limit is refused naming the field
+// (at submit when the shot tells, when the job runs when only the file does); under it runs.
+TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
+  // A VDB of about 4000 active voxels, baked by the unlimited server.
+  ASSERT_EQ(run(server_.cloudctl() + " submit " + ws_.write("vdb/g.json", sphereShot(8, 1)) +
+                " --quiet --out " + ws_.path("vdb/out"))
+                .code,
+            0);
+  const std::string vdb_bytes = slurp(ws_.path("vdb/out/bake.vdb"));
+  ServerProc limited(ws_.path("limited-state"));
+  ASSERT_TRUE(limited.start({"--max-voxels=2000", "--max-frames=2"}));
+  {
+    // The limits a client can read before submitting.
+    const CmdResult info = run(limited.cloudctl() + " --json info");
+    ASSERT_EQ(info.code, 0) << info.err;
+    const Json limits = Json::parse(info.out).at("limits");
+    EXPECT_EQ(limits.at("max_voxels"), 2000);
+    EXPECT_EQ(limits.at("max_frames"), 2);
+  }
+  const std::string base = sphereShot(8, 1, "[1, 1, 1]", "front", -5, false);
+  const std::string sphere =
+      R"("volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})";
+  auto withVolume = [&](const std::string& v) {
+    return replaced(replaced(base, sphere, "\"volume\": " + v),
+                    R"("vdb": false, "vdb_voxel_size": 0.1)", R"("vdb": false)");
+  };
+  const std::string tetra =
+      "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  const std::vector<BadCase> cases = {
+      {"VDB active voxels over the limit",
+       withVolume(R"({"vdb": {"path": "big.vdb"}})"),
+       2,
+       "/volume/vdb/path: big.vdb has ",
+       {{"big.vdb", vdb_bytes}}},
+      {"mesh resolution^3 over the limit",
+       withVolume(R"({"mesh": {"path": "t.obj", "resolution": 13}})"),
+       2,
+       "/volume/mesh/resolution: resolution 13 (cubed) gives 2197 voxels, over this server's "
+       "limit of 2000 (--max-voxels)",
+       {{"t.obj", tetra}}},
+      {"mesh voxel size over the limit (known once the mesh is read)",
+       withVolume(R"({"mesh": {"path": "t.obj", "voxel_size": 0.05}})"),
+       2,
+       "/volume/mesh/voxel_size",
+       {{"t.obj", tetra}}},
+      {"procedural grid over the limit",
+       withVolume(R"({"procedural": {"type": "perlin_cloud", "resolution": 16}})"), 2,
+       "/volume/procedural/resolution: resolution 16 gives 2048 voxels"},
+      {"bake.vdb grid of a sphere over the limit",
+       replaced(sphereShot(8, 1), "\"vdb_voxel_size\": 0.1", "\"vdb_voxel_size\": 0.1"), 2,
+       "/outputs/vdb_voxel_size: voxel size 0.1 over the volume's bounds gives 8000 voxels"},
+      {"sequence over the frame limit",
+       withVolume(
+           R"({"sequence": {"frames": 3, "procedural": {"type": "perlin_cloud", "resolution": 12}}})"),
+       2, "/volume/sequence/frames: 3 frames exceed this server's limit of 2 (--max-frames)"},
+      {"procedural sequence grid over the voxel limit",
+       withVolume(
+           R"({"sequence": {"frames": 2, "procedural": {"type": "perlin_cloud", "resolution": 20}}})"),
+       2, "/volume/sequence/procedural/resolution"},
+  };
+  expectBadCases(limited, ws_, cases, "limit");
+  // Under the limits the same kinds run: a 512-voxel bake.vdb, an 864-voxel procedural cloud.
+  const std::string small_vdb =
+      ws_.write("ok/a.json",
+                replaced(sphereShot(8, 1), "\"vdb_voxel_size\": 0.1", "\"vdb_voxel_size\": 0.25"));
+  CmdResult r = run(limited.cloudctl(30) + " submit " + small_vdb + " --quiet");
+  EXPECT_EQ(r.code, 0) << r.err;
+  r = run(limited.cloudctl(30) + " submit " +
+          ws_.write("ok/b.json",
+                    withVolume(R"({"procedural": {"type": "perlin_cloud", "resolution": 12}})")) +
+          " --quiet");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(limited.stop());
 }
 
 TEST(ServerQueue, FullQueueAnswersResourceExhausted) {
