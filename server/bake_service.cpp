@@ -48,6 +48,7 @@ grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest
     reply->set_max_samples(uint64_t(o.limits.max_samples));
     reply->set_max_voxels(o.limits.max_voxels);
     reply->set_max_frames(uint64_t(o.limits.max_frames));
+    reply->set_max_points(uint64_t(o.limits.max_points));
     toProto(jobs_.stats(), reply->mutable_stats());
     return grpc::Status::OK;
   });

@@ -127,6 +127,12 @@ int main(int argc, char** argv) {
       ->envname("CLOUDBAKE_MAX_FRAMES")
       ->check(CLI::Range(int64_t(0), int64_t(100000)))
       ->capture_default_str();
+  app.add_option("--max-points", o.limits.max_points,
+                 "most points of a point-based bake (bake.points of pointcloud, bake.sample_points "
+                 "of precomputed; 0: no limit)")
+      ->envname("CLOUDBAKE_MAX_POINTS")
+      ->check(CLI::Range(int64_t(0), int64_t(1) << 32))
+      ->capture_default_str();
   app.add_option("--log-level", log_level, "trace|debug|info|warn|error")
       ->envname("CLOUDBAKE_LOG_LEVEL")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))

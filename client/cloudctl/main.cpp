@@ -747,7 +747,8 @@ int main(int argc, char** argv) {
                        {"max_views", reply.max_views()},
                        {"max_samples", reply.max_samples()},
                        {"max_voxels", reply.max_voxels()},
-                       {"max_frames", reply.max_frames()}};
+                       {"max_frames", reply.max_frames()},
+                       {"max_points", reply.max_points()}};
         j["stats"] = {{"scatter_computations", s.scatter_computations()},
                       {"views_from_cache", s.views_from_cache()},
                       {"volume_builds", s.volume_builds()},
@@ -776,8 +777,8 @@ int main(int argc, char** argv) {
                   << reply.queue_bound() << ", upload " << reply.max_upload_bytes()
                   << " bytes, image " << reply.max_image_pixels() << " pixels, "
                   << reply.max_views() << " views, " << reply.max_samples() << " spp, "
-                  << reply.max_voxels() << " voxels, " << reply.max_frames()
-                  << " frames (0: unlimited)\n";
+                  << reply.max_voxels() << " voxels, " << reply.max_frames() << " frames, "
+                  << reply.max_points() << " points (0: unlimited)\n";
       }
       return ExitCode::kOk;
     }

@@ -210,6 +210,7 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
   // Before checkRunnable: a limit is this server's answer whatever the method supports.
   checkShotFrames(p.shot, lim.max_frames, "shot.json");
   checkShotVoxels(p.shot, lim.max_voxels, "shot.json");
+  checkShotPoints(p.shot, lim.max_points, "shot.json");
   checkRunnable(p.shot, "shot.json");
   if (lim.max_views > 0 && p.shot.views.size() > size_t(lim.max_views)) {
     throw InputError("shot.json: /views: " + std::to_string(p.shot.views.size()) +

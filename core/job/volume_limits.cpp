@@ -5,6 +5,8 @@
 #include <sstream>
 #include <variant>
 
+#include <nlohmann/json.hpp>
+
 #include "core/error.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/mesh_io.h"
@@ -87,6 +89,24 @@ void checkShotFrames(const ShotSpec& shot, int64_t max_frames, const std::string
     throw InputError(source + ": /volume/sequence/frames: " + std::to_string(s->frames) +
                      " frames exceed this server's limit of " + std::to_string(max_frames) +
                      " (--max-frames)");
+  }
+}
+
+void checkShotPoints(const ShotSpec& shot, int64_t max_points, const std::string& source) {
+  if (max_points <= 0) return;
+  const char* key = shot.bake.method == BakeSpec::Method::kPointcloud    ? "points"
+                    : shot.bake.method == BakeSpec::Method::kPrecomputed ? "sample_points"
+                                                                         : nullptr;
+  if (!key) return;
+  // The parser has validated the knobs; options_json is its canonical text.
+  const nlohmann::json knobs = nlohmann::json::parse(shot.bake.options_json);
+  const auto it = knobs.find(key);
+  if (it == knobs.end() || !it->is_number_integer()) return;
+  const int64_t points = it->get<int64_t>();
+  if (points > max_points) {
+    throw InputError(source + ": /bake/" + key + ": " + std::to_string(points) +
+                     " points exceed this server's limit of " + std::to_string(max_points) +
+                     " (--max-points)");
   }
 }
 

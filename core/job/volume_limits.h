@@ -28,6 +28,10 @@ void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
 /// frames (0: no limit).
 void checkShotFrames(const ShotSpec& shot, int64_t max_frames, const std::string& source);
 
+/// Throws InputError naming /bake/points (pointcloud) or /bake/sample_points (precomputed) when
+/// the method's point count exceeds `max_points` (0: no limit).
+void checkShotPoints(const ShotSpec& shot, int64_t max_points, const std::string& source);
+
 /// Run-time check of a mesh given by voxel_size, whose voxel count needs the mesh's bounds:
 /// reads the mesh (cheap next to voxelising it) and counts the padded box meshToVolume would
 /// allocate. No-op for other volumes or max_voxels 0.

@@ -576,7 +576,7 @@ TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
             0);
   const std::string vdb_bytes = slurp(ws_.path("vdb/out/bake.vdb"));
   ServerProc limited(ws_.path("limited-state"));
-  ASSERT_TRUE(limited.start({"--max-voxels=2000", "--max-frames=2"}));
+  ASSERT_TRUE(limited.start({"--max-voxels=2000", "--max-frames=2", "--max-points=1000"}));
   {
     // The limits a client can read before submitting.
     const CmdResult info = run(limited.cloudctl() + " --json info");
@@ -584,6 +584,7 @@ TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
     const Json limits = Json::parse(info.out).at("limits");
     EXPECT_EQ(limits.at("max_voxels"), 2000);
     EXPECT_EQ(limits.at("max_frames"), 2);
+    EXPECT_EQ(limits.at("max_points"), 1000);
   }
   const std::string base = sphereShot(8, 1, "[1, 1, 1]", "front", -5, false);
   const std::string sphere =
@@ -595,6 +596,10 @@ TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
   const std::string tetra =
       "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
   const std::vector<BadCase> cases = {
+      {"pointcloud points over the limit",
+       replaced(base, R"("method": "pathtrace")", R"("method": "pointcloud", "points": 5000)"),
+       2,
+       "/bake/points: 5000 points exceed this server's limit of 1000 (--max-points)"},
       {"VDB active voxels over the limit",
        withVolume(R"({"vdb": {"path": "big.vdb"}})"),
        2,
