@@ -90,22 +90,8 @@ void check(const grpc::Status& s, const std::string& what) {
   }
 }
 
-const char* stateName(v1::JobState s) {
-  switch (s) {
-    case v1::QUEUED:
-      return "QUEUED";
-    case v1::RUNNING:
-      return "RUNNING";
-    case v1::SUCCEEDED:
-      return "SUCCEEDED";
-    case v1::FAILED:
-      return "FAILED";
-    case v1::CANCELLED:
-      return "CANCELLED";
-    default:
-      return "UNKNOWN";
-  }
-}
+// Protobuf's own names of the enum values ("QUEUED", "RUNNING", ...); they live for the program.
+const char* stateName(v1::JobState s) { return v1::JobState_Name(s).c_str(); }
 
 bool terminal(v1::JobState s) {
   return s == v1::SUCCEEDED || s == v1::FAILED || s == v1::CANCELLED;
