@@ -1,0 +1,2 @@
+// Being written.
+#include "core/bake/bake_lattice.h"

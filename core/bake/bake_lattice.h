@@ -1,0 +1,26 @@
+// Resampling a shot's density field onto the dense lattice a bake computes on.
+#pragma once
+
+#include <cstdint>
+
+#include "core/bake/baked_light.h"
+#include "core/volume/density_field.h"
+
+namespace cloudbake {
+
+/// Default lattice resolution (voxels along the longest side of the density's bounds).
+constexpr int kDefaultLightResolution = 128;
+/// Largest lattice a bake may allocate (voxels, margin included): 2^25 (a few hundred MB with
+/// every pointcloud grid).
+constexpr uint64_t kMaxBakeVoxels = uint64_t(1) << 25;
+
+/// A BakedLight with only `density` filled: a lattice of cubic voxels covering field.bounds()
+/// with `resolution` voxels along its longest side plus one empty voxel of margin on every face
+/// (so trilinear lookups fall to zero outside the cloud), each voxel the mean density over its
+/// volume (the field supersampled 2x2x2 per voxel, or more when the field's feature size is
+/// smaller than the voxel, up to 4x4x4). resolution in [8, 1024]; InputError naming
+/// "light_resolution" otherwise, or when the lattice would exceed kMaxBakeVoxels. Parallel
+/// over z slices with one density lookup per thread; deterministic.
+BakedLight makeBakeLattice(const DensityField& field, int resolution);
+
+}  // namespace cloudbake

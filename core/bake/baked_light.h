@@ -1,0 +1,78 @@
+// The result of every bake method: light scattering computed once for one sun direction, stored
+// per unit sun irradiance on a voxel lattice, so any view and any sun colour renders from it.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/bake/bake_grid.h"
+#include "core/math/vec3.h"
+
+namespace cloudbake {
+
+/// Names of the grids a bake may hold (also their names in the .vdb file; docs/outputs.md).
+/// Light values are per unit sun irradiance E, so a render multiplies them by the shot's E.
+namespace bake_grids {
+/// float, unitless: the shot's density (sigma_t = extinction * density per world unit).
+constexpr const char* kDensity = "density";
+/// float in [0, 1]: transmittance from the voxel centre to the sun, i.e. the direct sun
+/// irradiance reaching the voxel per unit E (seed 004's precomputed transmittance; seed 000's Ci).
+constexpr const char* kSunTransmittance = "sun_transmittance";
+/// float in [0, 1]: transmittance to the sky averaged over all directions (only when the shot's
+/// sky is not black).
+constexpr const char* kSkyVisibility = "sky_visibility";
+/// Vec3 (RGB), unitless: fluence (radiance integrated over the sphere) of light scattered more
+/// than once, per unit E (seed 000's Co; arbitrary scale under the paper's rule).
+constexpr const char* kMultipleFluence = "Co";
+/// Vec3, unit or zero: the prominent direction in which multiply scattered light travels at the
+/// voxel (seed 000's L).
+constexpr const char* kLightDir = "light_dir";
+/// float in [0, 1]: the Mie fraction R of the multiply scattered light (seed 000's R; 1 = all
+/// along light_dir with the full phase function, 0 = isotropic).
+constexpr const char* kMieRatio = "mie_ratio";
+/// Vec3 (RGB), sr^-1: mean radiance of the light arriving at the voxel per unit E,
+/// (sun_transmittance + Co) / (4 pi): the isotropic preview DCCs (Houdini, Blender) can shade
+/// with emission = sigma_s * Cd * E.
+constexpr const char* kCd = "Cd";
+}  // namespace bake_grids
+
+/// One grid of a bake: `components` floats per voxel (1 or 3), interleaved, in BakeGrid order.
+struct BakeChannel {
+  int components = 1;
+  std::vector<float> data;
+};
+
+/// A bake: the lattice, the density and the light grids, and where they came from.
+///
+/// `sun_direction` (unit, from the scene towards the sun) is the direction the light was baked
+/// for; `metadata` holds provenance written to the .vdb file as string metadata (method knobs,
+/// medium, statistics, code version; keys "cloudbake:*").
+struct BakedLight {
+  BakeGrid grid;
+  std::string method;  ///< "single" or "pointcloud"
+  Vec3 sun_direction{0, 0, 1};
+  std::map<std::string, std::string> metadata;
+  std::vector<float> density;                  ///< grid.voxelCount() values
+  std::map<std::string, BakeChannel> channels;  ///< every grid but density, by name
+
+  /// The channel, or nullptr when the bake has none of that name.
+  const BakeChannel* find(const std::string& name) const;
+  /// Adds (or replaces) a zero-filled channel of grid.voxelCount() * components floats.
+  BakeChannel& add(const std::string& name, int components);
+
+  /// Zeroes every light channel outside the support of the density (voxels within one voxel,
+  /// in the 26-neighbourhood, of a voxel with density > 0): trilinear lookups never read them
+  /// with a non-zero density weight, and a .vdb file stores only that support, so a bake and its
+  /// file read back are identical. Bake methods call it last.
+  void trimToSupport();
+
+  /// Throws InputError("<what>: grid '<name>': ...") naming the grid and the first bad voxel
+  /// (index and world position) when: a size does not match the lattice; a value is NaN or
+  /// infinite; density < 0; sun_transmittance, sky_visibility or mie_ratio outside [0, 1];
+  /// Co < 0; light_dir neither unit (within 1e-3) nor zero; the lattice is empty or its voxel size
+  /// not finite and > 0; sun_direction not unit.
+  void validate(const std::string& what) const;
+};
+
+}  // namespace cloudbake

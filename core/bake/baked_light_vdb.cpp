@@ -1,0 +1,2 @@
+// Being written.
+#include "core/bake/baked_light_vdb.h"

@@ -1,0 +1,2 @@
+// Being written.
+#include "core/bake/pointcloud_bake.h"

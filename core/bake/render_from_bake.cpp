@@ -1,0 +1,2 @@
+// Being written.
+#include "core/bake/render_from_bake.h"

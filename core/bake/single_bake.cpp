@@ -1,0 +1,2 @@
+// Being written.
+#include "core/bake/single_bake.h"

@@ -1,0 +1,2 @@
+// Being written.
+#include "core/bake/sky_visibility.h"

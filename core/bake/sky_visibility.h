@@ -1,0 +1,24 @@
+// How much of the sky each voxel sees: the ambient term of the bake renders.
+#pragma once
+
+#include "core/bake/bake_progress.h"
+#include "core/bake/baked_light.h"
+
+namespace cloudbake {
+
+/// Adds the `sky_visibility` channel: transmittance to the outside of the lattice averaged over
+/// the sphere of directions, estimated from the 26 lattice directions (6 axes, 12 face and 8
+/// body diagonals), each weighted by the solid angle of its cell on the sphere. Along a lattice
+/// direction the transmittance of a voxel is the transmittance of its upstream neighbour times
+/// the exact trapezoidal segment between the two voxel centres, so each direction is one O(voxels)
+/// sweep with no interpolation. Deterministic. Throws Cancelled when progress returns false.
+void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgressFn& progress = {});
+
+/// The 26 lattice directions (unit) and their solid-angle weights (summing to 1), for tests.
+struct LatticeDirection {
+  int dx, dy, dz;
+  double weight;
+};
+const LatticeDirection* latticeDirections();  ///< 26 entries
+
+}  // namespace cloudbake

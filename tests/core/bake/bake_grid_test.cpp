@@ -1,0 +1,68 @@
+#include "core/bake/bake_grid.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "core/bake/phase_lut.h"
+#include "core/phase/henyey_greenstein.h"
+
+namespace cloudbake {
+namespace {
+
+BakeGrid lattice(int n, double h) {
+  BakeGrid g;
+  g.origin = Vec3(0.0);
+  g.voxel_size = h;
+  g.nx = g.ny = g.nz = n;
+  return g;
+}
+
+TEST(BakeGrid, TrilinearReproducesALinearField) {
+  const BakeGrid g = lattice(6, 0.5);
+  std::vector<float> v(g.voxelCount());
+  for (int k = 0; k < 6; ++k)
+    for (int j = 0; j < 6; ++j)
+      for (int i = 0; i < 6; ++i) {
+        const Vec3 c = g.center(i, j, k);
+        v[g.index(i, j, k)] = float(1 + c.x + 2 * c.y - c.z);
+      }
+  for (const Vec3 p : {Vec3(0.3, 0.7, 1.1), Vec3(2.49, 0.01, 1.99), Vec3(1.25, 1.25, 1.25)}) {
+    EXPECT_NEAR(sampleTrilinear(g, v.data(), p), 1 + p.x + 2 * p.y - p.z, 1e-5);
+  }
+  // Outside the lattice: zero background, fading over the last half voxel.
+  EXPECT_EQ(sampleTrilinear(g, v.data(), Vec3(-0.6, 1, 1)), 0.f);
+  EXPECT_EQ(sampleTrilinear(g, v.data(), Vec3(1, 1, 1e30)), 0.f);
+  EXPECT_EQ(sampleTrilinear(g, v.data(), Vec3(std::nan(""), 1, 1)), 0.f);
+  EXPECT_NEAR(sampleTrilinear(g, v.data(), Vec3(-0.25, 0, 0)), 0.5 * 1.0, 1e-6);
+}
+
+TEST(BakeGrid, MarchedTransmittanceOfAHomogeneousBlock) {
+  const BakeGrid g = lattice(20, 0.1);
+  std::vector<float> d(g.voxelCount(), 0.f);
+  for (int k = 0; k < 20; ++k)
+    for (int j = 0; j < 20; ++j)
+      for (int i = 0; i < 20; ++i) d[g.index(i, j, k)] = 2.f;
+  // From the centre along +x: the trilinear density is 2 up to the last voxel centre (x = 1.9),
+  // then falls linearly towards the zero background, to 1 at the lattice face (x = 1.95).
+  const Vec3 p(0.95, 0.95, 0.95);
+  const double tau = 3.0 * (2 * (1.9 - 0.95) + 0.5 * (2 + 1) * 0.05);
+  EXPECT_NEAR(marchTransmittance(g, d.data(), 3.0, p, Vec3(1, 0, 0), 0.01), std::exp(-tau), 1e-6);
+  EXPECT_EQ(marchTransmittance(g, d.data(), 0.0, p, Vec3(1, 0, 0), 0.01), 1.0);
+  EXPECT_EQ(marchTransmittance(g, d.data(), 1e6, p, Vec3(0, 0, 1), 0.01), 0.0);
+  // A point outside, looking away: nothing in the way.
+  EXPECT_EQ(marchTransmittance(g, d.data(), 3.0, Vec3(5, 5, 5), Vec3(1, 0, 0), 0.01), 1.0);
+}
+
+TEST(PhaseLut, MatchesTheFunctionItTabulates) {
+  const HenyeyGreensteinPhase hg(0.9);
+  const PhaseLut lut(hg);
+  for (double c : {-1.0, -0.5, 0.0, 0.5, 0.9, 0.99, 0.999, 1.0}) {
+    EXPECT_NEAR(lut.eval(c).x / hg.eval(c).x, 1.0, 2e-3) << c;
+  }
+  EXPECT_TRUE(std::isfinite(lut.eval(1.5).x));
+}
+
+}  // namespace
+}  // namespace cloudbake
