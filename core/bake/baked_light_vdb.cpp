@@ -1,2 +1,247 @@
-// Being written.
 #include "core/bake/baked_light_vdb.h"
+
+#include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
+#include <openvdb/openvdb.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+void initOpenVdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+std::string exact(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+// Voxels a trilinear lookup can weight with non-zero density: density > 0 in the
+// 26-neighbourhood. Only these are stored (BakedLight::trimToSupport zeroes the rest).
+std::vector<uint8_t> supportMask(const BakedLight& b) {
+  const BakeGrid& g = b.grid;
+  std::vector<uint8_t> mask(g.voxelCount(), 0);
+  for (int k = 0; k < g.nz; ++k)
+    for (int j = 0; j < g.ny; ++j)
+      for (int i = 0; i < g.nx; ++i) {
+        if (!(b.density[g.index(i, j, k)] > 0)) continue;
+        for (int dk = -1; dk <= 1; ++dk)
+          for (int dj = -1; dj <= 1; ++dj)
+            for (int di = -1; di <= 1; ++di) {
+              const int x = i + di, y = j + dj, z = k + dk;
+              if (x < 0 || y < 0 || z < 0 || x >= g.nx || y >= g.ny || z >= g.nz) continue;
+              mask[g.index(x, y, z)] = 1;
+            }
+      }
+  return mask;
+}
+
+openvdb::math::Transform::Ptr latticeTransform(const BakeGrid& g) {
+  auto xform = openvdb::math::Transform::createLinearTransform(g.voxel_size);
+  xform->postTranslate(openvdb::Vec3d(g.origin.x, g.origin.y, g.origin.z));
+  return xform;
+}
+
+template <typename GridT, typename Get>
+typename GridT::Ptr makeGrid(const BakedLight& b, const std::vector<uint8_t>& mask,
+                             const std::string& name, Get&& get) {
+  const BakeGrid& g = b.grid;
+  auto grid = GridT::create(openvdb::zeroVal<typename GridT::ValueType>());
+  grid->setName(name);
+  grid->setTransform(latticeTransform(g));
+  auto acc = grid->getAccessor();
+  for (int k = 0; k < g.nz; ++k)
+    for (int j = 0; j < g.ny; ++j)
+      for (int i = 0; i < g.nx; ++i) {
+        const size_t v = g.index(i, j, k);
+        if (mask[v]) acc.setValueOn(openvdb::Coord(i, j, k), get(v));
+      }
+  return grid;
+}
+
+std::map<std::string, std::string> stringMeta(const openvdb::MetaMap& meta) {
+  std::map<std::string, std::string> out;
+  for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
+    if (it->second && it->second->typeName() == openvdb::StringMetadata::staticTypeName()) {
+      out[it->first] = it->second->str();
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+void writeBakedLight(const std::string& path, const BakedLight& bake) {
+  initOpenVdb();
+  const BakeGrid& g = bake.grid;
+  if (bake.density.size() != g.voxelCount()) {
+    throw InputError(path + ": bake density does not match its lattice");
+  }
+  const std::vector<uint8_t> mask = supportMask(bake);
+  openvdb::GridPtrVec grids;
+  auto density = makeGrid<openvdb::FloatGrid>(bake, mask, bake_grids::kDensity,
+                                              [&](size_t v) { return bake.density[v]; });
+  density->setGridClass(openvdb::GRID_FOG_VOLUME);
+  grids.push_back(density);
+  for (const auto& [name, c] : bake.channels) {
+    if (c.data.size() != g.voxelCount() * size_t(c.components)) {
+      throw InputError(path + ": bake grid '" + name + "' does not match its lattice");
+    }
+    if (c.components == 1) {
+      grids.push_back(makeGrid<openvdb::FloatGrid>(bake, mask, name,
+                                                   [&](size_t v) { return c.data[v]; }));
+    } else if (c.components == 3) {
+      auto grid = makeGrid<openvdb::Vec3SGrid>(bake, mask, name, [&](size_t v) {
+        return openvdb::Vec3s(c.data[3 * v], c.data[3 * v + 1], c.data[3 * v + 2]);
+      });
+      grid->setVectorType(openvdb::VEC_INVARIANT);
+      grids.push_back(grid);
+    } else {
+      throw InputError(path + ": bake grid '" + name + "' has " +
+                       std::to_string(c.components) + " components (1 or 3 expected)");
+    }
+  }
+  openvdb::MetaMap meta;
+  for (const auto& [k, v] : bake.metadata) meta.insertMeta(k, openvdb::StringMetadata(v));
+  auto put = [&](const char* k, const std::string& v) {
+    meta.removeMeta(k);
+    meta.insertMeta(k, openvdb::StringMetadata(v));
+  };
+  put("cloudbake:version", CLOUDBAKE_VERSION);
+  put("cloudbake:method", bake.method);
+  put("cloudbake:sun_direction", exact(bake.sun_direction.x) + " " + exact(bake.sun_direction.y) +
+                                     " " + exact(bake.sun_direction.z));
+  put("cloudbake:units",
+      "density unitless; sun_transmittance, sky_visibility, Co per unit sun irradiance; Cd sr^-1 "
+      "per unit sun irradiance");
+  put("cloudbake:lattice",
+      std::to_string(g.nx) + " " + std::to_string(g.ny) + " " + std::to_string(g.nz));
+  const std::string tmp = path + ".tmp";
+  try {
+    openvdb::io::File file(tmp);
+    file.write(grids, meta);
+    file.close();
+  } catch (const std::exception& e) {
+    std::remove(tmp.c_str());
+    throw InputError(path + ": cannot write VDB file (" + e.what() + ")");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    throw InputError(path + ": cannot rename " + tmp + " into place (" + ec.message() + ")");
+  }
+}
+
+BakedLight readBakedLight(const std::string& path) {
+  initOpenVdb();
+  if (!std::filesystem::is_regular_file(path)) throw InputError(path + ": bake file not found");
+  openvdb::GridPtrVec grids;
+  std::map<std::string, std::string> meta;
+  try {
+    // A stream that throws on short reads: openvdb::io::File loads truncated files silently.
+    std::ifstream in(path, std::ios::binary);
+    in.exceptions(std::ios::failbit | std::ios::badbit);
+    openvdb::io::Stream stream(in, /*delayLoad=*/false);
+    grids = *stream.getGrids();
+    meta = stringMeta(*stream.getMetadata());
+  } catch (const std::exception& e) {
+    throw InputError(path + ": not a readable OpenVDB file (" + e.what() + ")");
+  }
+  auto need = [&](const char* key) {
+    auto it = meta.find(key);
+    if (it == meta.end()) {
+      throw InputError(path + ": not a cloudbake bake (no '" + std::string(key) +
+                       "' metadata; bakes are written by methods single and pointcloud)");
+    }
+    return it->second;
+  };
+  BakedLight bake;
+  bake.method = need("cloudbake:method");
+  {
+    std::istringstream s(need("cloudbake:sun_direction"));
+    if (!(s >> bake.sun_direction.x >> bake.sun_direction.y >> bake.sun_direction.z)) {
+      throw InputError(path + ": malformed cloudbake:sun_direction metadata");
+    }
+    std::istringstream l(need("cloudbake:lattice"));
+    BakeGrid& g = bake.grid;
+    if (!(l >> g.nx >> g.ny >> g.nz) || g.nx < 1 || g.ny < 1 || g.nz < 1 ||
+        uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) > (uint64_t(1) << 31)) {
+      throw InputError(path + ": malformed cloudbake:lattice metadata");
+    }
+  }
+  for (const auto& [k, v] : meta) {
+    if (k != "cloudbake:method" && k != "cloudbake:sun_direction" && k != "cloudbake:lattice" &&
+        k != "cloudbake:units" && k != "cloudbake:version") {
+      bake.metadata[k] = v;
+    }
+  }
+  openvdb::GridBase::Ptr density_grid;
+  for (const auto& grid : grids) {
+    if (grid->getName() == bake_grids::kDensity) density_grid = grid;
+  }
+  if (!density_grid) throw InputError(path + ": no 'density' grid");
+  BakeGrid& g = bake.grid;
+  const openvdb::math::Transform& xform = density_grid->transform();
+  if (!xform.isLinear() || !xform.hasUniformScale()) {
+    throw InputError(path + ": grid 'density' does not have a uniform linear transform");
+  }
+  g.voxel_size = xform.voxelSize()[0];
+  const openvdb::Vec3d o = xform.indexToWorld(openvdb::Coord(0, 0, 0));
+  g.origin = Vec3(o.x(), o.y(), o.z());
+  const size_t n = g.voxelCount();
+  bake.density.assign(n, 0.f);
+  auto place = [&](const std::string& name, const openvdb::Coord& c) -> long long {
+    if (c.x() < 0 || c.y() < 0 || c.z() < 0 || c.x() >= g.nx || c.y() >= g.ny || c.z() >= g.nz) {
+      throw InputError(path + ": grid '" + name + "' has a voxel outside the bake's lattice");
+    }
+    return (long long)g.index(c.x(), c.y(), c.z());
+  };
+  for (const auto& grid : grids) {
+    const std::string name = grid->getName();
+    if (grid->transform() != xform) {
+      throw InputError(path + ": grid '" + name + "' is not on the density grid's transform");
+    }
+    if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(grid)) {
+      std::vector<float>* out = &bake.density;
+      if (name != bake_grids::kDensity) out = &bake.add(name, 1).data;
+      for (auto it = f->cbeginValueOn(); it; ++it) {
+        if (!it.isVoxelValue()) {
+          throw InputError(path + ": grid '" + name + "' has tiles (bakes store voxels)");
+        }
+        (*out)[size_t(place(name, it.getCoord()))] = *it;
+      }
+    } else if (auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(grid)) {
+      if (name == bake_grids::kDensity) throw InputError(path + ": grid 'density' is not float");
+      std::vector<float>& out = bake.add(name, 3).data;
+      for (auto it = v->cbeginValueOn(); it; ++it) {
+        if (!it.isVoxelValue()) {
+          throw InputError(path + ": grid '" + name + "' has tiles (bakes store voxels)");
+        }
+        const size_t i = size_t(place(name, it.getCoord()));
+        const openvdb::Vec3s x = *it;
+        out[3 * i] = x[0];
+        out[3 * i + 1] = x[1];
+        out[3 * i + 2] = x[2];
+      }
+    } else {
+      throw InputError(path + ": grid '" + name + "' has value type " + grid->valueType() +
+                       " (bakes hold float and vec3s grids)");
+    }
+  }
+  bake.validate(path);
+  return bake;
+}
+
+}  // namespace cloudbake

@@ -1,2 +1,150 @@
-// Being written.
 #include "core/bake/pointcloud_bake.h"
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <string>
+
+#include "core/bake/bake_lattice.h"
+#include "core/bake/point_splat.h"
+#include "core/bake/scattering_passes.h"
+#include "core/bake/sky_visibility.h"
+#include "core/bake/sun_transmittance.h"
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+template <class T>
+std::string str(const T& v) {
+  std::ostringstream s;
+  s.precision(9);
+  s << v;
+  return s.str();
+}
+
+// Progress of one stage mapped into [from, to] of the whole bake.
+BakeProgressFn subRange(const BakeProgressFn& progress, double from, double to) {
+  if (!progress) return {};
+  return [progress, from, to](double f, const std::string& stage) {
+    return progress(from + (to - from) * f, stage);
+  };
+}
+
+}  // namespace
+
+BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
+                          const PointcloudOptions& options, const BakeProgressFn& progress,
+                          PointcloudStats* stats) {
+  checkPointcloudInput(medium, options);
+  if (!isFinite(sun_dir_in) || !(length(sun_dir_in) > 0)) {
+    throw InputError("sun: direction: must be a finite nonzero vector");
+  }
+  const Vec3 sun_dir = normalize(sun_dir_in);
+  auto report = [&](double f, const std::string& stage) {
+    if (progress && !progress(f, stage)) throw Cancelled();
+  };
+  // Stage fractions of the whole bake.
+  constexpr double kLattice = 0.05, kSun = 0.15, kSky = 0.25, kPoints = 0.9;
+
+  auto t0 = Clock::now();
+  report(0.0, "lattice");
+  BakedLight bake = makeBakeLattice(*medium.density, options.light_resolution);
+  const double seconds_lattice = secondsSince(t0);
+
+  t0 = Clock::now();
+  report(kLattice, "sun transmittance");
+  computeSunTransmittance(bake, sun_dir, medium.extinction, subRange(progress, kLattice, kSun));
+  const double seconds_sun = secondsSince(t0);
+
+  // sky_visibility is also the escape probability the normalised rule conserves energy with.
+  t0 = Clock::now();
+  const bool need_sky = options.sky || options.rule == PointcloudOptions::Rule::kNormalized;
+  if (need_sky) {
+    report(kSun, "sky visibility");
+    computeSkyVisibility(bake, medium.extinction, subRange(progress, kSun, kSky));
+  }
+  const double seconds_sky = secondsSince(t0);
+
+  const BakeChannel* vis = bake.find(bake_grids::kSkyVisibility);
+  const PointCloudResult result =
+      runPointcloud(bake.grid, bake.density, vis ? vis->data : std::vector<float>(), medium,
+                    sun_dir, options, true, subRange(progress, kSky, kPoints));
+  if (!options.sky) bake.channels.erase(bake_grids::kSkyVisibility);
+
+  t0 = Clock::now();
+  report(kPoints, "splat");
+  const double splat_radius = splatPoints(bake, result, [&](double f) {
+    return progress && !progress(kPoints + (1 - kPoints) * f, "splat");
+  });
+  // Cd = (sun_transmittance + Co) / (4 pi): the mean radiance arriving per unit E.
+  const BakeChannel* sun = bake.find(bake_grids::kSunTransmittance);
+  const std::vector<float>& co = bake.find(bake_grids::kMultipleFluence)->data;
+  std::vector<float>& cd = bake.add(bake_grids::kCd, 3).data;
+  const size_t voxels = bake.grid.voxelCount();
+  for (size_t v = 0; v < voxels; ++v) {
+    const double s = sun ? double(sun->data[v]) : 0.0;
+    for (int c = 0; c < 3; ++c) cd[3 * v + c] = float((s + co[3 * v + c]) * kInv4Pi);
+  }
+  bake.trimToSupport();
+  const double seconds_splat = secondsSince(t0);
+
+  bake.method = "pointcloud";
+  bake.sun_direction = sun_dir;
+  const bool paper = options.rule == PointcloudOptions::Rule::kPaper;
+  auto& md = bake.metadata;
+  md["cloudbake:method"] = "pointcloud";
+  md["cloudbake:points"] = str(result.cloud.size());
+  md["cloudbake:passes"] = str(options.passes);
+  md["cloudbake:passes_run"] = str(result.passes_run);
+  md["cloudbake:radius"] = str(result.radius);
+  md["cloudbake:radius_option"] = str(options.radius);
+  md["cloudbake:mean_neighbours"] = str(result.mean_neighbours);
+  md["cloudbake:point_spacing"] = str(result.cloud.spacing);
+  md["cloudbake:splat_radius"] = str(splat_radius);
+  md["cloudbake:rule"] = paper ? "paper" : "normalized";
+  md["cloudbake:output_mapping"] = options.output_mapping ? "true" : "false";
+  md["cloudbake:tolerance"] = str(options.tolerance);
+  md["cloudbake:last_relative_change"] = str(result.last_relative_change);
+  md["cloudbake:tail_ratio"] = str(result.tail_ratio);
+  md["cloudbake:pair_interactions"] = str(result.pair_interactions);
+  md["cloudbake:pairs"] = str(result.pairs);
+  md["cloudbake:light_resolution"] = str(options.light_resolution);
+  md["cloudbake:step"] = str(options.step);
+  md["cloudbake:seed"] = str(options.seed);
+  if (!result.transfer_scale.empty()) {
+    double mean = 0;
+    for (const float k : result.transfer_scale) mean += k;
+    md["cloudbake:mean_transfer_scale"] = str(mean / double(result.transfer_scale.size()));
+  }
+  md["cloudbake:sky"] = options.sky ? "true" : "false";
+  md["cloudbake:seconds_lattice"] = str(seconds_lattice);
+  md["cloudbake:seconds_sun_transmittance"] = str(seconds_sun);
+  md["cloudbake:seconds_sky_visibility"] = str(seconds_sky);
+  md["cloudbake:seconds_points"] = str(result.seconds_points);
+  md["cloudbake:seconds_neighbours"] = str(result.seconds_neighbours);
+  md["cloudbake:seconds_passes"] = str(result.seconds_passes);
+  md["cloudbake:seconds_splat"] = str(seconds_splat);
+  report(1.0, "done");
+
+  if (stats) {
+    stats->points = int(result.cloud.size());
+    stats->passes_run = result.passes_run;
+    stats->radius = result.radius;
+    stats->mean_neighbours = result.mean_neighbours;
+    stats->pair_interactions = result.pair_interactions;
+    stats->last_relative_change = result.last_relative_change;
+    stats->seconds_points = result.seconds_points;
+    stats->seconds_neighbours = result.seconds_neighbours;
+    stats->seconds_passes = result.seconds_passes;
+    stats->seconds_splat = seconds_splat;
+  }
+  return bake;
+}
+
+}  // namespace cloudbake

@@ -14,7 +14,7 @@ namespace cloudbake {
 /// Knobs of method `pointcloud` (shot keys beside "method": "pointcloud").
 struct PointcloudOptions {
   int points = 65536;    ///< points inside the volume, [64, 2^24]; the quality knob
-  int passes = 16;       ///< maximum scattering passes, [1, 1000]
+  int passes = 32;       ///< maximum scattering passes, [1, 1000]
   double radius = 0;     ///< neighbourhood cut-off, world units; 0: 3x the mean point spacing
   double tolerance = 0.01;  ///< stop when a pass changes Co by less than this (relative), (0, 1]
   enum class Rule { kNormalized, kPaper };

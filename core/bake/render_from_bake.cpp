@@ -1,2 +1,683 @@
-// Being written.
+// The view renderer of a bake (seed 000 "Final Rendering", Eq. 6-8; seed 004 "Volumetric
+// Rendering"): a ray march through the baked grids, no scattering recomputed.
+//
+// Along a camera ray r(t) = o + t d (unit d, t in world units):
+//   sigma_t(t) = medium.extinction * density(r(t))   (trilinear from bake.density)
+//   T_v(t)     = exp(-integral_0^t sigma_t)           (view transmittance)
+//   L          = integral T_v(t) S(t) dt + T_v(end) Lsky(d)
+// with the in-scattered radiance S = sigma_s J towards the camera, sigma_s = albedo * sigma_t
+// (RGB), and the source J (radiance per unit sigma_s) the sum of
+//   sun single  J_ss  = E p(cos_s) Tsun(x), cos_s = dot(bake.sun_direction, d) (light travels
+//                       along -sun_direction and leaves towards the camera along -d; constant
+//                       per ray, so p is looked up once per ray);
+//   multiple    J_ms  = E [R p(dot(Ldir, -d)) + (1 - R) / (4 pi)] Co   (seed 000 Eq. 8 with
+//                       A_iso = 1 / (4 pi)); only with a Co grid; a missing mie_ratio grid means
+//                       R = 0, and where light_dir is zero (or missing) only the isotropic part;
+//   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere;
+// E = sun.irradiance (the baked grids are per unit E), p = medium.phase via a PhaseLut. Layers:
+// sun = J_ss + J_ms terms, sky = J_sky term, single = J_ss + J_sky terms, multiple = J_ms term,
+// beauty = sun + sky + T_v(end) Lsky(d), alpha = 1 - T_v(end). The march stops once T_v <
+// options.min_transmittance; T_v(end) is then the value reached (< min_transmittance).
+//
+// Quadrature (seed 000: "the volume covered by each step is summed using trapezoidal
+// integration"): per step of length dt between samples i and i+1, the optical depth is the
+// trapezoid Delta = (sigma_i + sigma_{i+1}) dt / 2 and T_v(i+1) = T_v(i) exp(-Delta). The source
+// is integrated trapezoidally in optical depth: J linear between the samples, sigma_t T_v
+// integrated exactly over the step, which gives
+//   integral = T_v(i) [w_i J_i + w_{i+1} J_{i+1}],  w_{i+1} = (1 - e^-Delta) / Delta - e^-Delta,
+//                                                    w_i = (1 - e^-Delta) - w_{i+1}.
+// For optically thin steps w_i = w_{i+1} = Delta / 2 + O(Delta^2): the plain trapezoid of
+// T_v sigma_s J. Unlike the plain trapezoid it stays bounded (by J) when a step is optically
+// thick (extinction 1e6), where the plain rule would return sigma_t dt / 2 times the source, and
+// it is exact for a homogeneous medium with constant J.
+//
+// Empty space: per 8^3 block of the lattice (the VDB leaf size) the maximum density the trilinear
+// lookup can return inside it; a 3D DDA (Amanatides & Woo 1987) over the blocks skips those whose
+// maximum is 0. Density is exactly 0 there and on their faces, so T_v does not change and the
+// skipped part of the integral is exactly 0; runs of non-empty blocks are marched with uniform
+// steps of at most options.step. The march covers the whole support of the trilinear field,
+// index coordinates (-1, n) per axis (half a voxel beyond BakeGrid::bounds()).
+//
+// Pixels: samples_per_pixel film positions on a jittered sqrt(spp) x sqrt(spp) grid (the rest
+// uniform), one random stream per pixel from (seed, pixel), tiles of 16^2 pixels in parallel:
+// the image does not depend on the thread count. spp = 1 is the pixel centre.
 #include "core/bake/render_from_bake.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/bake/phase_lut.h"
+#include "core/error.h"
+#include "core/math/rng.h"
+#include "core/transport/camera.h"
+#include "core/transport/sky.h"
+
+namespace cloudbake {
+namespace {
+
+constexpr int kBlock = 8;      // empty-space block side, voxels (an OpenVDB leaf)
+constexpr int kTileSize = 16;  // pixels per tile side (work unit)
+
+template <typename T>
+std::string str(const T& v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+std::string str(const Vec3& v) {
+  std::ostringstream os;
+  os << "[" << v.x << ", " << v.y << ", " << v.z << "]";
+  return os.str();
+}
+
+void validateOptions(const BakeRenderOptions& o, double voxel_size) {
+  if (!std::isfinite(o.step) || o.step < 0) {
+    throw InputError("step: must be finite and >= 0 world units (0 = half a voxel), got " +
+                     str(o.step));
+  }
+  // Far finer than any lattice needs; bounds the step count of a march.
+  if (o.step > 0 && o.step < 1e-4 * voxel_size) {
+    throw InputError("step: must be 0 or at least 1e-4 voxel (" + str(1e-4 * voxel_size) +
+                     " world units), got " + str(o.step));
+  }
+  if (o.samples_per_pixel < 1 || o.samples_per_pixel > 1024) {
+    throw InputError("samples_per_pixel: must be in 1..1024, got " + str(o.samples_per_pixel));
+  }
+  if (!(o.min_transmittance >= 0 && o.min_transmittance < 1)) {  // also rejects NaN
+    throw InputError("min_transmittance: must be in [0, 1), got " + str(o.min_transmittance));
+  }
+  if (o.threads < 0 || o.threads > 4096) {
+    throw InputError("threads: must be in 0..4096 (0 = the caller's arena), got " + str(o.threads));
+  }
+}
+
+void validateMedium(const Medium& m) {
+  if (!m.phase) throw InputError("medium.phase: no phase function given");
+  if (!std::isfinite(m.extinction) || m.extinction < 0) {
+    throw InputError("medium.extinction: must be finite and >= 0, got " + str(m.extinction));
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (!(m.albedo[c] >= 0 && m.albedo[c] <= 1)) {
+      throw InputError("medium.albedo: each channel must be in [0, 1], got " + str(m.albedo));
+    }
+  }
+}
+
+/// The channel `name` with `components` floats per voxel, or nullptr when absent (or, with
+/// `required`, InputError).
+const float* channel(const BakedLight& bake, const char* name, int components, bool required,
+                     const std::string& why) {
+  const auto it = bake.channels.find(name);
+  if (it == bake.channels.end()) {
+    if (required) throw InputError(std::string("bake: grid '") + name + "' is missing" + why);
+    return nullptr;
+  }
+  const BakeChannel& ch = it->second;
+  const size_t expected = bake.grid.voxelCount() * size_t(components);
+  if (ch.components != components || ch.data.size() != expected) {
+    throw InputError(std::string("bake: grid '") + name + "': expected " + str(components) +
+                     " component(s) and " + str(expected) + " values for the " + str(bake.grid.nx) +
+                     "x" + str(bake.grid.ny) + "x" + str(bake.grid.nz) + " lattice, got " +
+                     str(ch.components) + " and " + str(ch.data.size()));
+  }
+  return ch.data.data();
+}
+
+/// Mean sky radiance over the sphere. A constant sky is exact; otherwise a midpoint rule on
+/// directions uniform in z = cos(theta) and azimuth (equal-area cells, equal weights). The
+/// horizon z = 0 is a cell boundary, so a gradient sky (linear in z above, constant below) is
+/// integrated exactly.
+Rgb meanSkyRadiance(const Sky& sky, const SkyLight& light) {
+  if (light.black()) return Rgb(0.0);
+  if (sky.type == Sky::Type::kConstant) return sky.radiance;
+  constexpr int kNz = 256, kNphi = 512;
+  Rgb sum(0.0);
+  for (int i = 0; i < kNz; ++i) {
+    const double z = 1 - 2 * (i + 0.5) / kNz;
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    Rgb row(0.0);
+    for (int j = 0; j < kNphi; ++j) {
+      const double phi = 2 * kPi * (j + 0.5) / kNphi;
+      row += light.radiance(Vec3(r * std::cos(phi), r * std::sin(phi), z));
+    }
+    sum += row;
+  }
+  return sum / (double(kNz) * kNphi);
+}
+
+/// Weights of one step of the optical-depth trapezoid (see the file comment): transmittance
+/// factor e = exp(-delta) and w0, w1 with integral = T(i) (w0 J_i + w1 J_{i+1}).
+inline void stepWeights(double delta, double* e, double* w0, double* w1) {
+  if (delta < 1e-3) {
+    // Series: (1 - e) / delta - e cancels for small delta. Truncation < 2e-14 relative.
+    const double a = delta * (1 - 0.5 * delta * (1 - delta / 3 * (1 - 0.25 * delta)));
+    *e = 1 - a;
+    *w1 = delta * (0.5 - delta * (1.0 / 3 - delta * (0.125 - delta / 30)));
+    *w0 = a - *w1;
+  } else {
+    *e = std::exp(-delta);
+    const double a = 1 - *e;
+    *w1 = a / delta - *e;
+    *w0 = a - *w1;
+  }
+}
+
+/// The eight lattice voxels a trilinear lookup reads and their weights; voxels outside the
+/// lattice get weight 0 (zero background) and a clamped, valid offset.
+struct Corners {
+  size_t offset[8];
+  float weight[8];
+};
+
+/// Where a lookup reads the lattice: inside (all eight voxels exist; the common case) by the
+/// lower corner's offset and the fractions, otherwise by explicit corners.
+struct Cell {
+  bool interior = false;
+  size_t base = 0;
+  float fx = 0, fy = 0, fz = 0;
+  Corners corners;
+};
+
+/// Trilinear interpolation from the lower corner `p` with the x, y and z strides in floats.
+inline float lerp3(const float* p, size_t sx, size_t sy, size_t sz, float fx, float fy, float fz) {
+  const float c00 = p[0] + fx * (p[sx] - p[0]);
+  const float c10 = p[sy] + fx * (p[sy + sx] - p[sy]);
+  const float c01 = p[sz] + fx * (p[sz + sx] - p[sz]);
+  const float c11 = p[sz + sy] + fx * (p[sz + sy + sx] - p[sz + sy]);
+  const float c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
+  return c0 + fz * (c1 - c0);
+}
+
+/// Per-pixel sums of the layers (radiance per the lights' units).
+struct PixelSum {
+  Rgb sun_single, multiple, sky, background;
+  double alpha = 0;
+};
+
+/// Everything constant over a render: the grids, the block maxima and the lights.
+class BakeMarcher {
+ public:
+  BakeMarcher(const BakedLight& bake, const Medium& medium, const Sun& sun, const SkyLight& sky,
+              const Rgb& sky_mean, const Vec3& sun_dir, double step, double min_transmittance)
+      : grid_(bake.grid),
+        density_(bake.density.data()),
+        sky_(sky),
+        lut_(*medium.phase),
+        sun_dir_(sun_dir),
+        extinction_(medium.extinction),
+        step_(step),
+        min_transmittance_(min_transmittance) {
+    tsun_ = channel(bake, bake_grids::kSunTransmittance, 1, true, "");
+    if (!sky.black()) {
+      vsky_ = channel(bake, bake_grids::kSkyVisibility, 1, true, " (needed under a non-black sky)");
+    }
+    co_ = channel(bake, bake_grids::kMultipleFluence, 3, false, "");
+    if (co_) {
+      ldir_ = channel(bake, bake_grids::kLightDir, 3, false, "");
+      mie_ = channel(bake, bake_grids::kMieRatio, 1, false, "");
+    }
+    nx_ = grid_.nx;
+    ny_ = grid_.ny;
+    nz_ = grid_.nz;
+    stride_y_ = size_t(nx_);
+    stride_z_ = size_t(nx_) * size_t(ny_);
+    inv_h_ = 1.0 / grid_.voxel_size;
+    scale_ss_ = medium.albedo * sun.irradiance;
+    scale_ms_ = medium.albedo * sun.irradiance;
+    scale_sky_ = medium.albedo * sky_mean;
+    buildBlockMax();
+  }
+
+  /// Marches `ray` (unit direction) and adds its layers to `sum`.
+  void trace(const Ray& ray, PixelSum* sum) const {
+    RayState s;
+    s.d = ray.d;
+    // Block space: w = index + 1, so the support of the trilinear field, index in (-1, n),
+    // is w in (0, n + 1).
+    s.w0 = (ray.o - grid_.origin) * inv_h_ + Vec3(1.0);
+    s.dw = ray.d * inv_h_;
+    if (!isFinite(s.w0) || !isFinite(s.dw)) return;
+    Bounds3 domain;
+    domain.min = Vec3(0.0);
+    domain.max = Vec3(nx_ + 1, ny_ + 1, nz_ + 1);
+    double t_in = 0, t_out = 0;
+    // The domain in world units along the ray; the ray starts at t = 0.
+    if (intersectBounds(domain, Ray{s.w0, s.dw}, 0.0, std::numeric_limits<double>::infinity(),
+                        &t_in, &t_out) &&
+        t_out > t_in) {
+      march(&s, t_in, t_out);
+    }
+    if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
+    if (s.sky > 0) sum->sky += scale_sky_ * s.sky;
+    sum->multiple += s.ms;
+    sum->alpha += 1 - s.transmittance;
+    if (s.transmittance > 0 && !sky_.black()) {
+      sum->background += sky_.radiance(ray.d) * s.transmittance;
+    }
+  }
+
+ private:
+  struct RayState {
+    Vec3 w0, dw, d;
+    double transmittance = 1;
+    double ss = 0, sky = 0;  // integrals of T_v sigma_t Tsun and T_v sigma_t Vsky
+    Rgb ms;                  // integral of T_v sigma_t J_ms, scaled
+    bool done = false;
+  };
+
+  void buildBlockMax() {
+    nbx_ = (nx_ + 1 + kBlock - 1) / kBlock;
+    nby_ = (ny_ + 1 + kBlock - 1) / kBlock;
+    nbz_ = (nz_ + 1 + kBlock - 1) / kBlock;
+    block_max_.assign(size_t(nbx_) * nby_ * nbz_, 0.f);
+    // Block b covers w in [8b, 8b + 8), i.e. lookups with floor(index) in [8b - 1, 8b + 6],
+    // which read voxels 8b - 1 .. 8b + 7: the block dilated by one voxel.
+    std::atomic<bool> bad{false};
+    tbb::parallel_for(tbb::blocked_range<int>(0, nbz_), [&](const tbb::blocked_range<int>& r) {
+      for (int bk = r.begin(); bk != r.end(); ++bk) {
+        const int k0 = std::max(0, kBlock * bk - 1), k1 = std::min(nz_ - 1, kBlock * bk + 7);
+        for (int bj = 0; bj < nby_; ++bj) {
+          const int j0 = std::max(0, kBlock * bj - 1), j1 = std::min(ny_ - 1, kBlock * bj + 7);
+          for (int bi = 0; bi < nbx_; ++bi) {
+            const int i0 = std::max(0, kBlock * bi - 1), i1 = std::min(nx_ - 1, kBlock * bi + 7);
+            float m = 0;
+            for (int k = k0; k <= k1; ++k) {
+              for (int j = j0; j <= j1; ++j) {
+                const float* row = density_ + grid_.index(0, j, k);
+                for (int i = i0; i <= i1; ++i) {
+                  const float v = row[i];
+                  if (!(v >= 0) || !std::isfinite(v)) bad = true;
+                  m = std::max(m, v);
+                }
+              }
+            }
+            block_max_[(size_t(bk) * nby_ + bj) * nbx_ + bi] = m;
+          }
+        }
+      }
+    });
+    if (bad) {
+      // Name the first bad voxel (serial scan only on the error path).
+      for (int k = 0; k < nz_; ++k) {
+        for (int j = 0; j < ny_; ++j) {
+          for (int i = 0; i < nx_; ++i) {
+            const float v = density_[grid_.index(i, j, k)];
+            if (!(v >= 0) || !std::isfinite(v)) {
+              throw InputError("bake: grid 'density': voxel (" + str(i) + ", " + str(j) + ", " +
+                               str(k) + ") at " + str(grid_.center(i, j, k)) +
+                               " must be finite and >= 0, got " + str(v));
+            }
+          }
+        }
+      }
+    }
+    double max_density = 0;
+    for (float v : block_max_) max_density = std::max(max_density, double(v));
+    if (!std::isfinite(extinction_ * max_density)) {
+      throw InputError("medium.extinction: extinction * max density overflows");
+    }
+  }
+
+  /// Corner offsets and weights of the trilinear lookup at block-space point w.
+  void corners(const Vec3& w, Corners* c) const {
+    size_t o[3][2];
+    float f[3][2];
+    const int n[3] = {nx_, ny_, nz_};
+    const size_t stride[3] = {1, stride_y_, stride_z_};
+    for (int a = 0; a < 3; ++a) {
+      const double u = w[a] - 1;  // index coordinates
+      double fl = std::floor(u);
+      fl = std::min(std::max(fl, -1.0), double(n[a] - 1));
+      const int i0 = int(fl);
+      const float t = float(std::min(std::max(u - fl, 0.0), 1.0));
+      int lo = i0, hi = i0 + 1;
+      float wlo = 1 - t, whi = t;
+      if (lo < 0) {
+        lo = 0;
+        wlo = 0;
+      }
+      if (hi > n[a] - 1) {
+        hi = n[a] - 1;
+        whi = 0;
+      }
+      o[a][0] = size_t(lo) * stride[a];
+      o[a][1] = size_t(hi) * stride[a];
+      f[a][0] = wlo;
+      f[a][1] = whi;
+    }
+    int q = 0;
+    for (int k = 0; k < 2; ++k) {
+      for (int j = 0; j < 2; ++j) {
+        const float wjk = f[2][k] * f[1][j];
+        const size_t ojk = o[2][k] + o[1][j];
+        for (int i = 0; i < 2; ++i, ++q) {
+          c->offset[q] = ojk + o[0][i];
+          c->weight[q] = wjk * f[0][i];
+        }
+      }
+    }
+  }
+
+  /// Finds the cell of block-space point w.
+  void locate(const Vec3& w, Cell* cell) const {
+    const double ux = w.x - 1, uy = w.y - 1, uz = w.z - 1;  // index coordinates
+    if (ux >= 0 && uy >= 0 && uz >= 0 && ux < nx_ - 1 && uy < ny_ - 1 && uz < nz_ - 1) {
+      const int i = int(ux), j = int(uy), k = int(uz);
+      cell->interior = true;
+      cell->base = size_t(k) * stride_z_ + size_t(j) * stride_y_ + size_t(i);
+      cell->fx = float(ux - i);
+      cell->fy = float(uy - j);
+      cell->fz = float(uz - k);
+    } else {
+      cell->interior = false;
+      corners(w, &cell->corners);
+    }
+  }
+
+  float read(const float* data, const Cell& c) const {
+    if (c.interior) return lerp3(data + c.base, 1, stride_y_, stride_z_, c.fx, c.fy, c.fz);
+    float v = 0;
+    for (int q = 0; q < 8; ++q) v += c.corners.weight[q] * data[c.corners.offset[q]];
+    return v;
+  }
+
+  /// Reads a 3-component (interleaved) channel.
+  void read3(const float* data, const Cell& c, float out[3]) const {
+    if (c.interior) {
+      const float* p = data + 3 * c.base;
+      for (int k = 0; k < 3; ++k) {
+        out[k] = lerp3(p + k, 3, 3 * stride_y_, 3 * stride_z_, c.fx, c.fy, c.fz);
+      }
+      return;
+    }
+    out[0] = out[1] = out[2] = 0;
+    for (int q = 0; q < 8; ++q) {
+      const float wq = c.corners.weight[q];
+      const float* v = data + 3 * c.corners.offset[q];
+      out[0] += wq * v[0];
+      out[1] += wq * v[1];
+      out[2] += wq * v[2];
+    }
+  }
+
+  /// The source terms at a sample: Tsun, Vsky, and the multiple term J_ms (RGB, per unit E).
+  struct Source {
+    double tsun = 0, vsky = 0;
+    Rgb ms;
+  };
+
+  void source(const Cell& c, const Vec3& d, Source* s) const {
+    s->tsun = read(tsun_, c);
+    if (vsky_) s->vsky = read(vsky_, c);
+    if (co_) {
+      float co[3], ld[3];
+      read3(co_, c, co);
+      const double r = mie_ ? read(mie_, c) : 0.0;
+      Vec3 l(0.0);
+      if (ldir_ && r > 0) {
+        read3(ldir_, c, ld);
+        l = Vec3(ld[0], ld[1], ld[2]);
+      }
+      const double len = length(l);
+      Rgb phase(kInv4Pi);
+      if (r > 0 && len > 1e-6) {
+        // Interpolated directions are shorter than unit; only the direction is meaningful.
+        phase = lut_.eval(-dot(l, d) / len) * r + Rgb((1 - r) * kInv4Pi);
+      }
+      s->ms = phase * Rgb(co[0], co[1], co[2]);
+    }
+  }
+
+  /// 3D DDA over the blocks from t_in to t_out, integrating runs of non-empty blocks.
+  void march(RayState* s, double t_in, double t_out) const {
+    const int nb[3] = {nbx_, nby_, nbz_};
+    int b[3], step[3];
+    double t_max[3], t_delta[3];
+    const Vec3 w_in = s->w0 + s->dw * t_in;
+    for (int a = 0; a < 3; ++a) {
+      b[a] = std::min(std::max(int(std::floor(w_in[a] / kBlock)), 0), nb[a] - 1);
+      const double dw = s->dw[a];
+      if (dw > 0) {
+        step[a] = 1;
+        t_max[a] = (kBlock * (b[a] + 1) - s->w0[a]) / dw;
+        t_delta[a] = kBlock / dw;
+      } else if (dw < 0) {
+        step[a] = -1;
+        t_max[a] = (kBlock * b[a] - s->w0[a]) / dw;
+        t_delta[a] = -kBlock / dw;
+      } else {
+        step[a] = 0;
+        t_max[a] = std::numeric_limits<double>::infinity();
+        t_delta[a] = 0;
+      }
+    }
+    double t = t_in, run_start = -1;
+    for (;;) {
+      const bool occupied = block_max_[(size_t(b[2]) * nby_ + b[1]) * nbx_ + b[0]] > 0;
+      if (occupied && run_start < 0) run_start = t;
+      if (!occupied && run_start >= 0) {
+        integrate(s, run_start, t);
+        run_start = -1;
+        if (s->done) return;
+      }
+      const int a =
+          t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
+      if (!(t_max[a] < t_out)) break;
+      t = std::max(t, t_max[a]);
+      b[a] += step[a];
+      if (b[a] < 0 || b[a] >= nb[a]) break;
+      t_max[a] += t_delta[a];
+    }
+    if (run_start >= 0) integrate(s, run_start, t_out);
+  }
+
+  /// Marches [t0, t1] with uniform steps of at most step_, accumulating into `s`.
+  void integrate(RayState* s, double t0, double t1) const {
+    const double len = t1 - t0;
+    if (!(len > 0)) return;
+    const int64_t n = std::max<int64_t>(1, int64_t(std::ceil(len / step_)));
+    const double dt = len / double(n);
+    Cell buf[2];
+    Cell* prev = &buf[0];
+    Cell* cur = &buf[1];
+    locate(s->w0 + s->dw * t0, prev);
+    double sigma_prev = extinction_ * read(density_, *prev);
+    Source src_prev, src_cur;
+    bool have_prev = false;  // src_prev computed (sources are read only next to density)
+    double transmittance = s->transmittance;
+    for (int64_t i = 1; i <= n; ++i) {
+      const double t = i == n ? t1 : t0 + double(i) * dt;
+      locate(s->w0 + s->dw * t, cur);
+      const double sigma = extinction_ * read(density_, *cur);
+      const double delta = 0.5 * (sigma_prev + sigma) * dt;
+      if (delta > 0) {
+        if (!have_prev) source(*prev, s->d, &src_prev);
+        source(*cur, s->d, &src_cur);
+        double e, w0, w1;
+        stepWeights(delta, &e, &w0, &w1);
+        const double a0 = transmittance * w0, a1 = transmittance * w1;
+        s->ss += a0 * src_prev.tsun + a1 * src_cur.tsun;
+        s->sky += a0 * src_prev.vsky + a1 * src_cur.vsky;
+        if (co_) s->ms += (src_prev.ms * a0 + src_cur.ms * a1) * scale_ms_;
+        transmittance *= e;
+        src_prev = src_cur;
+        have_prev = true;
+        if (transmittance < min_transmittance_ || !(transmittance > 0)) {
+          s->transmittance = transmittance;
+          s->done = true;
+          return;
+        }
+      } else {
+        have_prev = false;
+      }
+      sigma_prev = sigma;
+      std::swap(prev, cur);
+    }
+    s->transmittance = transmittance;
+  }
+
+  const BakeGrid& grid_;
+  const float* density_;
+  const float* tsun_ = nullptr;
+  const float* vsky_ = nullptr;
+  const float* co_ = nullptr;
+  const float* ldir_ = nullptr;
+  const float* mie_ = nullptr;
+  const SkyLight& sky_;
+  PhaseLut lut_;
+  Vec3 sun_dir_;
+  double extinction_;
+  double step_;
+  double min_transmittance_;
+  int nx_ = 0, ny_ = 0, nz_ = 0;
+  size_t stride_y_ = 0, stride_z_ = 0;
+  double inv_h_ = 1;
+  Rgb scale_ss_, scale_ms_, scale_sky_;
+  int nbx_ = 0, nby_ = 0, nbz_ = 0;
+  std::vector<float> block_max_;
+};
+
+void store(Image& im, int x, int y, const Rgb& v, double scale) {
+  float* p = im.at(x, y);
+  p[0] = static_cast<float>(v.x * scale);
+  p[1] = static_cast<float>(v.y * scale);
+  p[2] = static_cast<float>(v.z * scale);
+}
+
+void validateBake(const BakedLight& bake) {
+  const BakeGrid& g = bake.grid;
+  if (g.nx < 1 || g.ny < 1 || g.nz < 1) {
+    throw InputError("bake: lattice is empty (" + str(g.nx) + "x" + str(g.ny) + "x" + str(g.nz) +
+                     " voxels)");
+  }
+  if (!std::isfinite(g.voxel_size) || !(g.voxel_size > 0)) {
+    throw InputError("bake: voxel size must be finite and > 0, got " + str(g.voxel_size));
+  }
+  if (!isFinite(g.origin)) throw InputError("bake: lattice origin must be finite");
+  if (bake.density.size() != g.voxelCount()) {
+    throw InputError("bake: grid 'density': expected " + str(g.voxelCount()) + " values for the " +
+                     str(g.nx) + "x" + str(g.ny) + "x" + str(g.nz) + " lattice, got " +
+                     str(bake.density.size()));
+  }
+  const double len = length(bake.sun_direction);
+  if (!isFinite(bake.sun_direction) || !(len > 0) || !std::isfinite(len)) {
+    throw InputError("bake: sun_direction must be a finite non-zero vector, got " +
+                     str(bake.sun_direction));
+  }
+}
+
+}  // namespace
+
+RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const Sun& sun,
+                            const Sky& sky, const Camera& camera, const BakeRenderOptions& options,
+                            const ProgressFn& progress) {
+  validateMedium(medium);
+  validateBake(bake);
+  validateOptions(options, bake.grid.voxel_size);
+  if (!isFinite(sun.irradiance) || sun.irradiance.x < 0 || sun.irradiance.y < 0 ||
+      sun.irradiance.z < 0) {
+    throw InputError("sun.irradiance: must be finite and >= 0 per channel, got " +
+                     str(sun.irradiance));
+  }
+  const CameraRays rays(camera);
+  const SkyLight sky_light(sky);
+  const Rgb sky_mean = meanSkyRadiance(sky, sky_light);
+  const double step = options.step > 0 ? options.step : 0.5 * bake.grid.voxel_size;
+  const Vec3 sun_dir = normalize(bake.sun_direction);
+
+  const int w = camera.width_px, h = camera.height_px;
+  const int tiles_x = (w + kTileSize - 1) / kTileSize, tiles_y = (h + kTileSize - 1) / kTileSize;
+  const int tiles = tiles_x * tiles_y;
+  const int spp = options.samples_per_pixel;
+  const double inv_spp = 1.0 / spp;
+  // Stratified film positions: an sx x sy jittered grid, the remainder uniform in the pixel.
+  const int sx = std::max(1, int(std::floor(std::sqrt(double(spp)))));
+  const int sy = spp / sx;
+
+  RenderLayers out;
+  out.beauty = Image(w, h, 4);
+  out.sun = Image(w, h, 3);
+  out.sky = Image(w, h, 3);
+  out.single = Image(w, h, 3);
+  out.multiple = Image(w, h, 3);
+
+  std::atomic<bool> cancelled{false};
+  std::atomic<int> tiles_done{0};
+  std::mutex progress_mutex;
+  int reported = 0;
+
+  auto render_tile = [&](const BakeMarcher& marcher, int tile) {
+    const int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
+    const int x1 = std::min(x0 + kTileSize, w), y1 = std::min(y0 + kTileSize, h);
+    Rng rng;
+    for (int y = y0; y < y1; ++y) {
+      for (int x = x0; x < x1; ++x) {
+        PixelSum sum;
+        if (spp == 1) {
+          marcher.trace(rays.generate(x + 0.5, y + 0.5), &sum);
+        } else {
+          // One stream per pixel: the image depends neither on threads nor on tiling.
+          const uint64_t pixel = uint64_t(y) * uint64_t(w) + uint64_t(x);
+          rng.setSeed(mixBits(options.seed, pixel), mixBits(pixel, options.seed));
+          for (int s = 0; s < spp; ++s) {
+            double fx, fy;
+            if (s < sx * sy) {
+              fx = x + ((s % sx) + rng.uniform()) / sx;
+              fy = y + ((s / sx) + rng.uniform()) / sy;
+            } else {
+              fx = x + rng.uniform();
+              fy = y + rng.uniform();
+            }
+            marcher.trace(rays.generate(fx, fy), &sum);
+          }
+        }
+        const Rgb sun_total = sum.sun_single + sum.multiple;
+        store(out.beauty, x, y, sun_total + sum.sky + sum.background, inv_spp);
+        out.beauty.at(x, y)[3] = static_cast<float>(sum.alpha * inv_spp);
+        store(out.sun, x, y, sun_total, inv_spp);
+        store(out.sky, x, y, sum.sky, inv_spp);
+        store(out.single, x, y, sum.sun_single + sum.sky, inv_spp);
+        store(out.multiple, x, y, sum.multiple, inv_spp);
+      }
+    }
+    const int done = ++tiles_done;
+    if (progress) {
+      std::lock_guard<std::mutex> lock(progress_mutex);
+      reported = std::max(reported, done);  // monotonic fractions whatever the finishing order
+      if (!cancelled.load() && !progress(double(reported) / tiles)) cancelled = true;
+    }
+  };
+
+  auto run = [&] {
+    // Built inside the arena: the block maxima are computed in parallel too.
+    const BakeMarcher marcher(bake, medium, sun, sky_light, sky_mean, sun_dir, step,
+                              options.min_transmittance);
+    tbb::parallel_for(tbb::blocked_range<int>(0, tiles, 1), [&](const tbb::blocked_range<int>& r) {
+      for (int t = r.begin(); t != r.end(); ++t) {
+        if (cancelled.load(std::memory_order_relaxed)) return;
+        render_tile(marcher, t);
+      }
+    });
+  };
+  if (options.threads > 0) {
+    tbb::task_arena arena(options.threads);
+    arena.execute(run);
+  } else {
+    run();
+  }
+  if (cancelled) throw Cancelled("render from bake of view '" + camera.name + "' cancelled");
+  return out;
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,153 @@
+// Method `pointcloud`, internal: fixed-radius neighbour queries on a uniform grid and the
+// per-pair transfer lists (CSR) the scattering passes gather over.
+#pragma once
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <vector>
+
+#include "core/error.h"
+#include "core/math/vec3.h"
+
+namespace cloudbake {
+
+/// A uniform grid of cubic cells over a point set (counting sort, points stored cell by cell)
+/// for fixed-radius queries: seed 000's neighbourhood cut-off, O(n k) instead of O(n^2).
+class PointGrid {
+ public:
+  /// `cell_size` (world units, > 0) is a lower bound: cells grow when the grid would hold more
+  /// than about 2 cells per point (a tiny cut-off must not allocate a huge empty grid).
+  PointGrid(const std::vector<Vec3>& points, double cell_size);
+
+  /// Calls f(index, d2) for every point within `radius` of `p` (squared distance d2 <=
+  /// radius^2), p itself included when it is one of the points. Cells are visited in index order
+  /// and points in index order within a cell, so the sequence is deterministic.
+  template <class F>
+  void forEachWithin(const Vec3& p, double radius, F&& f) const {
+    const double r2 = radius * radius;
+    const Vec3 lo = (p - Vec3(radius) - origin_) / cell_;
+    const Vec3 hi = (p + Vec3(radius) - origin_) / cell_;
+    const int i0 = clampCell(lo.x, nx_), i1 = clampCell(hi.x, nx_);
+    const int j0 = clampCell(lo.y, ny_), j1 = clampCell(hi.y, ny_);
+    const int k0 = clampCell(lo.z, nz_), k1 = clampCell(hi.z, nz_);
+    for (int k = k0; k <= k1; ++k) {
+      for (int j = j0; j <= j1; ++j) {
+        const size_t row = (size_t(k) * size_t(ny_) + size_t(j)) * size_t(nx_);
+        const uint32_t b = start_[row + size_t(i0)], e = start_[row + size_t(i1) + 1];
+        for (uint32_t s = b; s < e; ++s) {
+          const Vec3 d = sorted_[s] - p;
+          const double d2 = dot(d, d);
+          if (d2 <= r2) f(order_[s], d2);
+        }
+      }
+    }
+  }
+
+  double cellSize() const { return cell_; }
+
+ private:
+  static int clampCell(double c, int n) {
+    if (!(c > 0)) return 0;
+    if (c >= n - 1) return n - 1;
+    return int(c);
+  }
+
+  Vec3 origin_;
+  double cell_ = 1;
+  int nx_ = 1, ny_ = 1, nz_ = 1;
+  std::vector<uint32_t> start_;  ///< first sorted slot of each cell; one extra entry at the end
+  std::vector<uint32_t> order_;  ///< original point index of each sorted slot
+  std::vector<Vec3> sorted_;     ///< positions in sorted order
+};
+
+/// Mean number of other points within `radius`, from `samples` points spread evenly over the
+/// index range (which follows the lattice, so over the whole cloud). Deterministic. Stops early
+/// and returns some value above `stop_above` once the mean is known to exceed it.
+double estimateMeanNeighbours(const PointGrid& grid, const std::vector<Vec3>& points,
+                              double radius, int samples = 256,
+                              double stop_above = std::numeric_limits<double>::infinity());
+
+/// Every (destination, source) pair within the cut-off with a non-negligible transfer weight,
+/// as compressed rows: the sources of destination j are source[offset[j] .. offset[j + 1]).
+/// Computed once, read by every pass.
+struct NeighbourPairs {
+  std::vector<uint64_t> offset;  ///< n + 1 entries
+  std::vector<uint32_t> source;
+  std::vector<float> weight;     ///< geometric transfer weight (rule-specific)
+  uint64_t within_radius = 0;    ///< pairs within the cut-off, negligible ones included
+
+  uint64_t size() const { return source.size(); }
+};
+
+/// Builds the pairs for all destinations: weight_fn(dst, src, d) (d: distance, world units)
+/// returns the pair's weight; pairs with weight <= 0 are dropped (a negligible transmittance).
+/// Parallel over blocks of destinations, appended in destination order: deterministic.
+/// `cancelled(fraction)` is polled between chunks of destinations; returning true stops the
+/// build with Cancelled. `reserve` pre-sizes the arrays (the estimate of the pair count).
+template <class WeightFn>
+NeighbourPairs buildNeighbourPairs(const PointGrid& grid, const std::vector<Vec3>& points,
+                                   double radius, const WeightFn& weight_fn, uint64_t reserve,
+                                   const std::function<bool(double)>& cancelled) {
+  NeighbourPairs pairs;
+  const size_t n = points.size();
+  pairs.offset.assign(n + 1, 0);
+  pairs.source.reserve(size_t(reserve));
+  pairs.weight.reserve(size_t(reserve));
+  constexpr size_t kBlock = 256;
+  constexpr size_t kChunk = 64 * kBlock;
+  struct Block {
+    std::vector<uint32_t> source;
+    std::vector<float> weight;
+    std::vector<uint32_t> count;  // pairs per destination
+    uint64_t within = 0;
+  };
+  std::vector<Block> blocks(kChunk / kBlock);
+  for (size_t chunk = 0; chunk < n; chunk += kChunk) {
+    if (cancelled && cancelled(double(chunk) / double(n))) throw Cancelled();
+    const size_t chunk_end = std::min(n, chunk + kChunk);
+    const size_t nblocks = (chunk_end - chunk + kBlock - 1) / kBlock;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nblocks, 1),
+                      [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t b = r.begin(); b != r.end(); ++b) {
+        Block& blk = blocks[b];
+        blk.source.clear();
+        blk.weight.clear();
+        blk.count.clear();
+        blk.within = 0;
+        const size_t d0 = chunk + b * kBlock, d1 = std::min(chunk_end, d0 + kBlock);
+        for (size_t dst = d0; dst < d1; ++dst) {
+          uint32_t count = 0;
+          grid.forEachWithin(points[dst], radius, [&](uint32_t src, double d2) {
+            if (src == dst) return;
+            ++blk.within;
+            const float w = weight_fn(uint32_t(dst), src, std::sqrt(d2));
+            if (!(w > 0)) return;
+            blk.source.push_back(src);
+            blk.weight.push_back(w);
+            ++count;
+          });
+          blk.count.push_back(count);
+        }
+      }
+    });
+    for (size_t b = 0; b < nblocks; ++b) {
+      const Block& blk = blocks[b];
+      const size_t d0 = chunk + b * kBlock;
+      for (size_t t = 0; t < blk.count.size(); ++t) {
+        pairs.offset[d0 + t + 1] = pairs.offset[d0 + t] + blk.count[t];
+      }
+      pairs.source.insert(pairs.source.end(), blk.source.begin(), blk.source.end());
+      pairs.weight.insert(pairs.weight.end(), blk.weight.begin(), blk.weight.end());
+      pairs.within_radius += blk.within;
+    }
+  }
+  return pairs;
+}
+
+}  // namespace cloudbake

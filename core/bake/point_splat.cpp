@@ -1,0 +1,111 @@
+#include "core/bake/point_splat.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "core/bake/neighbour_grid.h"
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+// Voxels within one voxel (26-neighbourhood) of a voxel with density > 0.
+std::vector<uint8_t> densitySupport(const BakeGrid& g, const std::vector<float>& density) {
+  std::vector<uint8_t> support(g.voxelCount(), 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.nz), [&](const tbb::blocked_range<int>& r) {
+    for (int k = r.begin(); k != r.end(); ++k) {
+      for (int j = 0; j < g.ny; ++j) {
+        for (int i = 0; i < g.nx; ++i) {
+          bool any = false;
+          for (int dk = -1; dk <= 1 && !any; ++dk) {
+            for (int dj = -1; dj <= 1 && !any; ++dj) {
+              for (int di = -1; di <= 1 && !any; ++di) {
+                const int a = i + di, b = j + dj, c = k + dk;
+                if (a < 0 || b < 0 || c < 0 || a >= g.nx || b >= g.ny || c >= g.nz) continue;
+                any = density[g.index(a, b, c)] > 0;
+              }
+            }
+          }
+          support[g.index(i, j, k)] = any ? 1 : 0;
+        }
+      }
+    }
+  });
+  return support;
+}
+
+}  // namespace
+
+double splatPoints(BakedLight& bake, const PointCloudResult& result,
+                   const std::function<bool(double)>& cancelled) {
+  const BakeGrid& g = bake.grid;
+  const double rs = std::max(2 * result.cloud.spacing, g.voxel_size);
+  const std::vector<uint8_t> support = densitySupport(g, bake.density);
+  const std::vector<Vec3>& pos = result.cloud.position;
+  const PointGrid grid(pos, rs);
+  float* co = bake.add(bake_grids::kMultipleFluence, 3).data.data();
+  float* ld = bake.add(bake_grids::kLightDir, 3).data.data();
+  float* mr = bake.add(bake_grids::kMieRatio, 1).data.data();
+  constexpr int kSlices = 8;  // z slices between cancellation polls
+  for (int k0 = 0; k0 < g.nz; k0 += kSlices) {
+    if (cancelled && cancelled(double(k0) / g.nz)) throw Cancelled();
+    const int k1 = std::min(g.nz, k0 + kSlices);
+    tbb::parallel_for(tbb::blocked_range<int>(k0 * g.ny, k1 * g.ny),
+                      [&](const tbb::blocked_range<int>& r) {
+      for (int row = r.begin(); row != r.end(); ++row) {
+        const int k = row / g.ny, j = row % g.ny;
+        for (int i = 0; i < g.nx; ++i) {
+          const size_t v = g.index(i, j, k);
+          if (!support[v]) continue;
+          const Vec3 c = g.center(i, j, k);
+          double wsum = 0, rsum = 0;
+          Rgb csum(0.0);
+          Vec3 lsum(0.0);
+          grid.forEachWithin(c, rs, [&](uint32_t p, double d2) {
+            const double t = 1 - std::sqrt(d2) / rs;
+            const double w = t * t;
+            wsum += w;
+            csum += result.co[p] * w;
+            lsum += result.light_dir[p] * w;
+            rsum += double(result.mie_ratio[p]) * w;
+          });
+          if (!(wsum > 0)) {
+            double best = std::numeric_limits<double>::infinity();
+            uint32_t nearest = 0;
+            grid.forEachWithin(c, 3 * rs, [&](uint32_t p, double d2) {
+              if (d2 < best) {
+                best = d2;
+                nearest = p;
+              }
+            });
+            if (!std::isfinite(best)) continue;
+            wsum = 1;
+            csum = result.co[nearest];
+            lsum = result.light_dir[nearest];
+            rsum = result.mie_ratio[nearest];
+          }
+          const Rgb cv = csum / wsum;
+          co[3 * v] = float(cv.x);
+          co[3 * v + 1] = float(cv.y);
+          co[3 * v + 2] = float(cv.z);
+          const double len = length(lsum);
+          if (len > 1e-12 * wsum) {
+            const Vec3 l = lsum / len;
+            ld[3 * v] = float(l.x);
+            ld[3 * v + 1] = float(l.y);
+            ld[3 * v + 2] = float(l.z);
+          }
+          mr[v] = float(std::clamp(rsum / wsum, 0.0, 1.0));
+        }
+      }
+    });
+  }
+  return rs;
+}
+
+}  // namespace cloudbake

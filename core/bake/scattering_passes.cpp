@@ -1,0 +1,424 @@
+#include "core/bake/scattering_passes.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <string>
+
+#include "core/bake/neighbour_grid.h"
+#include "core/bake/phase_lut.h"
+#include "core/bake/sky_visibility.h"
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+double lum(const Rgb& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
+
+constexpr double kMaxPaperCi = 1e30;  // the paper rule grows without bound; keep floats finite
+constexpr size_t kPassChunk = size_t(1) << 16;  // destinations between cancellation polls
+
+template <class T>
+std::string str(const T& v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+// What a source contributes, packed for the gather loop (one cache line per source).
+struct NormalisedSource {
+  float px, py, pz;  // P
+  float lx, ly, lz;  // L (zero when R = 0)
+  float ar, ag, ab;  // R * Delta
+  float br, bg, bb;  // (1 - R) * Delta / (4 pi)
+};
+
+struct PaperSource {
+  float px, py, pz;
+  float lx, ly, lz;
+  float r;           // R
+  float cr, cg, cb;  // Ci
+};
+
+// Runs `body(dst)` for every destination, in chunks with a cancellation poll between them.
+template <class Body>
+void forEachDestination(size_t n, const std::function<bool(double)>& cancelled, const Body& body) {
+  for (size_t c0 = 0; c0 < n; c0 += kPassChunk) {
+    if (cancelled && cancelled(double(c0) / double(n))) throw Cancelled();
+    const size_t c1 = std::min(n, c0 + kPassChunk);
+    tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 128),
+                      [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t j = r.begin(); j != r.end(); ++j) body(j);
+    });
+  }
+}
+
+// The normalised rule (derivation in the header).
+void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Medium& medium,
+                   const Vec3& sun_dir, const PointcloudOptions& options, bool geometric_tail,
+                   const BakeGrid& grid, const std::vector<float>& sky_visibility,
+                   const std::function<bool(double, int)>& cancelled) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  const PhaseLut lut(*medium.phase);
+  const Rgb albedo = medium.albedo;
+  // Own-sphere factor 1 - exp(-sigma_t r) per point, and the collision fraction of each
+  // source's isotropic emission as discretised, c_i = self_i + sum_j w_ij / (4 pi), against the
+  // medium's own 1 - P_escape (header, step 6): the source's transfers are scaled by the ratio.
+  std::vector<double> self(n), captured(n);
+  for (size_t j = 0; j < n; ++j) {
+    const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[j]));
+    self[j] = -std::expm1(-medium.extinction * pc.density[j] * r);
+    captured[j] = self[j];
+  }
+  for (uint64_t q = 0; q < pairs.size(); ++q) {
+    captured[pairs.source[q]] += pairs.weight[q] * kInv4Pi;
+  }
+  out.collision.resize(n);
+  out.transfer_scale.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const double vis = sampleTrilinear(grid, sky_visibility.data(), pc.position[i]);
+    const double target = std::clamp(1 - vis, 0.0, 1.0);
+    out.collision[i] = float(target);
+    const double k = captured[i] > 0 ? target / captured[i] : 1.0;
+    out.transfer_scale[i] = float(k);
+    self[i] *= k;
+  }
+  std::vector<Rgb> delta(n), next(n);  // Delta^k, Delta^{k+1}
+  std::vector<Vec3> dir(n, -sun_dir), next_dir(n);
+  std::vector<double> ratio(n, 1.0), next_ratio(n);
+  std::vector<Vec3> flux(n), total_flux(n, Vec3(0.0));  // F of the last pass, and of all
+  std::vector<double> incoming(n), total_incoming(n, 0.0);
+  std::vector<Rgb> co(n, Rgb(0.0));
+  std::vector<NormalisedSource> src(n);
+  double order_sum = 0;
+  for (size_t j = 0; j < n; ++j) {
+    delta[j] = Rgb(double(pc.sun[j]));
+    order_sum += lum(delta[j]);
+  }
+  out.order_luminance.assign(1, order_sum);
+  double prev_sum = order_sum;
+  for (int pass = 0; pass < options.passes; ++pass) {
+    for (size_t i = 0; i < n; ++i) {
+      const Vec3 p = pc.position[i];
+      const double r = ratio[i];
+      const Vec3 l = r > 0 ? dir[i] : Vec3(0.0);
+      const double k = out.transfer_scale[i];
+      const Rgb a = delta[i] * (r * k), b = delta[i] * ((1 - r) * kInv4Pi * k);
+      src[i] = {float(p.x), float(p.y), float(p.z), float(l.x), float(l.y), float(l.z),
+                float(a.x), float(a.y), float(a.z), float(b.x), float(b.y), float(b.z)};
+    }
+    forEachDestination(n, [&](double f) { return cancelled(f, pass); }, [&](size_t j) {
+      const float qx = float(pc.position[j].x), qy = float(pc.position[j].y),
+                  qz = float(pc.position[j].z);
+      double sr = 0, sg = 0, sb = 0, fx = 0, fy = 0, fz = 0;
+      const uint64_t e = pairs.offset[j + 1];
+      for (uint64_t q = pairs.offset[j]; q < e; ++q) {
+        const NormalisedSource& s = src[pairs.source[q]];
+        float dx = qx - s.px, dy = qy - s.py, dz = qz - s.pz;
+        const float inv = 1.f / std::sqrt(dx * dx + dy * dy + dz * dz);
+        dx *= inv;
+        dy *= inv;
+        dz *= inv;
+        const Rgb ph = lut.eval(double(s.lx * dx + s.ly * dy + s.lz * dz));
+        const double w = pairs.weight[q];
+        const double jr = w * (s.ar * ph.x + s.br), jg = w * (s.ag * ph.y + s.bg),
+                     jb = w * (s.ab * ph.z + s.bb);
+        sr += jr;
+        sg += jg;
+        sb += jb;
+        const double l = 0.2126 * jr + 0.7152 * jg + 0.0722 * jb;
+        fx += l * dx;
+        fy += l * dy;
+        fz += l * dz;
+      }
+      const Rgb in = Rgb(sr, sg, sb) + delta[j] * self[j];
+      next[j] = albedo * in;
+      const Vec3 f(fx, fy, fz);
+      const double fl = length(f), il = lum(in);
+      flux[j] = f;
+      incoming[j] = il;
+      if (fl > 0 && il > 0) {
+        next_dir[j] = f / fl;
+        next_ratio[j] = std::min(1.0, fl / il);
+      } else {
+        next_dir[j] = Vec3(0.0);
+        next_ratio[j] = 0;
+      }
+    });
+    double sum = 0, co_sum = 0;
+    for (size_t j = 0; j < n; ++j) {
+      co[j] += next[j];
+      total_flux[j] += flux[j];
+      total_incoming[j] += incoming[j];
+      sum += lum(next[j]);
+      co_sum += lum(co[j]);
+    }
+    delta.swap(next);
+    dir.swap(next_dir);
+    ratio.swap(next_ratio);
+    out.order_luminance.push_back(sum);
+    out.pair_interactions += pairs.size();
+    out.passes_run = pass + 1;
+    out.last_relative_change = co_sum > 0 ? sum / co_sum : 0.0;
+    const bool done = out.last_relative_change < options.tolerance;
+    if (done || pass + 1 == options.passes) {
+      const double q = prev_sum > 0 ? sum / prev_sum : 0.0;
+      if (geometric_tail && q > 0 && q < 1) {
+        out.tail_ratio = q;
+        const double g = q / (1 - q);
+        for (size_t j = 0; j < n; ++j) {
+          co[j] += delta[j] * g;
+          total_flux[j] += flux[j] * g;
+          total_incoming[j] += incoming[j] * g;
+        }
+      }
+      break;
+    }
+    prev_sum = sum;
+  }
+  out.co.resize(n);
+  out.light_dir.resize(n);
+  out.mie_ratio.resize(n);
+  for (size_t j = 0; j < n; ++j) {
+    out.co[j] = co[j];
+    const double fl = length(total_flux[j]);
+    if (fl > 0 && total_incoming[j] > 0) {
+      out.light_dir[j] = total_flux[j] / fl;
+      out.mie_ratio[j] = float(std::min(1.0, fl / total_incoming[j]));
+    } else {
+      out.light_dir[j] = Vec3(0.0);
+      out.mie_ratio[j] = 0.f;
+    }
+  }
+}
+
+// Seed 000's Eq. 1-5 (readings in the header).
+void runPaper(PointCloudResult& out, const NeighbourPairs& pairs, const Medium& medium,
+              const Vec3& sun_dir, const PointcloudOptions& options,
+              const std::function<bool(double, int)>& cancelled) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  const PhaseLut lut(*medium.phase);
+  const Rgb albedo = medium.albedo;
+  std::vector<Rgb> ci(n), co(n);
+  std::vector<Vec3> dir(n, -sun_dir), lsum(n);
+  std::vector<double> ratio(n, 1.0);
+  std::vector<PaperSource> src(n);
+  double ci_sum = 0;
+  for (size_t j = 0; j < n; ++j) {
+    ci[j] = Rgb(double(pc.sun[j]));
+    ci_sum += lum(ci[j]);
+  }
+  out.order_luminance.assign(1, ci_sum);
+  for (int pass = 0; pass < options.passes; ++pass) {
+    for (size_t i = 0; i < n; ++i) {
+      const Vec3 p = pc.position[i], l = dir[i];
+      src[i] = {float(p.x), float(p.y), float(p.z), float(l.x), float(l.y), float(l.z),
+                float(ratio[i]), float(ci[i].x), float(ci[i].y), float(ci[i].z)};
+    }
+    forEachDestination(n, [&](double f) { return cancelled(f, pass); }, [&](size_t j) {
+      const float qx = float(pc.position[j].x), qy = float(pc.position[j].y),
+                  qz = float(pc.position[j].z);
+      double cr = 0, cg = 0, cb = 0, lx = 0, ly = 0, lz = 0;
+      const uint64_t e = pairs.offset[j + 1];
+      for (uint64_t q = pairs.offset[j]; q < e; ++q) {
+        const PaperSource& s = src[pairs.source[q]];
+        float dx = qx - s.px, dy = qy - s.py, dz = qz - s.pz;
+        const float inv = 1.f / std::sqrt(dx * dx + dy * dy + dz * dz);
+        dx *= inv;
+        dy *= inv;
+        dz *= inv;
+        const Rgb am = lut.eval(double(s.lx * dx + s.ly * dy + s.lz * dz)) * (4 * kPi);
+        const double ad = pairs.weight[q], r = s.r;
+        cr += ad * (am.x * r + (1 - r)) * s.cr;
+        cg += ad * (am.y * r + (1 - r)) * s.cg;
+        cb += ad * (am.z * r + (1 - r)) * s.cb;
+        const double l = ad * (lum(am) * r + (1 - r));
+        lx += l * dx;
+        ly += l * dy;
+        lz += l * dz;
+      }
+      co[j] = albedo * Rgb(cr, cg, cb);
+      lsum[j] = Vec3(lx, ly, lz);
+    });
+    double co_sum = 0;
+    ci_sum = 0;
+    for (size_t j = 0; j < n; ++j) {
+      const double len = length(lsum[j]);
+      ratio[j] -= ratio[j] * std::exp(-len);  // Eq. 1
+      if (len > 0) dir[j] = lsum[j] / len;
+      ci[j] = min(ci[j] + co[j], Rgb(kMaxPaperCi));
+      co_sum += lum(co[j]);
+      ci_sum += lum(ci[j]);
+    }
+    out.order_luminance.push_back(ci_sum);
+    out.pair_interactions += pairs.size();
+    out.passes_run = pass + 1;
+    out.last_relative_change = ci_sum > 0 ? std::min(1.0, co_sum / ci_sum) : 0.0;
+    if (out.last_relative_change < options.tolerance) break;
+  }
+  out.co.resize(n);
+  out.light_dir = dir;
+  out.mie_ratio.resize(n);
+  for (size_t j = 0; j < n; ++j) {
+    const Rgb initial(double(pc.sun[j]));
+    out.co[j] = options.output_mapping ? Rgb(1.0) - exp(-ci[j])
+                                       : max(ci[j] - initial, Rgb(0.0));  // Eq. 2 or scattered
+    out.mie_ratio[j] = float(std::clamp(ratio[j], 0.0, 1.0));
+  }
+}
+
+}  // namespace
+
+void checkPointcloudInput(const Medium& medium, const PointcloudOptions& o) {
+  if (o.points < 64 || o.points > (1 << 24)) {
+    throw InputError("points: must be in [64, 16777216], got " + str(o.points));
+  }
+  if (o.passes < 1 || o.passes > 1000) {
+    throw InputError("passes: must be in [1, 1000], got " + str(o.passes));
+  }
+  if (!(o.tolerance > 0 && o.tolerance <= 1)) {
+    throw InputError("tolerance: must be in (0, 1], got " + str(o.tolerance));
+  }
+  if (!(o.radius >= 0) || !std::isfinite(o.radius)) {
+    throw InputError("radius: must be finite and >= 0 (0: 3x the mean point spacing), got " +
+                     str(o.radius));
+  }
+  if (!(o.step >= 0) || !std::isfinite(o.step)) {
+    throw InputError("step: must be finite and >= 0, got " + str(o.step));
+  }
+  if (!medium.density) throw InputError("medium: density: no volume");
+  if (!medium.phase) throw InputError("medium: phase: no phase function");
+  if (!(medium.extinction >= 0) || !std::isfinite(medium.extinction)) {
+    throw InputError("medium: extinction: must be finite and >= 0, got " +
+                     str(medium.extinction));
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (!(medium.albedo[c] >= 0 && medium.albedo[c] <= 1)) {
+      throw InputError("medium: albedo: must be in [0, 1], got " + str(medium.albedo[c]));
+    }
+  }
+}
+
+PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& density,
+                               const std::vector<float>& sky_visibility, const Medium& medium,
+                               const Vec3& sun_dir_in,
+                               const PointcloudOptions& options, bool geometric_tail,
+                               const BakeProgressFn& progress) {
+  checkPointcloudInput(medium, options);
+  if (!isFinite(sun_dir_in) || !(length(sun_dir_in) > 0)) {
+    throw InputError("sun: direction: must be a finite nonzero vector");
+  }
+  if (density.size() != grid.voxelCount() || grid.voxelCount() == 0) {
+    throw InputError("volume: density grid of " + str(density.size()) + " voxels on a lattice of " +
+                     str(grid.voxelCount()));
+  }
+  const Vec3 sun_dir = normalize(sun_dir_in);
+  PointCloudResult out;
+  // Stage fractions: points 0-0.1, neighbours 0.1-0.3, passes 0.3-1.
+  auto report = [&](double f, const std::string& stage) {
+    if (progress && !progress(f, stage)) throw Cancelled();
+  };
+
+  auto t0 = Clock::now();
+  report(0.0, "points");
+  out.cloud = placePoints(grid, density, options.points, options.seed);
+  computePointSunTransmittance(out.cloud, grid, density, medium.extinction, sun_dir,
+                               0.5 * grid.voxel_size);
+  out.seconds_points = secondsSince(t0);
+
+  t0 = Clock::now();
+  report(0.1, "neighbours");
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  const double diagonal = length(grid.bounds().extent());
+  out.radius = options.radius > 0 ? options.radius : 3 * pc.spacing;
+  if (out.radius > diagonal) {
+    throw InputError("radius: " + str(out.radius) + " is larger than the volume (lattice " +
+                     "diagonal " + str(diagonal) + " world units)");
+  }
+  const PointGrid point_grid(pc.position, out.radius);
+  const double max_mean = kMaxNeighbourPairs / double(n);
+  const double mean_estimate =
+      estimateMeanNeighbours(point_grid, pc.position, out.radius, 256, max_mean);
+  if (mean_estimate > max_mean) {
+    throw InputError("radius: " + str(out.radius) + " gives about " +
+                     str(uint64_t(mean_estimate * double(n))) + " neighbour pairs for " +
+                     str(n) + " points, more than the " + str(kMaxNeighbourPairs) +
+                     " that fit in memory; use a smaller radius or fewer points");
+  }
+  const uint64_t reserve = uint64_t(std::min(mean_estimate * 1.1 + 8, max_mean) * double(n));
+  auto cancelled_build = [&](double f) {
+    return progress && !progress(0.1 + 0.2 * f, "neighbours");
+  };
+  const double ext = medium.extinction;
+  NeighbourPairs pairs;
+  if (options.rule == PointcloudOptions::Rule::kNormalized) {
+    std::vector<float> clamp_r2(n);  // r_i^2: a source's own sphere
+    for (size_t i = 0; i < n; ++i) {
+      const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[i]));
+      clamp_r2[i] = float(r * r);
+    }
+    const double em = ext * pc.mass;
+    auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
+      const double ends = double(pc.density[src]) + double(pc.density[dst]);
+      if (ext * d * ends / 6 > 16.2) return 0.f;  // T < 1e-7 whatever the midpoint holds
+      const double mid =
+          sampleTrilinear(grid, density.data(), (pc.position[src] + pc.position[dst]) * 0.5);
+      const double tau = ext * d * (ends + 4 * mid) / 6;
+      if (tau > 16.2) return 0.f;
+      return float(em * std::exp(-tau) / std::max(d * d, double(clamp_r2[src])));
+    };
+    pairs = buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve,
+                                cancelled_build);
+  } else {
+    auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
+      const double tau = d * 0.5 * (double(pc.density[src]) + double(pc.density[dst])) * ext;
+      return tau > 16.2 ? 0.f : float(std::exp(-tau));  // Eq. 3; below 1e-7 negligible
+    };
+    pairs = buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve,
+                                cancelled_build);
+  }
+  out.pairs = pairs.size();
+  out.mean_neighbours = double(pairs.within_radius) / double(n);
+  out.seconds_neighbours = secondsSince(t0);
+
+  t0 = Clock::now();
+  const int passes = options.passes;
+  auto cancelled_pass = [&](double f, int pass) {
+    if (!progress) return false;
+    const std::string stage = "pass " + str(pass + 1) + "/" + str(passes);
+    return !progress(0.3 + 0.7 * (pass + f) / passes, stage);
+  };
+  if (options.rule == PointcloudOptions::Rule::kNormalized) {
+    std::vector<float> computed;
+    const std::vector<float>* vis = &sky_visibility;
+    if (sky_visibility.size() != grid.voxelCount()) {
+      BakedLight tmp;
+      tmp.grid = grid;
+      tmp.density = density;
+      computeSkyVisibility(tmp, medium.extinction);
+      computed = std::move(tmp.channels.at(bake_grids::kSkyVisibility).data);
+      vis = &computed;
+    }
+    runNormalised(out, pairs, medium, sun_dir, options, geometric_tail, grid, *vis,
+                  cancelled_pass);
+  } else {
+    runPaper(out, pairs, medium, sun_dir, options, cancelled_pass);
+  }
+  out.seconds_passes = secondsSince(t0);
+  report(1.0, "passes done");
+  return out;
+}
+
+}  // namespace cloudbake
