@@ -38,7 +38,7 @@ grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest
   return guarded("GetServerInfo", [&] {
     const JobManagerOptions& o = jobs_.options();
     reply->set_version(CLOUDBAKE_VERSION);
-    reply->add_methods("pathtrace");
+    for (const char* m : {"pathtrace", "single", "pointcloud"}) reply->add_methods(m);
     reply->set_worker_threads(o.worker_threads);
     reply->set_max_concurrent_jobs(o.max_concurrent_jobs);
     reply->set_queue_bound(uint32_t(o.queue_bound));

@@ -61,6 +61,9 @@ void toProto(const JobRecord& r, v1::Job* out) {
   }
   out->set_views_rendered(uint32_t(r.views_rendered));
   out->set_views_cached(uint32_t(r.views_cached));
+  out->set_bakes_computed(uint32_t(r.bakes_computed));
+  out->set_bakes_cached(uint32_t(r.bakes_cached));
+  out->set_views_from_bake(uint32_t(r.views_from_bake));
 }
 
 void toProto(const JobEvent& e, v1::JobEvent* out) {
@@ -84,11 +87,14 @@ void toProto(const JobPlan& p, v1::JobPlan* out) {
   out->set_vdb(p.vdb);
   out->set_pixel_samples(p.pixel_samples);
   out->set_bake_key(p.bake_key);
+  for (const std::string& c : p.components) out->add_components(c);
+  out->set_bake_cached(p.bake_cached);
 }
 
 void toProto(const JobManagerStats& s, v1::ServerStats* out) {
   out->set_scatter_computations(s.scatter_computations);
   out->set_views_from_cache(s.views_from_cache);
+  out->set_bakes_from_cache(s.bakes_from_cache);
   out->set_volume_builds(s.volume_builds);
   out->set_jobs_submitted(s.jobs_submitted);
   out->set_jobs_queued(uint32_t(s.queued));

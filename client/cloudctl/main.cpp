@@ -115,6 +115,9 @@ Json jobJson(const v1::Job& j) {
           {"finished_unix", j.finished_unix()},
           {"views_rendered", j.views_rendered()},
           {"views_cached", j.views_cached()},
+          {"bakes_computed", j.bakes_computed()},
+          {"bakes_cached", j.bakes_cached()},
+          {"views_from_bake", j.views_from_bake()},
           {"outputs", outputs}};
 }
 
@@ -577,18 +580,17 @@ int cmdSubmit(Client& c, const SubmitArgs& a) {
                         {"views", views},
                         {"vdb", p.vdb()},
                         {"pixel_samples", p.pixel_samples()},
-                        {"bake_key", p.bake_key()}}
+                        {"bake_key", p.bake_key()},
+                        {"bake_cached", p.bake_cached()},
+                        {"components", Json(std::vector<std::string>(p.components().begin(),
+                                                                     p.components().end()))}}
                        .dump()
                 << "\n";
     } else {
       std::cout << "shot '" << p.shot_name() << "', method " << p.method() << "\n";
-      for (const auto& v : p.views()) {
-        std::cout << "  view '" << v.name()
-                  << "': " << (v.cached() ? "cached (no scattering computed)" : "path trace")
-                  << "\n";
-      }
-      if (p.vdb()) std::cout << "  bake.vdb: density grid\n";
-      std::cout << "  estimated cost: " << p.pixel_samples() << " paths\n";
+      for (const auto& c : p.components()) std::cout << "  " << c << "\n";
+      std::cout << "  estimated cost: " << p.pixel_samples()
+                << (p.method() == "pathtrace" ? " paths\n" : " view rays\n");
       std::cout << "  bake key: " << p.bake_key() << "\n";
     }
     return ExitCode::kOk;
@@ -614,8 +616,13 @@ void printJob(const Client& c, const v1::Job& j) {
             << "\nshot:     " << j.shot_name() << " (" << j.method() << ")\nstage:    " << j.stage()
             << " " << int(std::round(j.fraction() * 100)) << "%\n";
   if (!j.error().empty()) std::cout << "error:    " << j.error() << "\n";
-  std::cout << "views:    " << j.views_rendered() << " rendered, " << j.views_cached()
-            << " from cache\n";
+  if (j.bakes_computed() + j.bakes_cached() > 0) {
+    std::cout << "bake:     " << (j.bakes_computed() ? "computed" : "from cache") << ", "
+              << j.views_from_bake() << " view(s) rendered from it\n";
+  } else {
+    std::cout << "views:    " << j.views_rendered() << " rendered, " << j.views_cached()
+              << " from cache\n";
+  }
   for (const auto& o : j.outputs()) {
     std::cout << "output:   " << o.name() << " " << o.size() << " bytes sha256 " << o.sha256()
               << "\n";
@@ -737,6 +744,7 @@ int main(int argc, char** argv) {
                        {"max_points", reply.max_points()}};
         j["stats"] = {{"scatter_computations", s.scatter_computations()},
                       {"views_from_cache", s.views_from_cache()},
+                      {"bakes_from_cache", s.bakes_from_cache()},
                       {"volume_builds", s.volume_builds()},
                       {"jobs_submitted", s.jobs_submitted()},
                       {"jobs_queued", s.jobs_queued()},
@@ -757,6 +765,7 @@ int main(int argc, char** argv) {
                   << " queued, " << s.jobs_running()
                   << " running\nscattering computations: " << s.scatter_computations()
                   << " (views from cache: " << s.views_from_cache()
+                  << ", bakes from cache: " << s.bakes_from_cache()
                   << ")\ncache: " << s.cache_entries() << " entries, " << s.cache_bytes()
                   << " bytes, " << s.cache_hits() << " hits, " << s.cache_misses() << " misses\n"
                   << "limits: " << reply.max_concurrent_jobs() << " concurrent job(s), queue "

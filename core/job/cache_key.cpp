@@ -60,6 +60,25 @@ std::string keyOf(const char* kind, const Json& material) {
 
 }  // namespace
 
+bool bakesLight(const ShotSpec& shot) {
+  return shot.bake.method == BakeSpec::Method::kSingle ||
+         shot.bake.method == BakeSpec::Method::kPointcloud;
+}
+
+bool needsSky(const ShotSpec& shot) {
+  const Sky& sky = shot.lighting.sky;
+  switch (sky.type) {
+    case Sky::Type::kConstant:
+      return maxComponent(sky.radiance) > 0;
+    case Sky::Type::kGradient:
+      return maxComponent(sky.zenith) > 0 || maxComponent(sky.horizon) > 0 ||
+             maxComponent(sky.ground) > 0;
+    case Sky::Type::kMap:
+      return sky.map_scale > 0;  // a map of zeros still bakes visibility: cheap and harmless
+  }
+  return true;
+}
+
 Vec3 quantiseDirection(const Vec3& direction) {
   const double len = length(direction);
   const Vec3 d = len > 0 ? direction / len : direction;
@@ -104,6 +123,27 @@ ShotCacheKeys computeCacheKeys(const ShotSpec& shot) {
   Json vdb = {{"volume", keys.volume},
               {"voxel_size", canonical["outputs"].value("vdb_voxel_size", 0.0)}};
   keys.vdb = keyOf("vdb", vdb);
+
+  if (bakesLight(shot)) {
+    Json light;
+    light["volume"] = keys.volume;
+    if (shot.bake.method == BakeSpec::Method::kSingle) {
+      light["extinction"] = canonical["medium"]["extinction"];
+    } else {
+      light["medium"] = canonical["medium"];
+      light["seed"] = shot.bake.seed;
+    }
+    light["sky"] = needsSky(shot);
+    light["method"] = methodName(shot.bake.method);
+    Json knobs = Json::parse(shot.bake.options_json);
+    knobs.erase("step");
+    light["knobs"] = knobs;
+    keys.light_family = keyOf("light-family", light);
+    const Vec3 d = quantiseDirection(shot.lighting.has_sun ? shot.lighting.sun.direction
+                                                           : Vec3(0, 0, 1));
+    light["sun_direction"] = {d.x, d.y, d.z};
+    keys.light = keyOf("light", light);
+  }
 
   for (const Json& view : canonical["views"]) {
     Json v = {{"bake", keys.bake}, {"camera", view["camera"]}, {"resolution", view["resolution"]}};

@@ -36,7 +36,21 @@ struct ShotCacheKeys {
   std::string vdb;
   std::vector<std::string> views;
   bool sun_scaled = false;
+  /// Methods that bake light (single, pointcloud): the baked-light lattice, keyed by what the
+  /// scattering depends on: volume key, medium (single: extinction only, since albedo and phase
+  /// are applied when a view is rendered), quantised sun direction, whether the sky term is
+  /// baked (not the sky's radiance), method, seed and knobs other than the view-only `step` and
+  /// `samples` + code version. Not in it: views, sun colour or intensity, sky radiance, image
+  /// size. Empty for other methods. `light_family` is the same without the sun direction.
+  std::string light;
+  std::string light_family;
 };
+
+/// True for the methods whose views render from a baked-light lattice (single, pointcloud).
+bool bakesLight(const ShotSpec& shot);
+
+/// True when the shot's sky is not black (a bake then needs sky_visibility).
+bool needsSky(const ShotSpec& shot);
 
 /// Keys of a validated shot (files it names must exist: they are hashed, with an in-memory
 /// memo keyed by path, size and modification time). Throws InputError when a file cannot be

@@ -12,6 +12,8 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "core/job/bake_methods.h"
+#include "core/job/cache_key.h"
 #include "core/job/file_util.h"
 #include "core/job/job_errors.h"
 #include "core/job/run_shot.h"
@@ -248,14 +250,40 @@ JobPlan JobManager::plan(const SubmitInput& input) {
   plan.method = methodName(p.shot.bake.method);
   plan.bake_key = p.keys.bake;
   plan.vdb = p.shot.outputs.vdb;
+  const bool bake_method = bakesLight(p.shot);
+  if (bake_method) {
+    plan.bake_key = p.keys.light;
+    plan.bake_cached = cache_->lookup(p.keys.light).has_value();
+    plan.components = planBake(p.shot, plan.bake_cached);
+  }
   if (p.shot.outputs.exr) {
     for (size_t i = 0; i < p.shot.views.size(); ++i) {
       const Camera& c = p.shot.views[i];
-      const bool cached = cache_->lookup(p.keys.views[i]).has_value();
+      const bool cached = bake_method ? plan.bake_cached
+                                      : cache_->lookup(p.keys.views[i]).has_value();
       plan.views.push_back(c.name);
       plan.view_cached.push_back(cached);
-      if (!cached) plan.pixel_samples += double(c.width_px) * c.height_px * p.shot.bake.samples;
+      const double rays = double(c.width_px) * c.height_px * p.shot.bake.samples;
+      if (bake_method) {
+        plan.pixel_samples += rays;
+        plan.components.push_back("view '" + c.name + "': ray march from the bake, " +
+                                  std::to_string(c.width_px) + "x" +
+                                  std::to_string(c.height_px) + ", " +
+                                  std::to_string(p.shot.bake.samples) + " ray(s) per pixel");
+      } else if (!cached) {
+        plan.pixel_samples += rays;
+        plan.components.push_back("view '" + c.name + "': path trace " +
+                                  std::to_string(c.width_px) + "x" +
+                                  std::to_string(c.height_px) + " at " +
+                                  std::to_string(p.shot.bake.samples) + " spp");
+      } else {
+        plan.components.push_back("view '" + c.name + "': from the cache");
+      }
     }
+  }
+  if (p.shot.outputs.vdb) {
+    plan.components.push_back(bake_method ? "bake.vdb: the baked light lattice"
+                                          : "bake.vdb: the density grid");
   }
   return plan;
 }
@@ -431,6 +459,7 @@ JobManagerStats JobManager::stats() const {
   JobManagerStats s;
   s.scatter_computations = scatter_computations_;
   s.views_from_cache = views_from_cache_;
+  s.bakes_from_cache = bakes_from_cache_;
   s.volume_builds = volumes_.builds();
   s.jobs_submitted = submitted_;
   s.cache = cache_->stats();
@@ -540,8 +569,9 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
     error = "internal error while running the job (details in the server log, job " + id + ")";
     spdlog::error("job {}: {}", id, e.what());
   }
-  scatter_computations_ += uint64_t(result.views_rendered);
+  scatter_computations_ += uint64_t(result.views_rendered) + uint64_t(result.bakes_computed);
   views_from_cache_ += uint64_t(result.views_cached);
+  bakes_from_cache_ += uint64_t(result.bakes_cached);
   if (final_state != JobState::kSucceeded) {
     std::error_code ec;
     fs::remove_all(ro.out_dir, ec);
@@ -555,6 +585,9 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   r.error_is_input = error_is_input;
   r.views_rendered = result.views_rendered;
   r.views_cached = result.views_cached;
+  r.bakes_computed = result.bakes_computed;
+  r.bakes_cached = result.bakes_cached;
+  r.views_from_bake = result.views_from_bake;
   r.stage = jobStateName(final_state);
   if (final_state == JobState::kSucceeded) r.fraction = 1;
   for (OutputFile f : result.files) {
@@ -565,8 +598,13 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   pushEventLocked(*job, "done", r.fraction,
                   final_state == JobState::kSucceeded
                       ? fmt::format("succeeded in {:.2f} s (", result.seconds) +
-                            std::to_string(result.views_rendered) + " view(s) rendered, " +
-                            std::to_string(result.views_cached) + " from cache)"
+                            (result.bakes_computed + result.bakes_cached > 0
+                                 ? std::string(result.bakes_computed ? "light baked, "
+                                                                     : "bake from cache, ") +
+                                       std::to_string(result.views_from_bake) +
+                                       " view(s) rendered from the bake)"
+                                 : std::to_string(result.views_rendered) + " view(s) rendered, " +
+                                       std::to_string(result.views_cached) + " from cache)")
                       : error);
   spdlog::info("job {}: {}{}", id, jobStateName(final_state), error.empty() ? "" : ": " + error);
 }

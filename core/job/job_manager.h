@@ -70,8 +70,10 @@ struct JobPlan {
   std::vector<bool> view_cached;
   bool vdb = false;
   bool volume_cached = false;
-  double pixel_samples = 0;  ///< paths to trace for the views not cached (cost estimate)
+  double pixel_samples = 0;  ///< paths to trace (or rays to march from a bake): cost estimate
   std::string bake_key;
+  std::vector<std::string> components;  ///< what will be computed, one line each
+  bool bake_cached = false;             ///< single/pointcloud: the light is already baked
 };
 
 /// One progress event of a job. `seq` increases by one per job from 1; `eta_s` < 0: unknown.
@@ -87,8 +89,9 @@ struct JobEvent {
 
 /// Counters the service exposes (tests assert on `scatter_computations`).
 struct JobManagerStats {
-  uint64_t scatter_computations = 0;  ///< views path-traced (not served from the cache)
+  uint64_t scatter_computations = 0;  ///< views path-traced + lights baked (not from cache)
   uint64_t views_from_cache = 0;
+  uint64_t bakes_from_cache = 0;  ///< bakes (single, pointcloud) reused
   uint64_t volume_builds = 0;
   uint64_t jobs_submitted = 0;
   size_t queued = 0, running = 0;
@@ -163,7 +166,8 @@ class JobManager {
   bool stopping_ = false;
   std::vector<std::thread> runners_;
   int lock_fd_ = -1;
-  std::atomic<uint64_t> scatter_computations_{0}, views_from_cache_{0}, submitted_{0};
+  std::atomic<uint64_t> scatter_computations_{0}, views_from_cache_{0}, bakes_from_cache_{0},
+      submitted_{0};
 };
 
 }  // namespace cloudbake

@@ -58,7 +58,10 @@ Json toJson(const JobRecord& r) {
           {"error_is_input", r.error_is_input},
           {"outputs", outputs},
           {"views_rendered", r.views_rendered},
-          {"views_cached", r.views_cached}};
+          {"views_cached", r.views_cached},
+          {"bakes_computed", r.bakes_computed},
+          {"bakes_cached", r.bakes_cached},
+          {"views_from_bake", r.views_from_bake}};
 }
 
 JobRecord fromJson(const Json& j) {
@@ -84,6 +87,10 @@ JobRecord fromJson(const Json& j) {
   }
   r.views_rendered = j.at("views_rendered").get<int>();
   r.views_cached = j.at("views_cached").get<int>();
+  // Records written before bake methods existed lack these.
+  r.bakes_computed = j.value("bakes_computed", 0);
+  r.bakes_cached = j.value("bakes_cached", 0);
+  r.views_from_bake = j.value("views_from_bake", 0);
   return r;
 }
 

@@ -29,6 +29,9 @@ struct JobRecord {
   std::vector<OutputFile> outputs;  ///< `path` is not stored; JobStore::outputPath gives it
   int views_rendered = 0;
   int views_cached = 0;
+  int bakes_computed = 0;
+  int bakes_cached = 0;
+  int views_from_bake = 0;
   bool terminal() const {
     return state == JobState::kSucceeded || state == JobState::kFailed ||
            state == JobState::kCancelled;

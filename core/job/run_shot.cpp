@@ -11,7 +11,9 @@
 #include "core/error.h"
 #include "core/io/exr_io.h"
 #include "core/io/png_writer.h"
+#include "core/bake/baked_light_vdb.h"
 #include "core/io/vdb_io.h"
+#include "core/job/bake_methods.h"
 #include "core/job/bake_cache.h"
 #include "core/job/cache_key.h"
 #include "core/job/direction_index.h"
@@ -113,17 +115,142 @@ OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
   return f;
 }
 
+// Methods single and pointcloud: the light is baked once per light direction (or taken from the
+// cache: then no scattering is computed at all), and every view is ray-marched from the bake.
+template <class NeedLights, class NeedScene, class Report, class ShouldStop>
+void runBakeMethod(const ShotSpec& shot, const RunOptions& opt, const ShotCacheKeys& keys,
+                   NeedLights& needLights, NeedScene& needScene, Report& report,
+                   ShouldStop& should_stop, RunProgress& progress, double total,
+                   RunResult& result) {
+  const Scene& lights = needLights();  // phase, sky and cameras; no density
+  const auto t_bake = std::chrono::steady_clock::now();
+  std::optional<BakedLight> fresh;
+  auto compute = [&]() -> BakedLight {
+    const Scene& s = needScene();
+    report("bake", 0, std::string("baking light (method ") + methodName(shot.bake.method) + ")");
+    return bakeShotLight(shot, s.medium, [&](double f, const std::string& stage) {
+      progress.stage = "bake";
+      progress.fraction = std::clamp(f / total, 0.0, 1.0);
+      progress.message = "bake: " + stage;
+      return !opt.progress || opt.progress(progress);
+    });
+  };
+  std::string entry;
+  std::string how = "baked";
+  if (opt.cache) {
+    // Tolerance reuse: a cached bake of a nearby sun direction (closest first).
+    if (opt.directions && opt.sun_tolerance_deg > 0 && shot.lighting.has_sun &&
+        !opt.cache->lookup(keys.light)) {
+      const Vec3 own = quantiseDirection(shot.lighting.sun.direction);
+      for (const Vec3& d : opt.directions->near(keys.light_family, own, opt.sun_tolerance_deg)) {
+        ShotSpec alt = shot;
+        alt.lighting.sun.direction = d;
+        if (auto found = opt.cache->lookup(computeCacheKeys(alt).light)) {
+          entry = *found;
+          ++result.views_reused_direction;
+          result.reused_angle_deg = angleDeg(d, own);
+          how = "from the cached bake of a sun direction " + fixed(result.reused_angle_deg, 2) +
+                " deg away";
+          break;
+        }
+      }
+    }
+    bool computed = false;
+    if (entry.empty()) {
+      entry = opt.cache->getOrCompute(
+          keys.light,
+          [&](const std::string& staging) {
+            fresh = compute();
+            writeBakedLight((fs::path(staging) / kCachedVdbFile).string(), *fresh);
+            computed = true;
+          },
+          should_stop);
+      if (!computed) how = "from cache";
+      if (computed && opt.directions && shot.lighting.has_sun) {
+        opt.directions->add(keys.light_family, quantiseDirection(shot.lighting.sun.direction));
+      }
+    }
+    (computed ? result.bakes_computed : result.bakes_cached) += 1;
+    if (!fresh) {
+      try {
+        fresh = readBakedLight((fs::path(entry) / kCachedVdbFile).string());
+      } catch (const InputError& e) {
+        // The cache verified the entry's checksum: an unreadable bake is our fault, not input.
+        throw std::runtime_error(std::string("cached bake unreadable: ") + e.what());
+      }
+    }
+  } else {
+    fresh = compute();
+    result.bakes_computed = 1;
+  }
+  const BakedLight& bake = *fresh;
+  report("bake", 1,
+         std::string("light ") + how + " in " + fixed(secondsSince(t_bake), 2) + " s (" +
+             std::to_string(bake.grid.nx) + "x" + std::to_string(bake.grid.ny) + "x" +
+             std::to_string(bake.grid.nz) + " lattice)");
+
+  const BakeRenderOptions ro = bakeRenderOptions(shot, opt.threads);
+  const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
+  for (int i = 0; i < n_views; ++i) {
+    const Camera& camera = lights.cameras[size_t(i)];
+    const std::string label = "view '" + camera.name + "' " + std::to_string(camera.width_px) +
+                              "x" + std::to_string(camera.height_px) + " from the bake";
+    progress.view = camera.name;
+    progress.view_fraction = 0;
+    report("render", 1 + i, label);
+    const auto t0 = std::chrono::steady_clock::now();
+    RenderLayers layers =
+        renderFromBake(bake, lights.medium, lights.sun, lights.sky, camera, ro, [&](double f) {
+          progress.view_fraction = f;
+          progress.fraction = std::clamp((1 + i + f) / total, 0.0, 1.0);
+          return !opt.progress || opt.progress(progress);
+        });
+    const std::string name = camera.name + ".exr";
+    const std::string path = (fs::path(opt.out_dir) / name).string();
+    writeExr(path, toExrLayers(std::move(layers)),
+             {{"cloudbake:shot", shot.name},
+              {"cloudbake:view", camera.name},
+              {"cloudbake:method", methodName(shot.bake.method)},
+              {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
+              {"cloudbake:seed", std::to_string(ro.seed)},
+              {"cloudbake:units", "radiance, units of sun irradiance per sr"}});
+    result.files.push_back(describeOutput(opt.out_dir, name));
+    ++result.views_from_bake;
+    progress.view_fraction = 1;
+    report("render", 2 + i, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s");
+    if (opt.png) {
+      const std::string png_name = camera.name + ".png";
+      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path));
+      result.files.push_back(describeOutput(opt.out_dir, png_name));
+    }
+  }
+  progress.view.clear();
+  if (shot.outputs.vdb) {
+    report("vdb", 1 + n_views, "writing bake.vdb (the baked light)");
+    const std::string path = (fs::path(opt.out_dir) / kCachedVdbFile).string();
+    if (!entry.empty()) {
+      // A copy, not a link: the job's file must not change if the cache entry is tampered with.
+      const std::string tmp = path + ".tmp." + uniqueSuffix();
+      fs::copy_file(fs::path(entry) / kCachedVdbFile, tmp, fs::copy_options::overwrite_existing);
+      fs::rename(tmp, path);
+    } else {
+      writeBakedLight(path, bake);
+    }
+    result.files.push_back(describeOutput(opt.out_dir, kCachedVdbFile));
+  }
+}
+
 }  // namespace
 
 void checkRunnable(const ShotSpec& shot, const std::string& source) {
-  if (shot.bake.method != BakeSpec::Method::kPathtrace) {
+  if (shot.bake.method != BakeSpec::Method::kPathtrace && !bakesLight(shot)) {
     throw InputError(source + ": /bake/method: '" + methodName(shot.bake.method) +
-                     "' is not implemented in this version (use 'pathtrace')");
+                     "' is not implemented in this version (use 'pathtrace', 'single' or "
+                     "'pointcloud')");
   }
   if (std::holds_alternative<SequenceVolumeSpec>(shot.volume)) {
-    throw InputError(source +
-                     ": /volume/sequence: animated volumes are not supported by method "
-                     "'pathtrace' yet");
+    throw InputError(source + ": /volume/sequence: animated volumes are not supported by method '" +
+                     methodName(shot.bake.method) + "' yet");
   }
 }
 
@@ -152,7 +279,8 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   }
 
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
-  const double total = std::max(1, n_views + (shot.outputs.vdb ? 1 : 0));
+  const bool bake_method = bakesLight(shot);
+  const double total = std::max(1, n_views + (shot.outputs.vdb ? 1 : 0) + (bake_method ? 1 : 0));
   RunProgress progress;
   auto report = [&](const std::string& stage, double done, const std::string& message) {
     progress.stage = stage;
@@ -166,11 +294,22 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   report("build", 0, "building " + std::string(volumeTypeName(shot.volume)) + " volume");
   const ShotCacheKeys keys = opt.cache || opt.volumes ? computeCacheKeys(shot) : ShotCacheKeys{};
 
-  // The scene (and its density field, the expensive part) is built only when something is
-  // computed; with a volume cache the field comes from memory when an earlier job built it.
+  // The scene's lights, phase function and cameras are cheap; its density field is the
+  // expensive part, built only when something is computed (with a volume cache it comes from
+  // memory when an earlier job built it).
   std::optional<Scene> scene;
+  bool density_built = false;
+  auto needLights = [&]() -> Scene& {
+    if (!scene) {
+      ShotSpec light = shot;
+      light.volume = BoxVolumeSpec{{0, 0, 0}, {1, 1, 1}, 0.0};  // stand-in until needScene
+      scene = buildScene(light, opt.source);
+    }
+    return *scene;
+  };
   auto needScene = [&]() -> const Scene& {
-    if (scene) return *scene;
+    Scene& s = needLights();
+    if (density_built) return s;
     const auto t0 = std::chrono::steady_clock::now();
     // Limits that need the files: checked before voxelising a mesh, and on a loaded VDB
     // before it enters the memory cache.
@@ -180,21 +319,25 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
       checkLoadedVoxels(shot, *field, opt.max_voxels, opt.source);
       return field;
     };
-    ShotSpec light = shot;
-    light.volume = BoxVolumeSpec{{0, 0, 0}, {1, 1, 1}, 0.0};  // cheap stand-in, replaced below
-    Scene s = buildScene(light, opt.source);
     s.medium.density =
         opt.volumes ? opt.volumes->getOrBuild(keys.volume, build, &result.volume_cached) : build();
-    scene = std::move(s);
+    density_built = true;
     // Built lazily, inside whichever stage first needs it: keep that stage and fraction.
     report(progress.stage, progress.fraction * total,
-           "built " + scene->medium.density->describe() + " in " + fixed(secondsSince(t0), 2) +
-               " s" + (result.volume_cached ? " (volume from memory cache)" : ""));
-    return *scene;
+           "built " + s.medium.density->describe() + " in " + fixed(secondsSince(t0), 2) + " s" +
+               (result.volume_cached ? " (volume from memory cache)" : ""));
+    return s;
   };
   // Validate the medium, lights and cameras up front even when everything is cached, so bad
   // input fails the same way with and without a cache.
   if (!opt.cache) needScene();
+  if (bake_method) {
+    runBakeMethod(shot, opt, keys, needLights, needScene, report, should_stop, progress, total,
+                  result);
+    result.seconds = secondsSince(t_start);
+    report("done", total, "done in " + fixed(result.seconds, 2) + " s");
+    return result;
+  }
 
   PathTracerOptions pt;
   pt.samples_per_pixel = shot.bake.samples;

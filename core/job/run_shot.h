@@ -57,11 +57,16 @@ struct OutputFile {
 };
 
 /// What a run did. `views_rendered` counts path-traced views (scattering computations);
-/// `views_cached` views served from the cache (and scaled to the sun irradiance).
+/// `views_cached` views served from the cache (and scaled to the sun irradiance). Bake methods
+/// (single, pointcloud) compute their light once per light direction (`bakes_computed`) or
+/// reuse it (`bakes_cached`), then ray-march every view from it (`views_from_bake`).
 struct RunResult {
   std::vector<OutputFile> files;
   int views_rendered = 0;
   int views_cached = 0;
+  int bakes_computed = 0;
+  int bakes_cached = 0;
+  int views_from_bake = 0;
   /// Views served from a render of another sun direction within the tolerance, and the largest
   /// angle (degrees) between that direction and the shot's.
   int views_reused_direction = 0;
@@ -72,13 +77,14 @@ struct RunResult {
 };
 
 /// Throws InputError when the shot's method or volume is not implemented by runShot yet
-/// (methods other than pathtrace; animated volumes).
+/// (methods precomputed and auto; animated volumes).
 void checkRunnable(const ShotSpec& shot, const std::string& source = "shot.json");
 
 /// Renders every view (when outputs.exr) to out_dir/<view>.exr — beauty RGBA unprefixed plus
 /// `sun`, `sky`, `single`, `multiple` layers, with the same header attributes as `cloudbake
-/// render` — and writes out_dir/bake.vdb when outputs.vdb. With a cache, a view whose key
-/// (computeCacheKeys) is present is not rendered again. Throws InputError for bad input,
+/// render` — and writes out_dir/bake.vdb when outputs.vdb (the density for pathtrace; the baked
+/// light lattice for single and pointcloud). With a cache, a view (pathtrace) or a bake (single,
+/// pointcloud) whose key (computeCacheKeys) is present is not computed again. Throws InputError for bad input,
 /// Cancelled when `progress` returns false.
 RunResult runShot(const ShotSpec& shot, const RunOptions& options);
 

@@ -64,6 +64,19 @@ void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
   if (auto* s = std::get_if<SequenceVolumeSpec>(&shot.volume); s && s->procedural) {
     procedural(*s->procedural, "/volume/sequence/procedural/resolution");
   }
+  if (shot.bake.method == BakeSpec::Method::kSingle ||
+      shot.bake.method == BakeSpec::Method::kPointcloud) {
+    // The bake lattice: light_resolution voxels along the longest side plus a margin, counted
+    // as a cube (an upper bound: the volume's bounds are not known before its files are read).
+    const auto knobs = nlohmann::json::parse(shot.bake.options_json, nullptr, false);
+    const int res = knobs.is_object() ? knobs.value("light_resolution", 128) : 128;
+    const double n = std::pow(double(res + 2), 3);
+    if (n > limit) {
+      overLimit(source, "/bake/light_resolution",
+                "a bake lattice of up to (" + std::to_string(res) + " + 2)^3",
+                n, max_voxels);
+    }
+  }
   if (shot.outputs.vdb && shot.outputs.vdb_voxel_size > 0) {
     Vec3 extent;
     bool analytic = true;

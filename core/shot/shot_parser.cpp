@@ -151,15 +151,20 @@ std::string parseMethodKnobs(const Object& o, BakeSpec::Method method) {
       o.allowOnly({"method", "samples", "seed", "max_depth"}, context);
       break;
     case BakeSpec::Method::kSingle:
-      o.allowOnly({"method", "samples", "seed", "max_depth", "step", "light_resolution"}, context);
+      o.allowOnly({"method", "samples", "seed", "step", "light_resolution"}, context);
       num("step", 0, 1e12, true);
       integer("light_resolution", 8, 1024);
       break;
     case BakeSpec::Method::kPointcloud:
-      o.allowOnly({"method", "samples", "seed", "max_depth", "points", "passes", "radius", "rule",
-                   "tolerance"},
+      o.allowOnly({"method", "samples", "seed", "points", "passes", "radius", "rule", "tolerance",
+                   "output_mapping", "step", "light_resolution"},
                   context);
       integer("points", 64, int64_t(1) << 24);
+      num("step", 0, 1e12, true);
+      integer("light_resolution", 8, 1024);
+      if (auto* v = o.find("output_mapping")) {
+        knobs["output_mapping"] = r.boolean(*v, o.path("output_mapping"));
+      }
       integer("passes", 1, 1000);
       num("radius", 0, 1e12, true);
       num("tolerance", 0, 1, true);
@@ -169,6 +174,11 @@ std::string parseMethodKnobs(const Object& o, BakeSpec::Method method) {
           r.fail(o.path("rule"), "must be 'normalized' or 'paper', got '" + rule + "'");
         }
         knobs["rule"] = rule;
+      }
+      if (knobs.value("output_mapping", false) && knobs.value("rule", "normalized") != "paper") {
+        r.fail(o.path("output_mapping"),
+               "Eq. 2's output mapping applies to rule 'paper' only (the normalised rule keeps "
+               "radiometric units)");
       }
       break;
     case BakeSpec::Method::kPrecomputed:
@@ -202,6 +212,10 @@ BakeSpec parseBake(const Object& o) {
     }
     b.method = it->method;
   }
+  // Paths per pixel for the path tracer; rays per pixel of each view rendered from a bake.
+  const bool from_bake =
+      b.method == BakeSpec::Method::kSingle || b.method == BakeSpec::Method::kPointcloud;
+  b.samples = from_bake ? 1 : 64;
   if (auto* v = o.find("samples"))
     b.samples = int(r.integer(*v, o.path("samples"), 1, kMaxSamples));
   if (auto* v = o.find("seed")) b.seed = r.unsignedInteger(*v, o.path("seed"));
@@ -302,6 +316,17 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
     analytic = true;
   }
   const OutputSpec& out = shot.outputs;
+  // Bake methods write their own lattice (light_resolution), whatever the volume.
+  const bool lattice = shot.bake.method == BakeSpec::Method::kSingle ||
+                       shot.bake.method == BakeSpec::Method::kPointcloud;
+  if (lattice) {
+    if (out.vdb_voxel_size > 0) {
+      r.fail("/outputs/vdb_voxel_size",
+             std::string("does not apply to method '") + methodName(shot.bake.method) +
+                 "' (its bake.vdb is the bake lattice; set bake.light_resolution instead)");
+    }
+    return;
+  }
   if (!analytic) {
     if (out.vdb_voxel_size > 0) {
       r.fail("/outputs/vdb_voxel_size", std::string("only applies to box and sphere volumes (a ") +

@@ -370,7 +370,7 @@ TEST(RunShot, ProgressReturningFalseCancels) {
 
 TEST(RunShot, RejectsMethodsNotImplemented) {
   std::string shot = tinyShot();
-  shot.replace(shot.find("\"pathtrace\""), 11, "\"single\"");
+  shot.replace(shot.find("\"pathtrace\""), 11, "\"precomputed\"");
   RunOptions opt;
   opt.out_dir = freshDir("method").string();
   try {

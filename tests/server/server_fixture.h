@@ -176,6 +176,26 @@ inline std::string sphereShot(int w, int spp, const std::string& irradiance = "[
          (vdb ? "true" : "false") + R"(, "vdb_voxel_size": 0.1}})";
 }
 
+/// A small sphere shot baked by `method` (single or pointcloud) with one orthographic view
+/// looking along +y from y = cam_y (or along -x from x = -cam_y when view is "side").
+inline std::string bakedSphereShot(const std::string& method, const std::string& irradiance,
+                                   const std::string& view) {
+  const bool side = view == "side";
+  return R"({"version": 1, "name": "baked",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": 4, "albedo": 0.95, "phase": {"type": "hg", "g": 0.7}},
+    "lighting": {"sun": {"direction": [0.3, 0, 1], "irradiance": )" +
+         irradiance + R"(}},
+    "bake": {"method": ")" +
+         method + R"(", "light_resolution": 32)" +
+         (method == "pointcloud" ? R"(, "points": 4096, "passes": 4)" : "") + R"(},
+    "views": [{"name": ")" +
+         view + R"(", "camera": {"type": "orthographic", "position": )" +
+         (side ? "[5, 0, 0]" : "[0, -5, 0]") +
+         R"(, "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [48, 48]}],
+    "outputs": {"exr": true, "vdb": true}})";
+}
+
 /// A temporary folder removed with everything in it at the end.
 class Workspace {
  public:

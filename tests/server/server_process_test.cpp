@@ -336,6 +336,64 @@ TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
   EXPECT_EQ(slurp(ws_.path("again/front.exr")), slurp(out + "/front.exr"));
 }
 
+// Issue 5's cache contract for the bake methods: once a shot's light is baked for its sun
+// direction, a second view, a new sun colour and a RenderView of a new view compute no
+// scattering (the server's counter stays put); only the view's ray march runs.
+TEST_F(ServerTest, BakedLightServesNewViewsAndSunColoursWithoutScattering) {
+  for (const std::string method : {"single", "pointcloud"}) {
+    SCOPED_TRACE(method);
+    const uint64_t before = infoStats(server_).at("scatter_computations");
+    std::string first_id;
+    auto timed = [&](const std::string& args, const std::string& out) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const CmdResult r = run(server_.cloudctl(60) + " --json " + args + " --quiet --out " + out);
+      EXPECT_EQ(r.code, 0) << r.err;
+      if (first_id.empty()) first_id = Json::parse(r.out).at("id");
+      return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    const double t_first = timed(
+        "submit " + ws_.write(method + "a.json", bakedSphereShot(method, "[1, 1, 1]", "front")),
+        ws_.path(method + "a"));
+    const Json s1 = infoStats(server_);
+    EXPECT_EQ(s1.at("scatter_computations"), before + 1);
+
+    const double t_view = timed(
+        "submit " + ws_.write(method + "b.json", bakedSphereShot(method, "[1, 1, 1]", "side")),
+        ws_.path(method + "b"));
+    const double t_colour = timed(
+        "submit " + ws_.write(method + "c.json", bakedSphereShot(method, "[2, 1, 0.5]", "front")),
+        ws_.path(method + "c"));
+    const Json s2 = infoStats(server_);
+    EXPECT_EQ(s2.at("scatter_computations"), before + 1)
+        << "a second view or a new sun colour recomputed scattering";
+    EXPECT_GE(s2.at("bakes_from_cache").get<uint64_t>(),
+              s1.at("bakes_from_cache").get<uint64_t>() + 2);
+    // The new colour is the same bake lit differently: exactly the scaled image.
+    const Image a = readExr(ws_.path(method + "a/front.exr")).layers.at("");
+    const Image c = readExr(ws_.path(method + "c/front.exr")).layers.at("");
+    double sum = 0;
+    for (size_t i = 0; i < a.data.size(); i += 4) {
+      EXPECT_NEAR(c.data[i], 2 * a.data[i], 1e-5 * (1 + a.data[i]));
+      EXPECT_NEAR(c.data[i + 2], 0.5 * a.data[i + 2], 1e-5 * (1 + a.data[i + 2]));
+      sum += a.data[i];
+    }
+    EXPECT_GT(sum, 0);
+    EXPECT_TRUE(fs::exists(ws_.path(method + "b/side.exr")));
+
+    const std::string views = ws_.write(method + "views.json", R"([{"name": "top", "camera": {
+        "type": "orthographic", "position": [0, 0, 5], "look_at": [0, 0, 0], "up": [0, 1, 0],
+        "width": 2.5}, "resolution": [32, 32]}])");
+    const double t_render =
+        timed("render " + first_id + " --views " + views, ws_.path(method + "d"));
+    EXPECT_TRUE(fs::exists(ws_.path(method + "d/top.exr")));
+    EXPECT_EQ(infoStats(server_).at("scatter_computations"), before + 1);
+    std::printf(
+        "[ timing ] %s: first bake %.3f s; second view %.3f s; new sun colour %.3f s; "
+        "RenderView new view %.3f s (client wall time incl. upload and download)\n",
+        method.c_str(), t_first, t_view, t_colour, t_render);
+  }
+}
+
 TEST_F(ServerTest, SecondSunColourAndSecondViewRecomputeNoCachedPart) {
   const std::string first = ws_.write("a.json", sphereShot(64, 256));
   std::string first_id;
@@ -509,7 +567,7 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
       {"unknown top-level key", replaced(base, "\"version\": 1", "\"version\": 1, \"colour\": 3"),
        2, "colour"},
       {"unknown method", replaced(base, "\"pathtrace\"", "\"magic\""), 2, "/bake/method"},
-      {"method not implemented", replaced(base, "\"pathtrace\"", "\"single\""), 2,
+      {"method not implemented", replaced(base, "\"pathtrace\"", "\"precomputed\""), 2,
        "not implemented"},
       {"infinite extinction", replaced(base, "\"extinction\": 2", "\"extinction\": 1e999"), 2,
        "1e999"},
@@ -597,7 +655,8 @@ TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
       "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
   const std::vector<BadCase> cases = {
       {"pointcloud points over the limit",
-       replaced(base, R"("method": "pathtrace")", R"("method": "pointcloud", "points": 5000)"),
+       replaced(replaced(base, R"("method": "pathtrace")", R"("method": "pointcloud", "points": 5000)"),
+                R"("vdb": false, "vdb_voxel_size": 0.1)", R"("vdb": false)"),
        2,
        "/bake/points: 5000 points exceed this server's limit of 1000 (--max-points)"},
       {"VDB active voxels over the limit",

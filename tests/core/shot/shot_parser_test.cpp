@@ -226,6 +226,11 @@ TEST(ShotParser, EveryVariantRoundTripsThroughTheCanonicalForm) {
         j["bake"] = {{"method", "single"}, {"step", 0.05}, {"light_resolution", 64}};
       },
       [](json& j) {
+        j["bake"] = {{"method", "pointcloud"}, {"points", 4096}, {"passes", 5},
+                     {"radius", 0.3},          {"rule", "paper"}, {"output_mapping", true},
+                     {"tolerance", 0.05},      {"light_resolution", 48}};
+      },
+      [](json& j) {
         j["views"].push_back({{"name", "persp.v2"},
                               {"camera",
                                {{"type", "perspective"},

@@ -202,13 +202,13 @@ TEST_F(RenderCli, MissingFilesExitWith3) {
   EXPECT_NE(r.err.find("/volume/vdb/path: file not found"), std::string::npos) << r.err;
 }
 
-TEST_F(RenderCli, MethodsOtherThanPathtraceAreRefusedClearly) {
+TEST_F(RenderCli, MethodsNotImplementedAreRefusedClearly) {
   json j = slab();
-  j["bake"] = {{"method", "single"}, {"samples", 4}};
-  const CliResult r =
-      run("render '" + writeShot("single.json", j).string() + "' --out '" + dir_.string() + "'");
+  j["bake"] = {{"method", "precomputed"}, {"samples", 4}};
+  const CliResult r = run("render '" + writeShot("precomputed.json", j).string() + "' --out '" +
+                          dir_.string() + "'");
   EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("/bake/method: 'single' is not implemented in this version"),
+  EXPECT_NE(r.err.find("/bake/method: 'precomputed' is not implemented in this version"),
             std::string::npos)
       << r.err;
 }
