@@ -21,6 +21,8 @@ enum ExitCode : int {
 void addMieCommand(CLI::App& app, int* exit_code);
 /// `cloudbake phase`: tabulate/plot a phase function (cmd_phase.cpp).
 void addPhaseCommand(CLI::App& app, int* exit_code);
+/// `cloudbake compare`: a view against a reference view, per layer (cmd_compare.cpp).
+void addCompareCommand(CLI::App& app, int* exit_code);
 /// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
 void addRenderCommand(CLI::App& app, int* exit_code);
 

@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   addMieCommand(app, &exit_code);
   addPhaseCommand(app, &exit_code);
   addRenderCommand(app, &exit_code);
+  addCompareCommand(app, &exit_code);
 
   try {
     app.parse(argc, argv);

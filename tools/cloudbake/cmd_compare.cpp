@@ -1,0 +1,91 @@
+// `cloudbake compare TEST.exr REFERENCE.exr [--json]`: how far a view (e.g. from a bake method)
+// lands from a reference render of the same view: per layer, the mean of each image and the
+// relative RMSE, sqrt(mean over pixels and RGB of (x - r)^2) / mean(r).
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/error.h"
+#include "core/io/exr_io.h"
+#include "tools/cloudbake/commands.h"
+
+namespace cloudbake::tool {
+namespace {
+
+struct LayerStats {
+  double mean_test = 0, mean_ref = 0, rel_rmse = 0;
+};
+
+LayerStats compareLayer(const Image& test, const Image& ref, const std::string& what) {
+  if (test.width != ref.width || test.height != ref.height) {
+    throw InputError(what + ": images differ in size (" + std::to_string(test.width) + "x" +
+                     std::to_string(test.height) + " vs " + std::to_string(ref.width) + "x" +
+                     std::to_string(ref.height) + ")");
+  }
+  double sum_t = 0, sum_r = 0, sq = 0;
+  size_t n = 0;
+  for (int y = 0; y < ref.height; ++y)
+    for (int x = 0; x < ref.width; ++x)
+      for (int c = 0; c < 3 && c < ref.channels && c < test.channels; ++c) {
+        const double t = test.at(x, y)[c], r = ref.at(x, y)[c];
+        if (!std::isfinite(t) || !std::isfinite(r)) {
+          throw InputError(what + ": non-finite pixel at (" + std::to_string(x) + ", " +
+                           std::to_string(y) + ")");
+        }
+        sum_t += t;
+        sum_r += r;
+        sq += (t - r) * (t - r);
+        ++n;
+      }
+  LayerStats s;
+  if (n == 0) return s;
+  s.mean_test = sum_t / double(n);
+  s.mean_ref = sum_r / double(n);
+  s.rel_rmse = s.mean_ref > 0 ? std::sqrt(sq / double(n)) / s.mean_ref : 0;
+  return s;
+}
+
+}  // namespace
+
+void addCompareCommand(CLI::App& app, int* exit_code) {
+  struct Options {
+    std::string test, ref;
+    bool json = false;
+  };
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand(
+      "compare",
+      "Compare a rendered view with a reference of the same view: per layer (beauty, sun, sky, "
+      "single, multiple) the means and the relative RMSE sqrt(mean((x - r)^2)) / mean(r) over "
+      "pixels and RGB");
+  cmd->add_option("test", opt->test, "the EXR to judge")->required();
+  cmd->add_option("reference", opt->ref, "the reference EXR (e.g. a converged pathtrace)")
+      ->required();
+  cmd->add_flag("--json", opt->json, "one JSON object on stdout");
+  cmd->callback([opt, exit_code] {
+    const ExrContents test = readExr(opt->test);
+    const ExrContents ref = readExr(opt->ref);
+    nlohmann::json out = nlohmann::json::object();
+    if (!opt->json) std::printf("%-10s %14s %14s %10s\n", "layer", "mean", "reference", "rel_rmse");
+    for (const auto& [name, image] : ref.layers) {
+      auto it = test.layers.find(name);
+      if (it == test.layers.end()) continue;
+      const std::string label = name.empty() ? "beauty" : name;
+      const LayerStats s = compareLayer(it->second, image, opt->test + " layer '" + label + "'");
+      out[label] = {{"mean", s.mean_test}, {"reference_mean", s.mean_ref},
+                    {"rel_rmse", s.rel_rmse}};
+      if (!opt->json) {
+        std::printf("%-10s %14.6g %14.6g %10.4f\n", label.c_str(), s.mean_test, s.mean_ref,
+                    s.rel_rmse);
+      }
+    }
+    if (out.empty()) throw InputError(opt->test + ": no layer in common with " + opt->ref);
+    if (opt->json) std::cout << out.dump() << std::endl;
+    *exit_code = kOk;
+  });
+}
+
+}  // namespace cloudbake::tool
