@@ -108,6 +108,8 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
   md["cloudbake:point_spacing"] = str(result.cloud.spacing);
   md["cloudbake:splat_radius"] = str(splat_radius);
   md["cloudbake:rule"] = paper ? "paper" : "normalized";
+  // How a view turns Co, R and light_dir into in-scattered light (render_from_bake.cpp).
+  md["cloudbake:angular_model"] = paper ? "beam" : "p1";
   md["cloudbake:output_mapping"] = options.output_mapping ? "true" : "false";
   md["cloudbake:tolerance"] = str(options.tolerance);
   md["cloudbake:last_relative_change"] = str(result.last_relative_change);

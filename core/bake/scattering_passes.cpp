@@ -34,6 +34,31 @@ std::string str(const T& v) {
   return s.str();
 }
 
+// The similarity (transport) reduction of the normalised rule: s = 1 - lum(a g) scales the
+// extinction, `albedo` = a (1 - g) / s per channel; `isotropic` is false only when the phase
+// function has no forward bias (g <= 0), where the beam model of R and L is used as it is.
+struct TransportScaling {
+  double s = 1;
+  Rgb albedo{1, 1, 1};
+  bool isotropic = false;
+};
+
+TransportScaling transportScaling(const Medium& medium) {
+  TransportScaling ts;
+  const Rgb g = medium.phase->meanCosine();
+  const Rgb a = medium.albedo;
+  if (!(lum(g) > 0)) {
+    ts.albedo = a;
+    return ts;
+  }
+  ts.s = 1 - lum(a * g);
+  ts.isotropic = true;
+  for (int c = 0; c < 3; ++c) {
+    ts.albedo[c] = ts.s > 0 ? std::min(1.0, a[c] * (1 - g[c]) / ts.s) : 0.0;
+  }
+  return ts;
+}
+
 // What a source contributes, packed for the gather loop (one cache line per source).
 struct NormalisedSource {
   float px, py, pz;  // P
@@ -66,18 +91,22 @@ void forEachDestination(size_t n, const std::function<bool(double)>& cancelled, 
 void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Medium& medium,
                    const Vec3& sun_dir, const PointcloudOptions& options, bool geometric_tail,
                    const BakeGrid& grid, const std::vector<float>& sky_visibility,
+                   const TransportScaling& ts,
                    const std::function<bool(double, int)>& cancelled) {
   const PointCloud& pc = out.cloud;
   const size_t n = pc.size();
   const PhaseLut lut(*medium.phase);
-  const Rgb albedo = medium.albedo;
+  // The passes run on the similarity-reduced medium (header, step 7): isotropic scattering with
+  // extinction s * sigma_t and albedo a (1 - g) / s.
+  const Rgb albedo = ts.albedo;
+  const double ext = medium.extinction * ts.s;
   // Own-sphere factor 1 - exp(-sigma_t r) per point, and the collision fraction of each
   // source's isotropic emission as discretised, c_i = self_i + sum_j w_ij / (4 pi), against the
   // medium's own 1 - P_escape (header, step 6): the source's transfers are scaled by the ratio.
   std::vector<double> self(n), captured(n);
   for (size_t j = 0; j < n; ++j) {
     const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[j]));
-    self[j] = -std::expm1(-medium.extinction * pc.density[j] * r);
+    self[j] = -std::expm1(-ext * pc.density[j] * r);
     captured[j] = self[j];
   }
   for (uint64_t q = 0; q < pairs.size(); ++q) {
@@ -101,10 +130,15 @@ void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Med
   std::vector<Rgb> co(n, Rgb(0.0));
   std::vector<NormalisedSource> src(n);
   double order_sum = 0;
+  // Order 0 of the reduced problem: the sun's beam attenuated by the reduced extinction, which
+  // counts light scattered into the forward peak as not scattered: Ci' = Ci^s.
+  std::vector<double> ci_reduced(n);
   for (size_t j = 0; j < n; ++j) {
-    delta[j] = Rgb(double(pc.sun[j]));
+    ci_reduced[j] = std::pow(double(pc.sun[j]), ts.s);
+    delta[j] = Rgb(ci_reduced[j]);
     order_sum += lum(delta[j]);
   }
+  std::fill(ratio.begin(), ratio.end(), ts.isotropic ? 0.0 : 1.0);
   out.order_luminance.assign(1, order_sum);
   double prev_sum = order_sum;
   for (int pass = 0; pass < options.passes; ++pass) {
@@ -166,6 +200,7 @@ void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Med
     delta.swap(next);
     dir.swap(next_dir);
     ratio.swap(next_ratio);
+    if (ts.isotropic) std::fill(ratio.begin(), ratio.end(), 0.0);
     out.order_luminance.push_back(sum);
     out.pair_interactions += pairs.size();
     out.passes_run = pass + 1;
@@ -190,6 +225,12 @@ void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Med
   out.light_dir.resize(n);
   out.mie_ratio.resize(n);
   for (size_t j = 0; j < n; ++j) {
+    // Scattered fluence = diffuse (the reduced problem's orders) + the forward-scattered beam
+    // Ci' - Ci, which travels along the sun's direction.
+    const double beam = std::max(0.0, ci_reduced[j] - double(pc.sun[j]));
+    co[j] += Rgb(beam);
+    total_flux[j] += -sun_dir * beam;
+    total_incoming[j] += beam;
     out.co[j] = co[j];
     const double fl = length(total_flux[j]);
     if (fl > 0 && total_incoming[j] > 0) {
@@ -361,9 +402,11 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   auto cancelled_build = [&](double f) {
     return progress && !progress(0.1 + 0.2 * f, "neighbours");
   };
-  const double ext = medium.extinction;
+  const bool normalised = options.rule == PointcloudOptions::Rule::kNormalized;
+  const TransportScaling ts = normalised ? transportScaling(medium) : TransportScaling{};
+  const double ext = medium.extinction * ts.s;
   NeighbourPairs pairs;
-  if (options.rule == PointcloudOptions::Rule::kNormalized) {
+  if (normalised) {
     std::vector<float> clamp_r2(n);  // r_i^2: a source's own sphere
     for (size_t i = 0; i < n; ++i) {
       const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[i]));
@@ -403,15 +446,16 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   if (options.rule == PointcloudOptions::Rule::kNormalized) {
     std::vector<float> computed;
     const std::vector<float>* vis = &sky_visibility;
-    if (sky_visibility.size() != grid.voxelCount()) {
+    // The escape probability of the reduced medium (its own extinction).
+    if (sky_visibility.size() != grid.voxelCount() || ts.s != 1) {
       BakedLight tmp;
       tmp.grid = grid;
       tmp.density = density;
-      computeSkyVisibility(tmp, medium.extinction);
+      computeSkyVisibility(tmp, ext);
       computed = std::move(tmp.channels.at(bake_grids::kSkyVisibility).data);
       vis = &computed;
     }
-    runNormalised(out, pairs, medium, sun_dir, options, geometric_tail, grid, *vis,
+    runNormalised(out, pairs, medium, sun_dir, options, geometric_tail, grid, *vis, ts,
                   cancelled_pass);
   } else {
     runPaper(out, pairs, medium, sun_dir, options, cancelled_pass);

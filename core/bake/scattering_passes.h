@@ -62,6 +62,22 @@
 //    conserved per order, light beyond the cut-off lands on the neighbours in the directions it
 //    was going. With a cut-off below the spacing only the own sphere is left, now scaled to
 //    1 - P_escape: Co_j = Ci_j sum_k (albedo (1 - P_escape,j))^k.
+// 7. Forward-peaked phase functions: the similarity (transport) reduction. Steps 1-6 as such
+//    assume the emission's escape probability is the isotropic one; for cloud phase functions
+//    (g ~ 0.75-0.9) most scattered light keeps going forwards, escapes far more easily and, with
+//    the cut-off, lands on the neighbours in the wrong places: a tau-2 slab (HG 0.75, albedo
+//    0.9) came out with Co 2-3x the reference fluence. The passes therefore run on the medium
+//    of the similarity relations (van de Hulst; Wyman et al. 1989's delta-isotropic form):
+//    isotropic scattering, extinction s sigma_t with s = 1 - a g and albedo a (1 - g) / s per
+//    channel (s from luminance-weighted a g). Order 0 is the sun's beam in that medium,
+//    Ci' = exp(-s tau) = Ci^s (light scattered into the forward peak counts as unscattered),
+//    pairs use T' = T^s and the escape probability is the reduced medium's sky visibility. The
+//    scattered fluence is then Co = (Ci' - Ci) + sum_k Delta'^k: the forward-scattered beam
+//    (travelling along -sun_dir, which enters the flux and so R and L) plus the diffuse orders.
+//    With the same slab, Co now lies within 10-40 % of a Monte Carlo fluence at every depth
+//    (high near the lit face, low near the far one: the cut-off keeps light close to its source)
+//    and the nadir view's multiple layer within 15 % (with the P1 angular model of
+//    render_from_bake.cpp). Isotropic phase functions (g = 0) are unchanged (s = 1).
 // Check (a test): a thin homogeneous sphere of radius a, isotropic, albedo 1: the second order
 // (first scattered) fluence at the centre is Int sigma_s / (4 pi d^2) dV = sigma_s a.
 //
