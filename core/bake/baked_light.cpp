@@ -90,7 +90,8 @@ void BakedLight::validate(const std::string& what) const {
     checkSize(name, c.data.size(), c.components);
     const bool unit_range = name == bake_grids::kSunTransmittance ||
                             name == bake_grids::kSkyVisibility || name == bake_grids::kMieRatio;
-    const bool non_negative = name == bake_grids::kMultipleFluence || name == bake_grids::kCd;
+    const bool non_negative = name == bake_grids::kMultipleFluence ||
+                              name == bake_grids::kSkyMultipleFluence || name == bake_grids::kCd;
     const bool direction = name == bake_grids::kLightDir;
     const size_t n = g.voxelCount();
     for (size_t v = 0; v < n; ++v) {

@@ -25,6 +25,9 @@ constexpr const char* kSkyVisibility = "sky_visibility";
 /// Vec3 (RGB), unitless: fluence (radiance integrated over the sphere) of light scattered more
 /// than once, per unit E (seed 000's Co; arbitrary scale under the paper's rule).
 constexpr const char* kMultipleFluence = "Co";
+/// Vec3 (RGB), unitless: fluence of sky light scattered at least once, per unit radiance of a
+/// uniform sky (the normalised pointcloud rule; a view scales it by the sky's mean radiance).
+constexpr const char* kSkyMultipleFluence = "Co_sky";
 /// Vec3, unit or zero: the prominent direction in which multiply scattered light travels at the
 /// voxel (seed 000's L).
 constexpr const char* kLightDir = "light_dir";

@@ -51,6 +51,8 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
   float* co = bake.add(bake_grids::kMultipleFluence, 3).data.data();
   float* ld = bake.add(bake_grids::kLightDir, 3).data.data();
   float* mr = bake.add(bake_grids::kMieRatio, 1).data.data();
+  const bool sky = !result.co_sky.empty();
+  float* cs = sky ? bake.add(bake_grids::kSkyMultipleFluence, 3).data.data() : nullptr;
   constexpr int kSlices = 8;  // z slices between cancellation polls
   for (int k0 = 0; k0 < g.nz; k0 += kSlices) {
     if (cancelled && cancelled(double(k0) / g.nz)) throw Cancelled();
@@ -64,13 +66,14 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
           if (!support[v]) continue;
           const Vec3 c = g.center(i, j, k);
           double wsum = 0, rsum = 0;
-          Rgb csum(0.0);
+          Rgb csum(0.0), ssum(0.0);
           Vec3 lsum(0.0);
           grid.forEachWithin(c, rs, [&](uint32_t p, double d2) {
             const double t = 1 - std::sqrt(d2) / rs;
             const double w = t * t;
             wsum += w;
             csum += result.co[p] * w;
+            if (sky) ssum += result.co_sky[p] * w;
             lsum += result.light_dir[p] * w;
             rsum += double(result.mie_ratio[p]) * w;
           });
@@ -86,6 +89,7 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
             if (!std::isfinite(best)) continue;
             wsum = 1;
             csum = result.co[nearest];
+            if (sky) ssum = result.co_sky[nearest];
             lsum = result.light_dir[nearest];
             rsum = result.mie_ratio[nearest];
           }
@@ -93,6 +97,12 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
           co[3 * v] = float(cv.x);
           co[3 * v + 1] = float(cv.y);
           co[3 * v + 2] = float(cv.z);
+          if (sky) {
+            const Rgb sv = ssum / wsum;
+            cs[3 * v] = float(sv.x);
+            cs[3 * v + 1] = float(sv.y);
+            cs[3 * v + 2] = float(sv.z);
+          }
           const double len = length(lsum);
           if (len > 1e-12 * wsum) {
             const Vec3 l = lsum / len;

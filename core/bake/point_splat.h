@@ -8,7 +8,8 @@
 
 namespace cloudbake {
 
-/// Adds the Co (RGB), light_dir (unit or zero) and mie_ratio channels to `bake` from the points
+/// Adds the Co (RGB), light_dir (unit or zero), mie_ratio and (when the result has it) Co_sky
+/// channels to `bake` from the points
 /// of `result`. Every voxel of the density's support (the 26-neighbourhood of density > 0) takes
 /// the Shepard average of the points within rs = max(2 x spacing, voxel size) of its centre,
 /// weights (1 - d / rs)^2; light_dir is the normalised weighted sum of the points' L. With no

@@ -25,8 +25,11 @@
 //                       A missing mie_ratio grid means R = 0, and where light_dir is zero (or
 //                       missing) only the isotropic part;
 //   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere;
+//   sky multiple J_skm = Lsky_mean Co_sky(x) / (4 pi), only with a Co_sky grid (the normalised
+//                       pointcloud rule bakes the sky's scattered light for a uniform sky);
 // E = sun.irradiance (the baked grids are per unit E), p = medium.phase via a PhaseLut. Layers:
-// sun = J_ss + J_ms terms, sky = J_sky term, single = J_ss + J_sky terms, multiple = J_ms term,
+// sun = J_ss + J_ms terms, sky = J_sky + J_skm terms, single = J_ss + J_sky terms, multiple =
+// J_ms + J_skm terms,
 // beauty = sun + sky + T_v(end) Lsky(d), alpha = 1 - T_v(end). The march stops once T_v <
 // options.min_transmittance; T_v(end) is then the value reached (< min_transmittance).
 //
@@ -219,7 +222,7 @@ inline float lerp3(const float* p, size_t sx, size_t sy, size_t sz, float fx, fl
 
 /// Per-pixel sums of the layers (radiance per the lights' units).
 struct PixelSum {
-  Rgb sun_single, multiple, sky, background;
+  Rgb sun_single, multiple, sky, sky_multiple, background;
   double alpha = 0;
 };
 
@@ -242,6 +245,7 @@ class BakeMarcher {
     if (!sky.black()) {
       vsky_ = channel(bake, bake_grids::kSkyVisibility, 1, true, " (needed under a non-black sky)");
     }
+    if (!sky.black()) csky_ = channel(bake, bake_grids::kSkyMultipleFluence, 3, false, "");
     co_ = channel(bake, bake_grids::kMultipleFluence, 3, false, "");
     if (co_) {
       ldir_ = channel(bake, bake_grids::kLightDir, 3, false, "");
@@ -280,6 +284,7 @@ class BakeMarcher {
     }
     if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
     if (s.sky > 0) sum->sky += scale_sky_ * s.sky;
+    sum->sky_multiple += scale_sky_ * s.sky_ms;
     sum->multiple += s.ms;
     sum->alpha += 1 - s.transmittance;
     if (s.transmittance > 0 && !sky_.black()) {
@@ -293,6 +298,7 @@ class BakeMarcher {
     double transmittance = 1;
     double ss = 0, sky = 0;  // integrals of T_v sigma_t Tsun and T_v sigma_t Vsky
     Rgb ms;                  // integral of T_v sigma_t J_ms, scaled
+    Rgb sky_ms;              // integral of T_v sigma_t Co_sky / (4 pi)
     bool done = false;
   };
 
@@ -434,12 +440,17 @@ class BakeMarcher {
   /// The source terms at a sample: Tsun, Vsky, and the multiple term J_ms (RGB, per unit E).
   struct Source {
     double tsun = 0, vsky = 0;
-    Rgb ms;
+    Rgb ms, csky;  // csky: Co_sky / (4 pi)
   };
 
   void source(const Cell& c, const Vec3& d, Source* s) const {
     s->tsun = read(tsun_, c);
     if (vsky_) s->vsky = read(vsky_, c);
+    if (csky_) {
+      float v[3];
+      read3(csky_, c, v);
+      s->csky = Rgb(v[0], v[1], v[2]) * kInv4Pi;
+    }
     if (co_) {
       float co[3], ld[3];
       read3(co_, c, co);
@@ -535,6 +546,7 @@ class BakeMarcher {
         s->ss += a0 * src_prev.tsun + a1 * src_cur.tsun;
         s->sky += a0 * src_prev.vsky + a1 * src_cur.vsky;
         if (co_) s->ms += (src_prev.ms * a0 + src_cur.ms * a1) * scale_ms_;
+        if (csky_) s->sky_ms += src_prev.csky * a0 + src_cur.csky * a1;
         transmittance *= e;
         src_prev = src_cur;
         have_prev = true;
@@ -557,6 +569,7 @@ class BakeMarcher {
   const float* tsun_ = nullptr;
   const float* vsky_ = nullptr;
   const float* co_ = nullptr;
+  const float* csky_ = nullptr;
   const float* ldir_ = nullptr;
   const float* mie_ = nullptr;
   const SkyLight& sky_;
@@ -670,12 +683,13 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
           }
         }
         const Rgb sun_total = sum.sun_single + sum.multiple;
-        store(out.beauty, x, y, sun_total + sum.sky + sum.background, inv_spp);
+        const Rgb sky_total = sum.sky + sum.sky_multiple;
+        store(out.beauty, x, y, sun_total + sky_total + sum.background, inv_spp);
         out.beauty.at(x, y)[3] = static_cast<float>(sum.alpha * inv_spp);
         store(out.sun, x, y, sun_total, inv_spp);
-        store(out.sky, x, y, sum.sky, inv_spp);
+        store(out.sky, x, y, sky_total, inv_spp);
         store(out.single, x, y, sum.sun_single + sum.sky, inv_spp);
-        store(out.multiple, x, y, sum.multiple, inv_spp);
+        store(out.multiple, x, y, sum.multiple + sum.sky_multiple, inv_spp);
       }
     }
     const int done = ++tiles_done;

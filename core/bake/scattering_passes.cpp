@@ -91,7 +91,7 @@ void forEachDestination(size_t n, const std::function<bool(double)>& cancelled, 
 void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Medium& medium,
                    const Vec3& sun_dir, const PointcloudOptions& options, bool geometric_tail,
                    const BakeGrid& grid, const std::vector<float>& sky_visibility,
-                   const TransportScaling& ts,
+                   const TransportScaling& ts, const std::vector<float>* true_visibility,
                    const std::function<bool(double, int)>& cancelled) {
   const PointCloud& pc = out.cloud;
   const size_t n = pc.size();
@@ -241,6 +241,52 @@ void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Med
       out.mie_ratio[j] = 0.f;
     }
   }
+
+  // Sky light (header, step 8): the same transfers for a uniform sky of unit radiance.
+  if (!true_visibility) return;
+  std::vector<Rgb> d(n), nx(n), acc(n, Rgb(0.0)), src_sky(n);
+  std::vector<double> beam(n);
+  for (size_t j = 0; j < n; ++j) {
+    const double vr = sampleTrilinear(grid, sky_visibility.data(), pc.position[j]);
+    const double vt = sampleTrilinear(grid, true_visibility->data(), pc.position[j]);
+    d[j] = Rgb(4 * kPi * vr);
+    beam[j] = 4 * kPi * std::max(0.0, vr - vt);
+  }
+  double prev = 0;
+  for (int pass = 0; pass < options.passes; ++pass) {
+    for (size_t i = 0; i < n; ++i) src_sky[i] = d[i] * (out.transfer_scale[i] * kInv4Pi);
+    forEachDestination(n, [&](double f) { return cancelled(f, pass); }, [&](size_t j) {
+      double sr = 0, sg = 0, sb = 0;
+      const uint64_t e = pairs.offset[j + 1];
+      for (uint64_t q = pairs.offset[j]; q < e; ++q) {
+        const Rgb& s = src_sky[pairs.source[q]];
+        const double w = pairs.weight[q];
+        sr += w * s.x;
+        sg += w * s.y;
+        sb += w * s.z;
+      }
+      nx[j] = albedo * (Rgb(sr, sg, sb) + d[j] * self[j]);
+    });
+    double sum = 0, acc_sum = 0;
+    for (size_t j = 0; j < n; ++j) {
+      acc[j] += nx[j];
+      sum += lum(nx[j]);
+      acc_sum += lum(acc[j]);
+    }
+    d.swap(nx);
+    out.pair_interactions += pairs.size();
+    const bool done = !(acc_sum > 0) || sum / acc_sum < options.tolerance;
+    if (done || pass + 1 == options.passes) {
+      const double q = prev > 0 ? sum / prev : 0.0;
+      if (geometric_tail && q > 0 && q < 1) {
+        for (size_t j = 0; j < n; ++j) acc[j] += d[j] * (q / (1 - q));
+      }
+      break;
+    }
+    prev = sum;
+  }
+  out.co_sky.resize(n);
+  for (size_t j = 0; j < n; ++j) out.co_sky[j] = acc[j] + Rgb(beam[j]);
 }
 
 // Seed 000's Eq. 1-5 (readings in the header).
@@ -455,8 +501,9 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
       computed = std::move(tmp.channels.at(bake_grids::kSkyVisibility).data);
       vis = &computed;
     }
+    const bool sky = options.sky && sky_visibility.size() == grid.voxelCount();
     runNormalised(out, pairs, medium, sun_dir, options, geometric_tail, grid, *vis, ts,
-                  cancelled_pass);
+                  sky ? &sky_visibility : nullptr, cancelled_pass);
   } else {
     runPaper(out, pairs, medium, sun_dir, options, cancelled_pass);
   }

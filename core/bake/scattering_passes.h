@@ -78,6 +78,13 @@
 //    (high near the lit face, low near the far one: the cut-off keeps light close to its source)
 //    and the nadir view's multiple layer within 15 % (with the P1 angular model of
 //    render_from_bake.cpp). Isotropic phase functions (g = 0) are unchanged (s = 1).
+// 8. Sky light. The bake is per unit sun irradiance and the sky's radiance is applied when a view
+//    is rendered, so the passes are run a second time for a uniform sky of unit radiance (it is
+//    linear): order 0 is the reduced medium's sky fluence 4 pi V' (V' its sky visibility), and
+//    the scattered sky fluence is Co_sky = 4 pi (V' - V) + sum_k Delta'^k_sky, V the true
+//    visibility (whose direct light is the views' ambient term). Views add
+//    sigma_s * mean sky radiance * Co_sky / (4 pi): isotropic, as the sky's net flux is not kept.
+//    Only with options.sky (a black sky bakes nothing).
 // Check (a test): a thin homogeneous sphere of radius a, isotropic, albedo 1: the second order
 // (first scattered) fluence at the centre is Int sigma_s / (4 pi d^2) dV = sigma_s a.
 //
@@ -114,6 +121,9 @@ constexpr double kMaxNeighbourPairs = 4e8;
 struct PointCloudResult {
   PointCloud cloud;               ///< P, D, Ci (initial sun transmittance)
   std::vector<Rgb> co;            ///< Co per point (see the rules above)
+  /// Normalised rule with a sky: fluence of sky light scattered at least once per unit radiance
+  /// of a uniform sky (header, step 8); empty otherwise.
+  std::vector<Rgb> co_sky;
   std::vector<Vec3> light_dir;    ///< L per point, unit or zero (travel direction)
   std::vector<float> mie_ratio;   ///< R per point, [0, 1]
   /// Normalised rule: 1 - P_escape per point (the target collision fraction) and the factor k_i

@@ -1,0 +1,158 @@
+#!/usr/bin/env python3
+"""The trade benchmark (issue 3, section 4): every bake method against the converged path tracer.
+
+For each scene in bench/scenes/ and each method/quality it renders the scene's views with
+`cloudbake render` (a child process per configuration, so peak memory is that configuration's
+own) and prints a markdown table:
+
+  scene | method | quality | bake s | render s/view | peak MiB | rel. RMSE
+
+- bake s: the bake's "light baked in X s" line (0 for pathtrace, which bakes nothing);
+- render s/view: mean of the views' "rendered in Y s" lines (the whole path trace for pathtrace);
+- peak MiB: the child's maximum resident set size (wait4 rusage);
+- rel. RMSE: sqrt(mean over pixels and RGB of (x - r)^2) / mean(r) of the beauty image against the
+  reference (pathtrace at --ref-spp), averaged over the scene's views (`cloudbake compare`).
+The reference's own noise is printed per scene: an independent render at ref_spp/4 differs from
+it by sigma * sqrt(1 + 4), so its RMSE / sqrt(5) estimates the reference's noise floor.
+References are cached under WORK/ref/ by scene, spp and seed.
+
+Usage: bench/trade_bench.py [--build build] [--threads 2] [--ref-spp 1024] [--scenes a,b]
+                            [--work DIR] [--quick]
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def methods(quick):
+    pts = [2048, 8192, 32768] if quick else [16384, 65536, 262144]
+    return [
+        ("single", "lattice 128", {"method": "single", "light_resolution": 128}),
+        ("pointcloud", "%d points" % pts[0], {"method": "pointcloud", "points": pts[0]}),
+        ("pointcloud", "%d points" % pts[1], {"method": "pointcloud", "points": pts[1]}),
+        ("pointcloud", "%d points" % pts[2], {"method": "pointcloud", "points": pts[2]}),
+        ("pointcloud paper", "%d points, Eq. 2" % pts[1],
+         {"method": "pointcloud", "points": pts[1], "rule": "paper", "output_mapping": True}),
+        ("pathtrace", "16 spp", {"method": "pathtrace", "samples": 16, "seed": 3}),
+    ]
+
+
+def absolutise(shot, folder):
+    """Relative asset paths resolve against the scene file's folder (as the parser does)."""
+    for kind in ("vdb", "mesh"):
+        spec = shot["volume"].get(kind)
+        if spec and not os.path.isabs(spec["path"]):
+            spec["path"] = os.path.normpath(os.path.join(folder, spec["path"]))
+            if not os.path.exists(spec["path"]):
+                return spec["path"]
+    return None
+
+
+def run(cloudbake, shot, out_dir, threads):
+    """Renders `shot` in a child; returns (bake_s, [view seconds], peak MiB, wall s)."""
+    os.makedirs(out_dir, exist_ok=True)
+    shot_path = os.path.join(out_dir, "shot.json")
+    with open(shot_path, "w") as f:
+        json.dump(shot, f, indent=1)
+    t0 = time.time()
+    proc = subprocess.Popen([cloudbake, "render", shot_path, "--out", out_dir, "--threads",
+                             str(threads)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    err = proc.stderr.read().decode()
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    wall = time.time() - t0
+    if proc.returncode != 0:
+        raise RuntimeError("cloudbake render failed (%d):\n%s" % (proc.returncode, err[-2000:]))
+    bake = [float(x) for x in re.findall(r"light \S+ in ([0-9.]+) s", err)]
+    views = [float(x) for x in re.findall(r"rendered in ([0-9.]+) s", err)]
+    return (bake[0] if bake else 0.0), views, usage.ru_maxrss / 1024.0, wall
+
+
+def rel_rmse(cloudbake, test, ref):
+    out = subprocess.run([cloudbake, "compare", test, ref, "--json"], check=True,
+                         capture_output=True, text=True).stdout
+    return json.loads(out)["beauty"]["rel_rmse"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--ref-spp", type=int, default=1024)
+    ap.add_argument("--scenes", default="perlin_cloud,bunny_cloud,disney_cloud")
+    ap.add_argument("--work", default=None, help="outputs and cached references "
+                    "(default BUILD/bench_trade)")
+    ap.add_argument("--quick", action="store_true",
+                    help="smoke run: 64x48 views, reference 64 spp, few points")
+    a = ap.parse_args()
+    cloudbake = os.path.join(a.build, "tools", "cloudbake", "cloudbake")
+    if not os.access(cloudbake, os.X_OK):
+        sys.exit("trade_bench: %s not found; build first (deploy/build.sh)" % cloudbake)
+    work = a.work or os.path.join(a.build, "bench_trade" + ("_quick" if a.quick else ""))
+    ref_spp = 64 if a.quick else a.ref_spp
+    rows, notes = [], []
+    for scene in a.scenes.split(","):
+        path = os.path.join(ROOT, "bench", "scenes", scene + ".json")
+        with open(path) as f:
+            base = json.load(f)
+        missing = absolutise(base, os.path.dirname(path))
+        if missing:
+            print("trade_bench: skipping %s: %s is missing (the shared data folder beside the "
+                  "repository)" % (scene, missing), file=sys.stderr)
+            continue
+        if a.quick:
+            for v in base["views"]:
+                v["resolution"] = [64, 48]
+        names = [v["name"] for v in base["views"]]
+
+        def shot_with(bake):
+            s = json.loads(json.dumps(base))
+            s["bake"] = bake
+            return s
+
+        refs = {}
+        for tag, spp, seed in (("a", ref_spp, 1), ("b", max(1, ref_spp // 4), 2)):
+            d = os.path.join(work, "ref", "%s_%d_%d" % (scene, spp, seed))
+            if not all(os.path.exists(os.path.join(d, n + ".exr")) for n in names):
+                print("trade_bench: %s reference %d spp (seed %d)..." % (scene, spp, seed),
+                      file=sys.stderr)
+                _, views, _, wall = run(cloudbake, shot_with(
+                    {"method": "pathtrace", "samples": spp, "seed": seed}), d, a.threads)
+                notes.append("%s: reference %d spp rendered in %.0f s" % (scene, spp, wall))
+            refs[tag] = d
+        floor = sum(rel_rmse(cloudbake, os.path.join(refs["b"], n + ".exr"),
+                             os.path.join(refs["a"], n + ".exr")) for n in names) / len(names)
+        notes.append("%s: reference noise floor (rel. RMSE of the %d-spp reference) ~ %.4f"
+                     % (scene, ref_spp, floor / 5 ** 0.5))
+        for method, quality, bake in methods(a.quick):
+            d = os.path.join(work, scene, (method + "_" + quality).replace(" ", "_"))
+            print("trade_bench: %s %s %s..." % (scene, method, quality), file=sys.stderr)
+            bake_s, views, peak, _ = run(cloudbake, shot_with(bake), d, a.threads)
+            err = sum(rel_rmse(cloudbake, os.path.join(d, n + ".exr"),
+                               os.path.join(refs["a"], n + ".exr")) for n in names) / len(names)
+            rows.append((scene, method, quality, bake_s, sum(views) / max(1, len(views)), peak,
+                         err))
+            print("  bake %.2f s, render %.3f s/view, peak %.0f MiB, rel. RMSE %.3f"
+                  % rows[-1][3:], file=sys.stderr)
+    print("Views: %s; reference: pathtrace %d spp; threads: %d; phase HG g=0.85 (the real Mie "
+          "table makes a converged reference far costlier)." % (
+              "64x48" if a.quick else "160x120, 2 per scene", ref_spp, a.threads))
+    print("rel. RMSE = sqrt(mean over pixels and RGB of (x - r)^2) / mean(r), beauty, mean over "
+          "the views.\n")
+    print("| scene | method | quality | bake s | render s/view | peak MiB | rel. RMSE |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print("| %s | %s | %s | %.2f | %.3f | %.0f | %.3f |" % r)
+    print()
+    for n in notes:
+        print("- " + n)
+
+
+if __name__ == "__main__":
+    main()
