@@ -1,2 +1,190 @@
-// Being written.
+// BakedLight: its checks, its support, and its .vdb form (round trip, conventions, bad files).
+#include "core/bake/baked_light.h"
+
 #include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "core/bake/baked_light_vdb.h"
+#include "core/error.h"
+#include "core/io/vdb_io.h"
+#include "core/volume/analytic.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+
+// A 10^3 lattice with a 4^3 block of density in the middle and light grids over the support.
+BakedLight smallBake() {
+  BakedLight b;
+  b.grid.origin = Vec3(-1.0, 0.5, 2.0);
+  b.grid.voxel_size = 0.25;
+  b.grid.nx = b.grid.ny = b.grid.nz = 10;
+  b.method = "single";
+  b.sun_direction = normalize(Vec3(1, 2, 3));
+  b.metadata["cloudbake:light_resolution"] = "8";
+  b.density.assign(b.grid.voxelCount(), 0.f);
+  for (int k = 3; k < 7; ++k)
+    for (int j = 3; j < 7; ++j)
+      for (int i = 3; i < 7; ++i) b.density[b.grid.index(i, j, k)] = 0.5f + 0.1f * float(i);
+  BakeChannel& t = b.add(bake_grids::kSunTransmittance, 1);
+  BakeChannel& co = b.add(bake_grids::kMultipleFluence, 3);
+  for (size_t v = 0; v < b.grid.voxelCount(); ++v) {
+    t.data[v] = float(v % 97) / 97.f;
+    for (int c = 0; c < 3; ++c) co.data[3 * v + size_t(c)] = float(v % 13) * 0.1f + float(c);
+  }
+  b.trimToSupport();
+  return b;
+}
+
+class BakeFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("cloudbake_bake_file_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+void expectErrorNaming(const std::function<void()>& fn, const std::string& what) {
+  try {
+    fn();
+    ADD_FAILURE() << "no error; expected one naming " << what;
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+  }
+}
+
+TEST(BakedLight, TrimKeepsTheNeighboursOfDensityOnly) {
+  const BakedLight b = smallBake();
+  const auto& t = b.find(bake_grids::kSunTransmittance)->data;
+  // (2, 5, 5) touches density at (3, 5, 5); (1, 5, 5) does not; (2, 2, 2) touches (3, 3, 3).
+  EXPECT_EQ(t[b.grid.index(2, 5, 5)], float(b.grid.index(2, 5, 5) % 97) / 97.f);
+  EXPECT_EQ(t[b.grid.index(2, 2, 2)], float(b.grid.index(2, 2, 2) % 97) / 97.f);
+  EXPECT_EQ(t[b.grid.index(1, 5, 5)], 0.f);
+  EXPECT_EQ(t[b.grid.index(0, 0, 0)], 0.f);
+  EXPECT_EQ(b.find("nothing"), nullptr);
+}
+
+TEST(BakedLight, ValidateNamesTheGridAndTheVoxel) {
+  EXPECT_NO_THROW(smallBake().validate("bake"));
+  {
+    BakedLight b = smallBake();
+    b.density[b.grid.index(4, 4, 4)] = std::nanf("");
+    expectErrorNaming([&] { b.validate("bake"); }, "grid 'density': voxel (4, 4, 4)");
+  }
+  {
+    BakedLight b = smallBake();
+    b.density[7] = -1.f;
+    expectErrorNaming([&] { b.validate("bake"); }, "negative density");
+  }
+  {
+    BakedLight b = smallBake();
+    b.add(bake_grids::kMieRatio, 1).data[b.grid.index(4, 4, 4)] = 1.5f;
+    expectErrorNaming([&] { b.validate("bake"); }, "grid 'mie_ratio'");
+  }
+  {
+    BakedLight b = smallBake();
+    b.channels[bake_grids::kSunTransmittance].data.pop_back();
+    expectErrorNaming([&] { b.validate("bake"); }, "grid 'sun_transmittance' has");
+  }
+  {
+    BakedLight b = smallBake();
+    float* l = b.add(bake_grids::kLightDir, 3).data.data() + 3 * b.grid.index(4, 4, 4);
+    l[0] = 0.5f;
+    expectErrorNaming([&] { b.validate("bake"); }, "grid 'light_dir'");
+    l[0] = 1.f;  // unit: fine
+    EXPECT_NO_THROW(b.validate("bake"));
+  }
+  {
+    BakedLight b = smallBake();
+    b.sun_direction = Vec3(0, 0, 2);
+    expectErrorNaming([&] { b.validate("bake"); }, "sun direction");
+  }
+}
+
+TEST_F(BakeFile, RoundTripsExactlyWithVdbConventions) {
+  const BakedLight b = smallBake();
+  const std::string file = path("bake.vdb");
+  writeBakedLight(file, b);
+  EXPECT_FALSE(fs::exists(file + ".tmp"));
+  const BakedLight r = readBakedLight(file);
+  EXPECT_EQ(r.method, "single");
+  EXPECT_NEAR(length(r.sun_direction - b.sun_direction), 0, 1e-15);
+  EXPECT_EQ(r.grid.nx, 10);
+  EXPECT_NEAR(r.grid.voxel_size, 0.25, 1e-12);
+  EXPECT_NEAR(length(r.grid.origin - b.grid.origin), 0, 1e-12);
+  EXPECT_EQ(r.density, b.density);
+  ASSERT_EQ(r.channels.size(), b.channels.size());
+  for (const auto& [name, c] : b.channels) {
+    ASSERT_NE(r.find(name), nullptr) << name;
+    EXPECT_EQ(r.find(name)->components, c.components) << name;
+    EXPECT_EQ(r.find(name)->data, c.data) << name;
+  }
+  EXPECT_EQ(r.metadata.at("cloudbake:light_resolution"), "8");
+
+  // What other tools see: a fog-volume density, invariant vectors, one transform whose voxel
+  // centres are the lattice's, and the provenance metadata.
+  VdbFileReader vdb(file);
+  EXPECT_EQ(vdb.fileMetadata().at("cloudbake:method"), "single");
+  EXPECT_EQ(vdb.fileMetadata().at("cloudbake:lattice"), "10 10 10");
+  EXPECT_EQ(vdb.fileMetadata().at("cloudbake:version"), CLOUDBAKE_VERSION);
+  EXPECT_TRUE(vdb.fileMetadata().count("cloudbake:sun_direction"));
+  for (const VdbGridInfo& g : vdb.grids()) {
+    if (g.name == "density") {
+      EXPECT_EQ(g.grid_class, "fog volume");
+    }
+    if (g.name == "Co") {
+      EXPECT_EQ(g.vector_type, "invariant");
+    }
+    EXPECT_NEAR(g.voxel_size, 0.25, 1e-12) << g.name;
+  }
+  const Vec3 c = b.grid.center(5, 4, 6);
+  EXPECT_FLOAT_EQ(vdb.floatAt("density", c), b.density[b.grid.index(5, 4, 6)]);
+  EXPECT_FLOAT_EQ(float(vdb.vec3At("Co", c).z),
+                  b.find("Co")->data[3 * b.grid.index(5, 4, 6) + 2]);
+}
+
+TEST_F(BakeFile, BadFilesAreRefusedNamingThePath) {
+  const std::string missing = path("missing.vdb");
+  expectErrorNaming([&] { readBakedLight(missing); }, missing);
+
+  const std::string good = path("good.vdb");
+  writeBakedLight(good, smallBake());
+  std::string bytes;
+  {
+    std::ifstream in(good, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::string cut = path("cut.vdb");
+  std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  expectErrorNaming([&] { readBakedLight(cut); }, cut);
+
+  const std::string junk = path("junk.vdb");
+  std::ofstream(junk, std::ios::binary) << "this is not an OpenVDB file at all";
+  expectErrorNaming([&] { readBakedLight(junk); }, junk);
+
+  // A valid VDB that is not a bake (a density written by writeVdb).
+  const std::string plain = path("plain.vdb");
+  VdbWriteOptions o;
+  o.voxel_size = 0.25;
+  writeVdb(plain, BoxDensity(Vec3(0.0), Vec3(1.0), 1.0), o);
+  expectErrorNaming([&] { readBakedLight(plain); }, "not a cloudbake bake");
+
+  // writeBakedLight does not validate; reading does.
+  BakedLight nan = smallBake();
+  nan.channels[bake_grids::kSunTransmittance].data[nan.grid.index(4, 4, 4)] = std::nanf("");
+  const std::string with_nan = path("nan.vdb");
+  writeBakedLight(with_nan, nan);
+  expectErrorNaming([&] { readBakedLight(with_nan); }, "grid 'sun_transmittance'");
+}
+
+}  // namespace
+}  // namespace cloudbake
