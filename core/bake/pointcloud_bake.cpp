@@ -74,7 +74,7 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
   const BakeChannel* vis = bake.find(bake_grids::kSkyVisibility);
   const PointCloudResult result =
       runPointcloud(bake.grid, bake.density, vis ? vis->data : std::vector<float>(), medium,
-                    sun_dir, options, true, subRange(progress, kSky, kPoints));
+                    sun_dir, options, options.tail, subRange(progress, kSky, kPoints));
   if (!options.sky) bake.channels.erase(bake_grids::kSkyVisibility);
 
   t0 = Clock::now();

@@ -23,6 +23,9 @@ struct PointcloudOptions {
   int light_resolution = 128;   ///< lattice resolution, as SingleBakeOptions
   double step = 0;              ///< view ray-march step; 0: half a lattice voxel
   bool sky = true;              ///< also bake sky_visibility
+  /// Add the geometric tail of the orders after the last pass (normalised rule); false shows
+  /// exactly the orders computed, e.g. for a pass-by-pass sequence (seed 000's Figure 9).
+  bool tail = true;
   uint64_t seed = 1;            ///< point jitter; same seed, same bake at any thread count
 };
 

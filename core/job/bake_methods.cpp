@@ -44,6 +44,7 @@ PointcloudOptions pointcloudOptions(const ShotSpec& shot) {
   o.rule = k.value("rule", std::string("normalized")) == "paper" ? PointcloudOptions::Rule::kPaper
                                                                  : PointcloudOptions::Rule::kNormalized;
   o.output_mapping = k.value("output_mapping", o.output_mapping);
+  o.tail = k.value("tail", o.tail);
   o.light_resolution = k.value("light_resolution", o.light_resolution);
   o.step = k.value("step", o.step);
   o.sky = needsSky(shot);

@@ -157,8 +157,9 @@ std::string parseMethodKnobs(const Object& o, BakeSpec::Method method) {
       break;
     case BakeSpec::Method::kPointcloud:
       o.allowOnly({"method", "samples", "seed", "points", "passes", "radius", "rule", "tolerance",
-                   "output_mapping", "step", "light_resolution"},
+                   "output_mapping", "tail", "step", "light_resolution"},
                   context);
+      if (auto* v = o.find("tail")) knobs["tail"] = r.boolean(*v, o.path("tail"));
       integer("points", 64, int64_t(1) << 24);
       num("step", 0, 1e12, true);
       integer("light_resolution", 8, 1024);

@@ -23,6 +23,8 @@ void addMieCommand(CLI::App& app, int* exit_code);
 void addPhaseCommand(CLI::App& app, int* exit_code);
 /// `cloudbake compare`: a view against a reference view, per layer (cmd_compare.cpp).
 void addCompareCommand(CLI::App& app, int* exit_code);
+/// `cloudbake bake-slice`: a colour-mapped slice of a bake's grid (cmd_bake_slice.cpp).
+void addBakeSliceCommand(CLI::App& app, int* exit_code);
 /// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
 void addRenderCommand(CLI::App& app, int* exit_code);
 

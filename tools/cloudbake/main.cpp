@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
   addPhaseCommand(app, &exit_code);
   addRenderCommand(app, &exit_code);
   addCompareCommand(app, &exit_code);
+  addBakeSliceCommand(app, &exit_code);
 
   try {
     app.parse(argc, argv);

@@ -224,5 +224,70 @@ TEST_F(RenderCli, AssetErrorsFoundWhileBuildingNameTheField) {
   EXPECT_NE(r.err.find("fake.json: /volume/vdb: "), std::string::npos) << r.err;
 }
 
+// A tiny pointcloud bake, inspected with bake-slice and compared with compare.
+TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
+  json j = slab();
+  j["volume"] = {{"sphere", {{"center", {0, 0, 0}}, {"radius", 1}, {"density", 1}}}};
+  j["bake"] = {{"method", "pointcloud"}, {"points", 1024}, {"passes", 3}, {"light_resolution", 16}};
+  j["views"][0]["camera"]["position"] = {0, 0, 5};
+  j["views"][0]["resolution"] = {16, 16};
+  j["outputs"] = {{"exr", true}, {"vdb", true}};
+  const fs::path out = dir_ / "pc";
+  CliResult r = run("render '" + writeShot("pc.json", j).string() + "' --out '" + out.string() +
+                    "' --quiet");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string bake = (out / "bake.vdb").string();
+  r = run("bake-slice '" + bake + "' --grid mie_ratio --axis y --png '" +
+          (dir_ / "r.png").string() + "'");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json slice = json::parse(r.out);
+  EXPECT_GE(slice.at("min").get<double>(), 0.0);
+  EXPECT_LE(slice.at("max").get<double>(), 1.0);
+  EXPECT_GT(fs::file_size(dir_ / "r.png"), 100u);
+  EXPECT_EQ(slurp(dir_ / "r.png").substr(1, 3), "PNG");
+  r = run("bake-slice '" + bake + "' --grid Co --axis z --at 0.1 --png '" +
+          (dir_ / "co.png").string() + "'");
+  EXPECT_EQ(r.rc, 0) << r.err;
+  r = run("bake-slice '" + bake + "' --grid colour --png '" + (dir_ / "x.png").string() + "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--grid: 'colour' is not in"), std::string::npos) << r.err;
+  r = run("bake-slice '" + bake + "' --grid density --at 99 --png '" + (dir_ / "x.png").string() +
+          "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--at"), std::string::npos) << r.err;
+  r = run("bake-slice '" + (dir_ / "none.vdb").string() + "' --grid density --png '" +
+          (dir_ / "x.png").string() + "'");
+  EXPECT_EQ(r.rc, 3);
+
+  // compare: a view against itself is exact; against a brighter copy it is not.
+  const std::string view = (out / "nadir.exr").string();
+  r = run("compare '" + view + "' '" + view + "' --json");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json same = json::parse(r.out);
+  EXPECT_EQ(same.at("beauty").at("rel_rmse").get<double>(), 0.0);
+  EXPECT_GT(same.at("multiple").at("mean").get<double>(), 0.0);
+  j["lighting"]["sun"]["irradiance"] = {6.28318, 6.28318, 6.28318};  // twice as bright
+  const fs::path out2 = dir_ / "pc2";
+  r = run("render '" + writeShot("pc2.json", j).string() + "' --out '" + out2.string() +
+          "' --quiet");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  r = run("compare '" + (out2 / "nadir.exr").string() + "' '" + view + "' --json");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json twice = json::parse(r.out);
+  EXPECT_NEAR(twice.at("sun").at("mean").get<double>(),
+              2 * twice.at("sun").at("reference_mean").get<double>(), 1e-6);
+  // x = 2r: RMSE = sqrt(mean(r^2)), so rel. RMSE = sqrt(mean(r^2)) / mean(r).
+  const Image ref = readExr(view).layers.at("sun");
+  double s1 = 0, s2 = 0;
+  for (float v : ref.data) {
+    s1 += v;
+    s2 += double(v) * v;
+  }
+  EXPECT_NEAR(twice.at("sun").at("rel_rmse").get<double>(),
+              std::sqrt(s2 / double(ref.data.size())) / (s1 / double(ref.data.size())), 1e-4);
+  r = run("compare '" + view + "' '" + (dir_ / "none.exr").string() + "'");
+  EXPECT_NE(r.rc, 0);
+}
+
 }  // namespace
 }  // namespace cloudbake
