@@ -50,7 +50,7 @@ uint8_t srgbByte(double linear) {
 
 // Preview only: exposure puts the 99th percentile of luminance at 0.8, then sRGB encoding (as
 // `cloudbake render --png`). The EXR stays the authoritative, unexposed radiance.
-void writePreviewPng(const std::string& path, const Image& beauty) {
+void writePreviewPng(const std::string& path, const Image& beauty, double fixed_exposure) {
   std::vector<double> lum;
   lum.reserve(size_t(beauty.width) * beauty.height);
   for (int y = 0; y < beauty.height; ++y) {
@@ -61,7 +61,9 @@ void writePreviewPng(const std::string& path, const Image& beauty) {
   }
   const size_t k = std::min(lum.size() - 1, size_t(0.99 * double(lum.size())));
   std::nth_element(lum.begin(), lum.begin() + std::ptrdiff_t(k), lum.end());
-  const double exposure = lum[k] > 0 && std::isfinite(lum[k]) ? 0.8 / lum[k] : 1.0;
+  const double exposure = fixed_exposure > 0                          ? fixed_exposure
+                          : lum[k] > 0 && std::isfinite(lum[k]) ? 0.8 / lum[k]
+                                                                : 1.0;
   std::vector<uint8_t> px(size_t(beauty.width) * beauty.height * 3);
   for (int y = 0; y < beauty.height; ++y) {
     for (int x = 0; x < beauty.width; ++x) {
@@ -220,7 +222,8 @@ void runBakeMethod(const ShotSpec& shot, const RunOptions& opt, const ShotCacheK
     report("render", 2 + i, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s");
     if (opt.png) {
       const std::string png_name = camera.name + ".png";
-      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path));
+      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path),
+                      opt.png_exposure);
       result.files.push_back(describeOutput(opt.out_dir, png_name));
     }
   }
@@ -263,6 +266,10 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   if (!(opt.sun_tolerance_deg >= 0 && opt.sun_tolerance_deg <= 90)) {
     throw InputError("sun_tolerance_deg: must be in [0, 90] degrees, got " +
                      std::to_string(opt.sun_tolerance_deg));
+  }
+  if (!(opt.png_exposure >= 0 && opt.png_exposure <= 1e12)) {
+    throw InputError("png_exposure: must be in [0, 1e12] (0 = auto), got " +
+                     std::to_string(opt.png_exposure));
   }
   if (opt.samples != -1 && (opt.samples < 1 || opt.samples > 1000000)) {
     throw InputError("samples: must be in [1, 1000000], got " + std::to_string(opt.samples));
@@ -437,7 +444,8 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
                fixed(secondsSince(t0), 2) + " s");
     if (opt.png) {
       const std::string png_name = camera.name + ".png";
-      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path));
+      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path),
+                      opt.png_exposure);
       result.files.push_back(describeOutput(opt.out_dir, png_name));
     }
   }

@@ -35,6 +35,9 @@ struct RunOptions {
   int threads = 0;                   ///< path tracer threads; 0: the caller's TBB arena
   int samples = -1;                  ///< -1: the shot's bake.samples; else 1..1e6
   bool png = false;                  ///< also DIR/<view>.png (auto-exposed sRGB preview)
+  /// > 0: the PNG previews multiply radiance by this instead of auto-exposing (so previews of
+  /// different lighting compare); finite, at most 1e12.
+  double png_exposure = 0;
   RunProgressFn progress;            ///< optional
   BakeCache* cache = nullptr;        ///< optional: reuse/commit renders and VDBs
   VolumeCache* volumes = nullptr;    ///< optional: reuse built density fields

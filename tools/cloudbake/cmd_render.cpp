@@ -27,6 +27,7 @@ struct RenderOptions {
   int samples = -1;  // -1: the shot's bake.samples
   bool quiet = false;
   bool png = false;
+  double png_exposure = 0;
 };
 
 // Per-view progress on stderr: an updating line on a terminal, one line per 10% otherwise (logs
@@ -99,6 +100,7 @@ std::vector<std::string> render(const RenderOptions& opt) {
   run.threads = opt.threads;
   run.samples = opt.samples;
   run.png = opt.png;
+  run.png_exposure = opt.png_exposure;
   // runShot reports each view once with its label at 0, then the tracer's fractions, then once
   // more with a summary message at the end; other stages report a message each.
   std::unique_ptr<ProgressLine> line;
@@ -145,6 +147,9 @@ void addRenderCommand(CLI::App& app, int* exit_code) {
   cmd->add_flag("--quiet", opt->quiet, "no progress on stderr");
   cmd->add_flag("--png", opt->png,
                 "also write an auto-exposed sRGB preview DIR/<view>.png beside each EXR");
+  cmd->add_option("--png-exposure", opt->png_exposure,
+                  "fixed exposure of the PNG previews (radiance multiplier; default: auto), so "
+                  "previews of different lighting compare");
   cmd->callback([opt, exit_code] {
     // Exit codes are decided here rather than in main() because a missing file (3) is an
     // InputError (2) to everything else.
