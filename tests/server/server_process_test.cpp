@@ -655,10 +655,16 @@ TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
       "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
   const std::vector<BadCase> cases = {
       {"pointcloud points over the limit",
-       replaced(replaced(base, R"("method": "pathtrace")", R"("method": "pointcloud", "points": 5000)"),
+       replaced(replaced(base, R"("method": "pathtrace")",
+                         R"("method": "pointcloud", "points": 5000, "light_resolution": 8)"),
                 R"("vdb": false, "vdb_voxel_size": 0.1)", R"("vdb": false)"),
        2,
        "/bake/points: 5000 points exceed this server's limit of 1000 (--max-points)"},
+      {"bake lattice over the voxel limit",
+       replaced(replaced(base, R"("method": "pathtrace")",
+                         R"("method": "single", "light_resolution": 64)"),
+                R"("vdb": false, "vdb_voxel_size": 0.1)", R"("vdb": false)"),
+       2, "/bake/light_resolution: a bake lattice of up to (64 + 2)^3 gives 287496 voxels"},
       {"VDB active voxels over the limit",
        withVolume(R"({"vdb": {"path": "big.vdb"}})"),
        2,
