@@ -1,26 +1,37 @@
 #include "core/bake/baked_light.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <cmath>
 #include <sstream>
 
 #include "core/error.h"
 
 namespace cloudbake {
-namespace {
 
-// True when a voxel within the 26-neighbourhood of (i, j, k) (itself included) has density > 0.
-bool nearDensity(const BakeGrid& g, const std::vector<float>& rho, int i, int j, int k) {
-  for (int dk = -1; dk <= 1; ++dk)
-    for (int dj = -1; dj <= 1; ++dj)
-      for (int di = -1; di <= 1; ++di) {
-        const int x = i + di, y = j + dj, z = k + dk;
-        if (x < 0 || y < 0 || z < 0 || x >= g.nx || y >= g.ny || z >= g.nz) continue;
-        if (rho[g.index(x, y, z)] > 0) return true;
+std::vector<uint8_t> densitySupport(const BakeGrid& g, const std::vector<float>& density) {
+  std::vector<uint8_t> support(g.voxelCount(), 0);
+  // A gather (each voxel looks at its neighbours), so threads never write the same byte.
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.nz), [&](const tbb::blocked_range<int>& r) {
+    for (int k = r.begin(); k != r.end(); ++k) {
+      for (int j = 0; j < g.ny; ++j) {
+        for (int i = 0; i < g.nx; ++i) {
+          bool any = false;
+          for (int dk = -1; dk <= 1 && !any; ++dk)
+            for (int dj = -1; dj <= 1 && !any; ++dj)
+              for (int di = -1; di <= 1 && !any; ++di) {
+                const int a = i + di, b = j + dj, c = k + dk;
+                if (a < 0 || b < 0 || c < 0 || a >= g.nx || b >= g.ny || c >= g.nz) continue;
+                any = density[g.index(a, b, c)] > 0;
+              }
+          support[g.index(i, j, k)] = any ? 1 : 0;
+        }
       }
-  return false;
+    }
+  });
+  return support;
 }
-
-}  // namespace
 
 const BakeChannel* BakedLight::find(const std::string& name) const {
   auto it = channels.find(name);
@@ -36,16 +47,14 @@ BakeChannel& BakedLight::add(const std::string& name, int components) {
 
 void BakedLight::trimToSupport() {
   if (density.size() != grid.voxelCount()) return;  // validate() reports it
-  for (int k = 0; k < grid.nz; ++k)
-    for (int j = 0; j < grid.ny; ++j)
-      for (int i = 0; i < grid.nx; ++i) {
-        if (nearDensity(grid, density, i, j, k)) continue;
-        const size_t v = grid.index(i, j, k);
-        for (auto& [name, c] : channels) {
-          if (c.data.size() != grid.voxelCount() * size_t(c.components)) continue;
-          for (int e = 0; e < c.components; ++e) c.data[v * size_t(c.components) + size_t(e)] = 0;
-        }
-      }
+  const std::vector<uint8_t> support = densitySupport(grid, density);
+  for (size_t v = 0; v < support.size(); ++v) {
+    if (support[v]) continue;
+    for (auto& [name, c] : channels) {
+      if (c.data.size() != grid.voxelCount() * size_t(c.components)) continue;
+      for (int e = 0; e < c.components; ++e) c.data[v * size_t(c.components) + size_t(e)] = 0;
+    }
+  }
 }
 
 void BakedLight::validate(const std::string& what) const {

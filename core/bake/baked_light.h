@@ -2,6 +2,7 @@
 // per unit sun irradiance on a voxel lattice, so any view and any sun colour renders from it.
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <string>
 #include <vector>
@@ -39,6 +40,11 @@ constexpr const char* kMieRatio = "mie_ratio";
 /// with emission = sigma_s * Cd * E.
 constexpr const char* kCd = "Cd";
 }  // namespace bake_grids
+
+/// The density's support on a lattice: 1 for every voxel with a density > 0 in its
+/// 26-neighbourhood (itself included), the voxels a trilinear lookup can weight with non-zero
+/// density; 0 elsewhere. `density` holds grid.voxelCount() values. Parallel, deterministic.
+std::vector<uint8_t> densitySupport(const BakeGrid& grid, const std::vector<float>& density);
 
 /// One grid of a bake: `components` floats per voxel (1 or 3), interleaved, in BakeGrid order.
 struct BakeChannel {

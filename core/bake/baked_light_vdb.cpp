@@ -1,25 +1,17 @@
 #include "core/bake/baked_light_vdb.h"
 
-#include <openvdb/io/File.h>
-#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
-#include <mutex>
 #include <sstream>
 
 #include "core/error.h"
+#include "core/io/openvdb_file.h"
 
 namespace cloudbake {
 namespace {
 
-void initOpenVdb() {
-  static std::once_flag once;
-  std::call_once(once, [] { openvdb::initialize(); });
-}
 
 std::string exact(double v) {
   char buf[64];
@@ -27,25 +19,6 @@ std::string exact(double v) {
   return buf;
 }
 
-// Voxels a trilinear lookup can weight with non-zero density: density > 0 in the
-// 26-neighbourhood. Only these are stored (BakedLight::trimToSupport zeroes the rest).
-std::vector<uint8_t> supportMask(const BakedLight& b) {
-  const BakeGrid& g = b.grid;
-  std::vector<uint8_t> mask(g.voxelCount(), 0);
-  for (int k = 0; k < g.nz; ++k)
-    for (int j = 0; j < g.ny; ++j)
-      for (int i = 0; i < g.nx; ++i) {
-        if (!(b.density[g.index(i, j, k)] > 0)) continue;
-        for (int dk = -1; dk <= 1; ++dk)
-          for (int dj = -1; dj <= 1; ++dj)
-            for (int di = -1; di <= 1; ++di) {
-              const int x = i + di, y = j + dj, z = k + dk;
-              if (x < 0 || y < 0 || z < 0 || x >= g.nx || y >= g.ny || z >= g.nz) continue;
-              mask[g.index(x, y, z)] = 1;
-            }
-      }
-  return mask;
-}
 
 openvdb::math::Transform::Ptr latticeTransform(const BakeGrid& g) {
   auto xform = openvdb::math::Transform::createLinearTransform(g.voxel_size);
@@ -70,15 +43,6 @@ typename GridT::Ptr makeGrid(const BakedLight& b, const std::vector<uint8_t>& ma
   return grid;
 }
 
-std::map<std::string, std::string> stringMeta(const openvdb::MetaMap& meta) {
-  std::map<std::string, std::string> out;
-  for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
-    if (it->second && it->second->typeName() == openvdb::StringMetadata::staticTypeName()) {
-      out[it->first] = it->second->str();
-    }
-  }
-  return out;
-}
 
 }  // namespace
 
@@ -88,7 +52,7 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
   if (bake.density.size() != g.voxelCount()) {
     throw InputError(path + ": bake density does not match its lattice");
   }
-  const std::vector<uint8_t> mask = supportMask(bake);
+  const std::vector<uint8_t> mask = densitySupport(g, bake.density);
   openvdb::GridPtrVec grids;
   auto density = makeGrid<openvdb::FloatGrid>(bake, mask, bake_grids::kDensity,
                                               [&](size_t v) { return bake.density[v]; });
@@ -127,38 +91,13 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
       "per unit sun irradiance");
   put("cloudbake:lattice",
       std::to_string(g.nx) + " " + std::to_string(g.ny) + " " + std::to_string(g.nz));
-  const std::string tmp = path + ".tmp";
-  try {
-    openvdb::io::File file(tmp);
-    file.write(grids, meta);
-    file.close();
-  } catch (const std::exception& e) {
-    std::remove(tmp.c_str());
-    throw InputError(path + ": cannot write VDB file (" + e.what() + ")");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw InputError(path + ": cannot rename " + tmp + " into place (" + ec.message() + ")");
-  }
+  writeVdbFileAtomically(path, grids, meta);
 }
 
 BakedLight readBakedLight(const std::string& path) {
-  initOpenVdb();
-  if (!std::filesystem::is_regular_file(path)) throw InputError(path + ": bake file not found");
-  openvdb::GridPtrVec grids;
-  std::map<std::string, std::string> meta;
-  try {
-    // A stream that throws on short reads: openvdb::io::File loads truncated files silently.
-    std::ifstream in(path, std::ios::binary);
-    in.exceptions(std::ios::failbit | std::ios::badbit);
-    openvdb::io::Stream stream(in, /*delayLoad=*/false);
-    grids = *stream.getGrids();
-    meta = stringMeta(*stream.getMetadata());
-  } catch (const std::exception& e) {
-    throw InputError(path + ": not a readable OpenVDB file (" + e.what() + ")");
-  }
+  VdbFileContents contents = readVdbFileChecked(path);
+  const openvdb::GridPtrVec& grids = contents.grids;
+  const std::map<std::string, std::string>& meta = contents.metadata;
   auto need = [&](const char* key) {
     auto it = meta.find(key);
     if (it == meta.end()) {

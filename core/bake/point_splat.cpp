@@ -12,34 +12,6 @@
 #include "core/error.h"
 
 namespace cloudbake {
-namespace {
-
-// Voxels within one voxel (26-neighbourhood) of a voxel with density > 0.
-std::vector<uint8_t> densitySupport(const BakeGrid& g, const std::vector<float>& density) {
-  std::vector<uint8_t> support(g.voxelCount(), 0);
-  tbb::parallel_for(tbb::blocked_range<int>(0, g.nz), [&](const tbb::blocked_range<int>& r) {
-    for (int k = r.begin(); k != r.end(); ++k) {
-      for (int j = 0; j < g.ny; ++j) {
-        for (int i = 0; i < g.nx; ++i) {
-          bool any = false;
-          for (int dk = -1; dk <= 1 && !any; ++dk) {
-            for (int dj = -1; dj <= 1 && !any; ++dj) {
-              for (int di = -1; di <= 1 && !any; ++di) {
-                const int a = i + di, b = j + dj, c = k + dk;
-                if (a < 0 || b < 0 || c < 0 || a >= g.nx || b >= g.ny || c >= g.nz) continue;
-                any = density[g.index(a, b, c)] > 0;
-              }
-            }
-          }
-          support[g.index(i, j, k)] = any ? 1 : 0;
-        }
-      }
-    }
-  });
-  return support;
-}
-
-}  // namespace
 
 double splatPoints(BakedLight& bake, const PointCloudResult& result,
                    const std::function<bool(double)>& cancelled) {

@@ -18,17 +18,7 @@ void computeSunTransmittance(BakedLight& bake, const Vec3& sun_dir, double extin
   }
   BakeChannel& t = bake.add(bake_grids::kSunTransmittance, 1);
   const float* rho = bake.density.data();
-  // Support: density > 0 within the 26-neighbourhood (what trilinear lookups can weight).
-  auto inSupport = [&](int i, int j, int k) {
-    for (int dk = -1; dk <= 1; ++dk)
-      for (int dj = -1; dj <= 1; ++dj)
-        for (int di = -1; di <= 1; ++di) {
-          const int x = i + di, y = j + dj, z = k + dk;
-          if (x < 0 || y < 0 || z < 0 || x >= g.nx || y >= g.ny || z >= g.nz) continue;
-          if (rho[g.index(x, y, z)] > 0) return true;
-        }
-    return false;
-  };
+  const std::vector<uint8_t> support = densitySupport(g, bake.density);
   const double step = 0.5 * g.voxel_size;
   std::atomic<bool> cancelled{false};
   std::atomic<int> slices_done{0};
@@ -41,7 +31,7 @@ void computeSunTransmittance(BakedLight& bake, const Vec3& sun_dir, double extin
       for (int k = r.begin(); k != r.end(); ++k) {
         for (int j = 0; j < g.ny; ++j) {
           for (int i = 0; i < g.nx; ++i) {
-            if (!inSupport(i, j, k)) continue;
+            if (!support[g.index(i, j, k)]) continue;
             t.data[g.index(i, j, k)] =
                 float(marchTransmittance(g, rho, extinction, g.center(i, j, k), sun_dir, step));
           }

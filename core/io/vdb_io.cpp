@@ -11,17 +11,13 @@
 #include <set>
 
 #include "core/error.h"
+#include "core/io/openvdb_file.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/openvdb_grid.h"
 #include "core/volume/sources.h"
 
 namespace cloudbake {
 namespace {
-
-void initOpenVdb() {
-  static std::once_flag once;
-  std::call_once(once, [] { openvdb::initialize(); });
-}
 
 // Evaluates `fn` at every active voxel of `topology` into a grid of the same topology.
 template <typename GridT, typename Fn>
@@ -104,21 +100,7 @@ void writeVdb(const std::string& path, const DensityField& density,
   for (const auto& [k, v] : options.file_metadata)
     file_meta.insertMeta(k, openvdb::StringMetadata(v));
 
-  const std::string tmp = path + ".tmp";
-  try {
-    openvdb::io::File file(tmp);
-    file.write(grids, file_meta);
-    file.close();
-  } catch (const std::exception& e) {
-    std::remove(tmp.c_str());
-    throw InputError(path + ": cannot write VDB file (" + e.what() + ")");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw InputError(path + ": cannot rename " + tmp + " into place (" + ec.message() + ")");
-  }
+  writeVdbFileAtomically(path, grids, file_meta);
 }
 
 struct VdbFileReader::Impl {
@@ -134,34 +116,12 @@ struct VdbFileReader::Impl {
   }
 };
 
-namespace {
-
-std::map<std::string, std::string> stringMeta(const openvdb::MetaMap& meta) {
-  std::map<std::string, std::string> out;
-  for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
-    if (it->second && it->second->typeName() == openvdb::StringMetadata::staticTypeName()) {
-      out[it->first] = it->second->str();
-    }
-  }
-  return out;
-}
-
-}  // namespace
-
 VdbFileReader::VdbFileReader(const std::string& path) : impl_(std::make_unique<Impl>()) {
   initOpenVdb();
   impl_->path = path;
-  if (!std::filesystem::is_regular_file(path)) throw InputError(path + ": VDB file not found");
-  try {
-    // Like loadVdbVolume: a stream that throws on short reads catches truncated files.
-    std::ifstream in(path, std::ios::binary);
-    in.exceptions(std::ios::failbit | std::ios::badbit);
-    openvdb::io::Stream stream(in, /*delayLoad=*/false);
-    impl_->grids = *stream.getGrids();
-    impl_->file_meta = stringMeta(*stream.getMetadata());
-  } catch (const std::exception& e) {
-    throw InputError(path + ": not a readable OpenVDB file (" + e.what() + ")");
-  }
+  VdbFileContents contents = readVdbFileChecked(path);
+  impl_->grids = std::move(contents.grids);
+  impl_->file_meta = std::move(contents.metadata);
   for (const auto& g : impl_->grids) {
     VdbGridInfo info;
     info.name = g->getName();
@@ -172,7 +132,7 @@ VdbFileReader::VdbFileReader(const std::string& path) : impl_(std::make_unique<I
     }
     info.active_voxels = g->activeVoxelCount();
     info.voxel_size = g->voxelSize()[0];
-    info.metadata = stringMeta(*g);
+    info.metadata = stringMetadata(*g);
     impl_->infos.push_back(info);
   }
 }
@@ -199,6 +159,58 @@ Vec3 VdbFileReader::vec3At(const std::string& name, const Vec3& p) const {
       grid->transform().worldToIndexCellCentered(openvdb::Vec3d(p.x, p.y, p.z));
   const openvdb::Vec3s v = grid->tree().getValue(ijk);
   return {v.x(), v.y(), v.z()};
+}
+
+void initOpenVdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+void writeVdbFileAtomically(const std::string& path, const openvdb::GridPtrVec& grids,
+                            const openvdb::MetaMap& meta) {
+  initOpenVdb();
+  const std::string tmp = path + ".tmp";
+  try {
+    openvdb::io::File file(tmp);
+    file.write(grids, meta);
+    file.close();
+  } catch (const std::exception& e) {
+    std::remove(tmp.c_str());
+    throw InputError(path + ": cannot write VDB file (" + e.what() + ")");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::remove(tmp.c_str());
+    throw InputError(path + ": cannot rename " + tmp + " into place (" + ec.message() + ")");
+  }
+}
+
+VdbFileContents readVdbFileChecked(const std::string& path) {
+  initOpenVdb();
+  if (!std::filesystem::is_regular_file(path)) throw InputError(path + ": VDB file not found");
+  VdbFileContents out;
+  try {
+    // Like loadVdbVolume: a stream that throws on short reads catches truncated files.
+    std::ifstream in(path, std::ios::binary);
+    in.exceptions(std::ios::failbit | std::ios::badbit);
+    openvdb::io::Stream stream(in, /*delayLoad=*/false);
+    out.grids = *stream.getGrids();
+    out.metadata = stringMetadata(*stream.getMetadata());
+  } catch (const std::exception& e) {
+    throw InputError(path + ": not a readable OpenVDB file (" + e.what() + ")");
+  }
+  return out;
+}
+
+std::map<std::string, std::string> stringMetadata(const openvdb::MetaMap& meta) {
+  std::map<std::string, std::string> out;
+  for (auto it = meta.beginMeta(); it != meta.endMeta(); ++it) {
+    if (it->second && it->second->typeName() == openvdb::StringMetadata::staticTypeName()) {
+      out[it->first] = it->second->str();
+    }
+  }
+  return out;
 }
 
 }  // namespace cloudbake

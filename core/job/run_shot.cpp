@@ -117,6 +117,15 @@ OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
   return f;
 }
 
+// DIR/<view>.png beside the view's EXR (a display preview; the EXR is the product).
+void addPreview(const RunOptions& opt, const std::string& view, const std::string& exr_path,
+                RunResult& result) {
+  const std::string png_name = view + ".png";
+  writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(exr_path),
+                  opt.png_exposure);
+  result.files.push_back(describeOutput(opt.out_dir, png_name));
+}
+
 // Methods single and pointcloud: the light is baked once per light direction (or taken from the
 // cache: then no scattering is computed at all), and every view is ray-marched from the bake.
 template <class NeedLights, class NeedScene, class Report, class ShouldStop>
@@ -220,12 +229,7 @@ void runBakeMethod(const ShotSpec& shot, const RunOptions& opt, const ShotCacheK
     ++result.views_from_bake;
     progress.view_fraction = 1;
     report("render", 2 + i, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s");
-    if (opt.png) {
-      const std::string png_name = camera.name + ".png";
-      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path),
-                      opt.png_exposure);
-      result.files.push_back(describeOutput(opt.out_dir, png_name));
-    }
+    if (opt.png) addPreview(opt, camera.name, path, result);
   }
   progress.view.clear();
   if (shot.outputs.vdb) {
@@ -442,12 +446,7 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
                                   : ": from cache in ")
                            : ": rendered in ") +
                fixed(secondsSince(t0), 2) + " s");
-    if (opt.png) {
-      const std::string png_name = camera.name + ".png";
-      writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(path),
-                      opt.png_exposure);
-      result.files.push_back(describeOutput(opt.out_dir, png_name));
-    }
+    if (opt.png) addPreview(opt, camera.name, path, result);
   }
   progress.view.clear();
 

@@ -22,18 +22,11 @@
 #include "core/job/volume_cache.h"
 #include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
+#include "tests/server/job_test_util.h"
 
 namespace cloudbake {
 namespace {
 namespace fs = std::filesystem;
-
-fs::path freshDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("cloudbake_job_test_" + name + "_" + uniqueSuffix());
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
 std::string tinyShot(const std::string& extra_sun = "[1, 1, 1]", int width = 8,
                      const std::string& camera_y = "-5") {

@@ -15,17 +15,11 @@
 #include "core/job/volume_cache.h"
 #include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
+#include "tests/server/job_test_util.h"
 
 namespace cloudbake {
 namespace {
 namespace fs = std::filesystem;
-
-fs::path freshDir(const std::string& name) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("cloudbake_bake_job_test_" + name + "_" + uniqueSuffix());
-  fs::create_directories(dir);
-  return dir;
-}
 
 // A sphere lit from above-left, one orthographic view from -y (or +x for "side").
 std::string shot(const std::string& method, const std::string& knobs = "",

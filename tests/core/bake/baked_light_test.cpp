@@ -10,6 +10,7 @@
 
 #include "core/bake/baked_light_vdb.h"
 #include "core/error.h"
+#include "tests/core/bake/bake_test_util.h"
 #include "core/io/vdb_io.h"
 #include "core/volume/analytic.h"
 
@@ -52,15 +53,6 @@ class BakeFile : public ::testing::Test {
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
   fs::path dir_;
 };
-
-void expectErrorNaming(const std::function<void()>& fn, const std::string& what) {
-  try {
-    fn();
-    ADD_FAILURE() << "no error; expected one naming " << what;
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
-  }
-}
 
 TEST(BakedLight, TrimKeepsTheNeighboursOfDensityOnly) {
   const BakedLight b = smallBake();

@@ -13,6 +13,7 @@
 #include "core/bake/sky_visibility.h"
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
+#include "tests/core/bake/bake_test_util.h"
 #include "core/phase/henyey_greenstein.h"
 #include "core/volume/analytic.h"
 
@@ -25,15 +26,6 @@ Medium boxMedium(double extinction, const Vec3& lo = Vec3(0.0), const Vec3& hi =
   m.extinction = extinction;
   m.phase = std::make_shared<HenyeyGreensteinPhase>(0.5);
   return m;
-}
-
-void expectErrorNaming(const std::function<void()>& fn, const std::string& what) {
-  try {
-    fn();
-    ADD_FAILURE() << "no error; expected one naming " << what;
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
-  }
 }
 
 TEST(BakeLattice, KeepsTheMassAndAnEmptyMargin) {
