@@ -1,0 +1,60 @@
+// Endless animation from a finite database of basic volumes (Iwasaki et al. 2011, seed 002,
+// after Schoedl et al. 2000's video textures): frame similarities, transition probabilities, a
+// seeded random walk and the cross-dissolve that hides each jump.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace cloudbake {
+
+/// A database of basic volumes: `frames` density arrays of equal size (one lattice), in their
+/// original time order. At least 2 frames.
+using BasicVolumes = std::vector<std::vector<float>>;
+
+/// D_kl = sum over voxels of (rho_k - rho_l)^2 for every pair, as an n x n row-major matrix
+/// (symmetric, zero diagonal). InputError for fewer than 2 frames, frames of different sizes, or
+/// non-finite densities (naming the frame). Parallel over rows; deterministic.
+std::vector<double> frameDistances(const BasicVolumes& frames);
+
+/// Options of the walk. `sigma` is the seed's temperature relative to the mean D_kl over k != l
+/// (so one value suits any lattice size): P_kl proportional to exp(-D_{k+1,l} / (sigma mean D)).
+/// `dissolve_frames` H: frames over which a jump is cross-dissolved (0: a hard cut).
+struct VideoTextureOptions {
+  double sigma = 0.05;      ///< (0, 1e6]; small: only near-identical continuations; large: uniform
+  int dissolve_frames = 8;  ///< H in [0, n - 2]
+  uint64_t seed = 1;
+};
+
+/// P as an n x n row-major matrix: row k gives the probabilities of the frames that may follow
+/// frame k. The natural successor k+1 has D_{k+1,k+1} = 0 and so the largest weight; a jump
+/// target l must leave room for the dissolve (l + H <= n - 1). The last frame has no successor:
+/// its row uses D_{n-1,l-1} (jump to a frame whose predecessor looks like it). Rows sum to 1.
+/// InputError naming sigma or H when out of range.
+std::vector<double> transitionProbabilities(const std::vector<double>& distances, int n,
+                                            const VideoTextureOptions& options);
+
+/// One output frame: rho = w rho_a + (1 - w) rho_b (w = 1: frame a alone).
+struct BlendFrame {
+  int a = 0, b = 0;
+  double w = 1;
+};
+
+/// A walk of `length` output frames starting at frame 0, drawn with P and options.seed (the same
+/// seed gives the same walk). A jump from k to l (l != k + 1) is played as H blended frames:
+/// t = 0..H-1 blends the old continuation min(k + 1 + t, n - 1) (weight w_t = 1 - (t + 1) /
+/// (H + 1)) with the new sequence l + t; the walk then continues from l + H - 1 (H = 0: from l).
+std::vector<BlendFrame> endlessWalk(const std::vector<double>& probabilities, int n, int length,
+                                    const VideoTextureOptions& options);
+
+/// The densities of one output frame.
+std::vector<float> blendFrame(const BasicVolumes& frames, const BlendFrame& f);
+
+/// The largest frame-to-frame change of a sequence of output frames: the maximum over
+/// consecutive pairs of the RMS density difference per voxel (sqrt(D / voxels)).
+double maxFrameChange(const BasicVolumes& frames, const std::vector<BlendFrame>& walk);
+
+/// The same for the input sequence played in order (0, 1, ..., n - 1).
+double maxInputFrameChange(const BasicVolumes& frames);
+
+}  // namespace cloudbake
