@@ -12,10 +12,13 @@
 namespace cloudbake {
 
 BakedLight makeBakeLattice(const DensityField& field, int resolution) {
+  return makeBakeLatticeOver(field, field.bounds(), resolution);
+}
+
+BakedLight makeBakeLatticeOver(const DensityField& field, const Bounds3& b, int resolution) {
   if (resolution < 8 || resolution > 1024) {
     throw InputError("light_resolution: must be in [8, 1024], got " + std::to_string(resolution));
   }
-  const Bounds3 b = field.bounds();
   if (b.empty() || !isFinite(b.min) || !isFinite(b.max)) {
     throw InputError("volume: '" + field.describe() + "' has empty or infinite bounds");
   }

@@ -23,4 +23,8 @@ constexpr uint64_t kMaxBakeVoxels = uint64_t(1) << 25;
 /// over z slices with one density lookup per thread; deterministic.
 BakedLight makeBakeLattice(const DensityField& field, int resolution);
 
+/// The same over explicit world `bounds` instead of the field's own (e.g. the union of the
+/// frames of an animation, so every frame lands on one lattice).
+BakedLight makeBakeLatticeOver(const DensityField& field, const Bounds3& bounds, int resolution);
+
 }  // namespace cloudbake

@@ -62,11 +62,10 @@ DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame
                      " is outside [0, " + std::to_string(sequence.frames) + ")");
   }
   if (sequence.procedural) {
-    // How a procedural cloud evolves between frames belongs to the animation module (seed 002's
-    // video-texture transitions); inventing a motion here would fix it prematurely.
-    throw InputError(source +
-                     ": /volume/sequence/procedural: animated procedural clouds are not "
-                     "supported yet");
+    // The cloud at its own time plus `frame` steps: the octaves drift (perlin_cloud.h).
+    PerlinCloudOptions options = sequence.procedural->perlin;
+    options.time += frame * sequence.time_step;
+    return labelled(source, "/volume/sequence/procedural", [&] { return makePerlinCloud(options); });
   }
   VdbSourceOptions options;
   options.path = sequence.paths.at(static_cast<size_t>(frame));

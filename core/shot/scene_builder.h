@@ -24,8 +24,8 @@ struct Scene {
 /// ..."). A `sequence` volume throws InputError (use buildSequenceFrame).
 DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source = "shot.json");
 
-/// Frame `frame` (0-based, < frames) of a `paths` sequence: that frame's VDB grid. Throws
-/// InputError for an out-of-range frame and for procedural sequences (not supported yet).
+/// Frame `frame` (0-based, < frames) of a sequence: that frame's VDB grid, or the procedural cloud
+/// at time procedural.time + frame * time_step. Throws InputError for an out-of-range frame.
 DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame,
                                    const std::string& source = "shot.json");
 

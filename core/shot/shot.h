@@ -48,6 +48,8 @@ struct SequenceVolumeSpec {
   std::string grid = "density";
   std::optional<ProceduralVolumeSpec> procedural;
   int frames = 0;
+  /// procedural: cloud time between frames (frame i is the cloud at procedural.time + i * step)
+  double time_step = 0.1;
 };
 
 /// `volume`: exactly one source.

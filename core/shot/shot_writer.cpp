@@ -27,6 +27,13 @@ Json proceduralJson(const ProceduralVolumeSpec& p) {
           {"persistence", c.persistence}};
 }
 
+// With the cloud time only when it is not 0, so static clouds keep their canonical form.
+Json proceduralJsonWithTime(const ProceduralVolumeSpec& p) {
+  Json j = proceduralJson(p);
+  if (p.perlin.time != 0) j["time"] = p.perlin.time;
+  return j;
+}
+
 Json volumeJson(const VolumeSpec& volume) {
   return std::visit(
       [](const auto& v) -> Json {
@@ -56,11 +63,12 @@ Json volumeJson(const VolumeSpec& volume) {
           }
           return {{"mesh", m}};
         } else if constexpr (std::is_same_v<T, ProceduralVolumeSpec>) {
-          return {{"procedural", proceduralJson(v)}};
+          return {{"procedural", proceduralJsonWithTime(v)}};
         } else {
           Json s = {{"frames", v.frames}};
           if (v.procedural) {
-            s["procedural"] = proceduralJson(*v.procedural);
+            s["procedural"] = proceduralJsonWithTime(*v.procedural);
+            s["time_step"] = v.time_step;
           } else {
             s["paths"] = v.paths;
             s["grid"] = v.grid;

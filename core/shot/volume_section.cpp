@@ -113,6 +113,7 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
   if (auto* v = o.find("persistence")) {
     c.persistence = r.numberIn(*v, o.path("persistence"), 0, 1, true);
   }
+  if (auto* v = o.find("time")) c.time = r.numberIn(*v, o.path("time"), -1e6, 1e6);
   // The remaining rule (at least 6 voxels along every axis) couples size and resolution.
   try {
     validatePerlinCloudOptions(c);
@@ -124,7 +125,7 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
 
 #define CLOUDBAKE_PROCEDURAL_KEYS                                                             \
   "type", "seed", "center", "size", "resolution", "cover", "sharpness", "density", "octaves", \
-      "frequency", "persistence"
+      "frequency", "persistence", "time"
 
 SequenceVolumeSpec parseSequence(const Object& o) {
   const Reader& r = o.reader();
@@ -149,6 +150,7 @@ SequenceVolumeSpec parseSequence(const Object& o) {
       s.grid = r.string(*g, o.path("grid"));
       if (s.grid.empty()) r.fail(o.path("grid"), "must be a non-empty grid name");
     }
+    if (o.has("time_step")) r.fail(o.path("time_step"), "only applies to procedural");
     s.frames = int(paths->size());
     if (frames) {
       const int64_t n = r.integer(*frames, o.path("frames"), 1, kMaxFrames);
@@ -163,6 +165,7 @@ SequenceVolumeSpec parseSequence(const Object& o) {
         parseProcedural(Object(r, *proc, o.path("procedural"), {CLOUDBAKE_PROCEDURAL_KEYS}));
     if (!frames) r.fail(o.path("frames"), "missing (required with procedural)");
     s.frames = int(r.integer(*frames, o.path("frames"), 1, kMaxFrames));
+    if (auto* t = o.find("time_step")) s.time_step = r.numberIn(*t, o.path("time_step"), 0, 1e3, true);
   }
   return s;
 }
@@ -193,7 +196,7 @@ VolumeSpec parseVolume(const Object& o) {
   if (kind == "procedural") {
     return parseProcedural(Object(r, v, ptr, {CLOUDBAKE_PROCEDURAL_KEYS}));
   }
-  return parseSequence(Object(r, v, ptr, {"paths", "grid", "procedural", "frames"}));
+  return parseSequence(Object(r, v, ptr, {"paths", "grid", "procedural", "frames", "time_step"}));
 }
 
 }  // namespace cloudbake::shotjson

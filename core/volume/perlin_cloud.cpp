@@ -38,6 +38,22 @@ double eliasCloudDensity(double v, double cover, double sharpness) {
   return 1.0 - std::pow(sharpness, 255.0 * c);
 }
 
+double evolvingFbm01(const PerlinNoise& noise, const Vec3& q, int octaves, double persistence,
+                     double time) {
+  double sum = 0, amplitude = 1, norm = 0, scale = 1;
+  for (int oct = 0; oct < octaves; ++oct) {
+    // PerlinNoise::fbm's octave offsets, plus a drift of (1 + oct/2) noise cells per unit time
+    // in a direction that turns with the octave: at time 0 this is exactly fbm01.
+    const double speed = time * (1 + 0.5 * oct);
+    const Vec3 drift(std::cos(1.7 * oct) * speed, std::sin(1.7 * oct) * speed, 0.35 * speed);
+    sum += amplitude * noise.noise(q * scale + Vec3(17.31 * oct, 5.77 * oct, 11.13 * oct) + drift);
+    norm += amplitude;
+    amplitude *= persistence;
+    scale *= 2;
+  }
+  return std::clamp(0.5 + 0.5 * (norm > 0 ? sum / norm : 0.0), 0.0, 1.0);
+}
+
 void validatePerlinCloudOptions(const PerlinCloudOptions& o) {
   auto fail = [](const std::string& field, const std::string& rule, const std::string& got) {
     throw InputError("perlin_cloud." + field + ": must be " + rule + ", got " + got);
@@ -62,6 +78,8 @@ void validatePerlinCloudOptions(const PerlinCloudOptions& o) {
   if (!(o.sharpness > 0 && o.sharpness < 1)) fail("sharpness", "in (0, 1)", num(o.sharpness));
   if (!std::isfinite(o.density) || !(o.density > 0))
     fail("density", "finite and > 0", num(o.density));
+  if (!std::isfinite(o.time) || std::abs(o.time) > 1e6)
+    fail("time", "finite (|time| <= 1e6)", num(o.time));
   if (o.octaves < 1 || o.octaves > 12) fail("octaves", "in [1, 12]", std::to_string(o.octaves));
   if (!std::isfinite(o.frequency) || !(o.frequency > 0) || o.frequency > 1e6)
     fail("frequency", "finite and in (0, 1e6]", num(o.frequency));
@@ -109,7 +127,9 @@ DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& o) {
         continue;
       }
       const Vec3 q = vi * (g.h / max_size * o.frequency);
-      const double v = env * 2.0 * fbm01(noise, q, o.octaves, o.persistence);
+      const double v =
+          env * 2.0 * (o.time == 0 ? fbm01(noise, q, o.octaves, o.persistence)
+                                    : evolvingFbm01(noise, q, o.octaves, o.persistence, o.time));
       values[i] = static_cast<float>(o.density * eliasCloudDensity(v, o.cover, o.sharpness));
     }
     return false;

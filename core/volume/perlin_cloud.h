@@ -11,6 +11,7 @@
 // ellipsoid's edge into puffs; the result depends only on the options (seed included).
 #pragma once
 
+#include "core/volume/noise.h"
 #include "core/volume/sources.h"
 
 namespace cloudbake {
@@ -21,6 +22,11 @@ double cloudEnvelope(double r);
 /// Elias's cover/sharpness mapping of a shaped noise value v (about [0, 2]) to density in
 /// [0, 1): 1 - sharpness^(255 * max(v - cover, 0)).
 double eliasCloudDensity(double v, double cover, double sharpness);
+
+/// fbm01 (noise.h) at cloud time `time`: each octave drifts by (1 + octave/2) noise cells per
+/// unit time in its own direction; equal to fbm01 at time 0.
+double evolvingFbm01(const PerlinNoise& noise, const Vec3& q, int octaves, double persistence,
+                     double time);
 
 /// Throws InputError naming the first invalid option ("perlin_cloud.<field>: ...").
 void validatePerlinCloudOptions(const PerlinCloudOptions& options);

@@ -49,6 +49,11 @@ struct PerlinCloudOptions {
   double frequency = 3.0;      ///< base frequency, cycles per box
   double persistence = 0.5;    ///< (0, 1]
   uint64_t seed = 1;
+  /// Cloud time (|time| <= 1e6): each octave's noise drifts through its own lattice at a speed
+  /// growing with the octave, so small puffs change faster than the large shapes and the cloud
+  /// evolves in place inside its fixed envelope (seed 002's "dynamic clouds" as frames of a
+  /// procedural sequence). 0: the static cloud.
+  double time = 0;
 };
 
 /// All three return a GridVolume (core/volume/grid_volume.h) and throw InputError naming the

@@ -67,7 +67,36 @@ TEST(SceneBuilder, SequencesAreBuiltFrameByFrame) {
   }
   const auto& seq = std::get<SequenceVolumeSpec>(shot.volume);
   EXPECT_THROW(buildSequenceFrame(seq, 3), InputError);
-  EXPECT_THROW(buildSequenceFrame(seq, 0), InputError);  // procedural animation: not yet
+  // Procedural frames: the cloud at time procedural.time + i * time_step, inside one box; frames
+  // differ from each other, and more for a larger step.
+  const DensityFieldPtr f0 = buildSequenceFrame(seq, 0), f1 = buildSequenceFrame(seq, 1),
+                        f2 = buildSequenceFrame(seq, 2);
+  for (const DensityFieldPtr& f : {f0, f1, f2}) {
+    EXPECT_GE(f->bounds().min.x, -1.0 - 1e-9);
+    EXPECT_LE(f->bounds().max.z, 1.0 + 1e-9);
+  }
+  auto difference = [](const DensityField& a, const DensityField& b) {
+    auto la = a.lookup(), lb = b.lookup();
+    double d = 0;
+    for (int i = 0; i < 2000; ++i) {
+      const Vec3 p(-0.9 + 1.8 * ((i * 37) % 100) / 100.0, -0.9 + 1.8 * ((i * 61) % 100) / 100.0,
+                   0.1 + 0.8 * ((i * 13) % 100) / 100.0);
+      d += std::abs(la->density(p) - lb->density(p));
+    }
+    return d;
+  };
+  const double d01 = difference(*f0, *f1), d02 = difference(*f0, *f2);
+  EXPECT_GT(d01, 0);
+  EXPECT_GT(d02, d01);
+  // Time 0 is the static cloud.
+  json still = json::parse(kDesignSlab);
+  still["volume"] = {{"procedural", {{"type", "perlin_cloud"}}}};
+  EXPECT_EQ(difference(*f0, *buildScene(parseShot(still.dump(), "")).medium.density), 0.0);
+  json bad = j;
+  bad["volume"]["sequence"]["paths"] = {"a.vdb"};
+  bad["volume"]["sequence"].erase("procedural");
+  bad["volume"]["sequence"]["time_step"] = 0.5;
+  EXPECT_THROW(parseShot(bad.dump(), ""), InputError);
 }
 
 TEST(SceneBuilder, AssetErrorsNameTheField) {
