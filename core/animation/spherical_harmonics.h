@@ -1,0 +1,22 @@
+// Real spherical harmonics up to order 4 (l = 0..3, 16 coefficients), the basis seed 002 stores
+// each voxel's optical depth to the sky in.
+#pragma once
+
+#include <array>
+
+#include "core/math/vec3.h"
+
+namespace cloudbake {
+
+/// Coefficients of one function on the sphere: index l * l + l + m for l in [0, 3], m in [-l, l].
+constexpr int kShCoefficients = 16;
+using ShCoefficients = std::array<float, kShCoefficients>;
+
+/// The 16 real, orthonormal spherical harmonics (integral over the sphere of Y_i Y_j = delta_ij;
+/// Sloan 2008's conventions, "Stupid SH tricks") at unit direction `w`.
+std::array<double, kShCoefficients> shBasis(const Vec3& w);
+
+/// Sum of coefficients times basis at `w`.
+double shEvaluate(const ShCoefficients& c, const Vec3& w);
+
+}  // namespace cloudbake
