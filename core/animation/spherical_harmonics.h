@@ -19,4 +19,8 @@ std::array<double, kShCoefficients> shBasis(const Vec3& w);
 /// Sum of coefficients times basis at `w`.
 double shEvaluate(const ShCoefficients& c, const Vec3& w);
 
+/// The SH projection of the product of the two functions (truncated to order 4), through the
+/// triple-product tensor integral(Y_i Y_j Y_k) (computed once by quadrature).
+ShCoefficients shProduct(const ShCoefficients& a, const ShCoefficients& b);
+
 }  // namespace cloudbake

@@ -1,0 +1,132 @@
+#include "core/animation/shexp.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "core/animation/optical_depth_sh.h"
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+const double kSqrt4Pi = std::sqrt(4 * kPi);
+
+double hatNorm(const ShCoefficients& g) {
+  double s = 0;
+  for (int i = 1; i < kShCoefficients; ++i) s += double(g[size_t(i)]) * g[size_t(i)];
+  return std::sqrt(s);
+}
+
+// Halvings that bring |g^| to at most 1 (scaling and squaring), at most 16.
+int squarings(const ShCoefficients& g) {
+  const double m = hatNorm(g);
+  return m <= 1 ? 0 : std::min(16, int(std::ceil(std::log2(m))));
+}
+
+ShCoefficients scaled(const ShCoefficients& g, int k) {
+  ShCoefficients out = g;
+  const float f = std::ldexp(1.0f, -k);
+  for (float& v : out) v *= f;
+  return out;
+}
+
+}  // namespace
+
+ShCoefficients shExpReference(const ShCoefficients& g, int directions) {
+  const std::vector<Vec3> dirs = sphereDirections(directions);
+  std::array<double, kShCoefficients> acc{};
+  for (const Vec3& w : dirs) {
+    const auto y = shBasis(w);
+    double f = 0;
+    for (int i = 0; i < kShCoefficients; ++i) f += double(g[size_t(i)]) * y[size_t(i)];
+    const double e = std::exp(f);
+    for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += e * y[size_t(i)];
+  }
+  ShCoefficients out{};
+  for (int i = 0; i < kShCoefficients; ++i) {
+    out[size_t(i)] = float(acc[size_t(i)] * 4 * kPi / double(dirs.size()));
+  }
+  return out;
+}
+
+ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int directions) {
+  if (samples.size() < 8) {
+    throw InputError("shexp: needs at least 8 sample vectors, got " +
+                     std::to_string(samples.size()));
+  }
+  if (bins < 4 || bins > 4096) {
+    throw InputError("shexp: bins must be in [4, 4096], got " + std::to_string(bins));
+  }
+  ShExp e;
+  std::vector<ShCoefficients> reduced;
+  reduced.reserve(samples.size());
+  for (const ShCoefficients& g : samples) {
+    for (float v : g) {
+      if (!std::isfinite(v)) throw InputError("shexp: a sample vector is not finite");
+    }
+    reduced.push_back(scaled(g, squarings(g)));
+    e.range_ = std::max(e.range_, hatNorm(reduced.back()));
+  }
+  const double width = e.range_ > 0 ? e.range_ / bins : 1.0;
+  // Per bin, minimise sum |a 1 + b g^ - t|^2 with t = reference / exp(g_0 / sqrt(4 pi)). The
+  // basis 1 and g^ are orthogonal, so a and b separate.
+  std::vector<double> sa(size_t(bins), 0), na(size_t(bins), 0), sb(size_t(bins), 0),
+      nb(size_t(bins), 0);
+  for (const ShCoefficients& g : reduced) {
+    const ShCoefficients ref = shExpReference(g, directions);
+    const double scale = std::exp(double(g[0]) / kSqrt4Pi);
+    const int k = std::min(bins - 1, int(hatNorm(g) / width));
+    sa[size_t(k)] += double(ref[0]) / scale * kSqrt4Pi;
+    na[size_t(k)] += 4 * kPi;
+    for (int i = 1; i < kShCoefficients; ++i) {
+      sb[size_t(k)] += double(ref[size_t(i)]) / scale * g[size_t(i)];
+      nb[size_t(k)] += double(g[size_t(i)]) * g[size_t(i)];
+    }
+  }
+  e.a_.assign(size_t(bins), std::nan(""));
+  e.b_.assign(size_t(bins), std::nan(""));
+  for (int k = 0; k < bins; ++k) {
+    if (na[size_t(k)] > 0) e.a_[size_t(k)] = sa[size_t(k)] / na[size_t(k)];
+    if (nb[size_t(k)] > 0) e.b_[size_t(k)] = sb[size_t(k)] / nb[size_t(k)];
+  }
+  // At |g^| = 0 the exact answer is a = 1, b = 1 (exp of a constant; first order in g^).
+  if (std::isnan(e.a_[0])) e.a_[0] = 1;
+  if (std::isnan(e.b_[0])) e.b_[0] = 1;
+  for (std::vector<double>* t : {&e.a_, &e.b_}) {
+    for (int k = 1; k < bins; ++k) {
+      if (std::isnan((*t)[size_t(k)])) (*t)[size_t(k)] = (*t)[size_t(k) - 1];
+    }
+  }
+  return e;
+}
+
+ShCoefficients ShExp::operator()(const ShCoefficients& g_in) const {
+  const int k = squarings(g_in);
+  const ShCoefficients g = scaled(g_in, k);
+  const int bins = int(a_.size());
+  const double width = range_ > 0 ? range_ / bins : 1.0;
+  // Linear interpolation between the bin centres, and from the exact values at |g^| = 0 (a = b =
+  // 1: the exponential of a constant, and its first-order term) to the first centre.
+  const double x = hatNorm(g) / width - 0.5;
+  double a, b;
+  if (x < 0) {
+    const double t = x + 0.5;  // 0 at |g^| = 0, 1 at the first centre
+    a = 1 + (a_[0] - 1) * t;
+    b = 1 + (b_[0] - 1) * t;
+  } else {
+    const double xc = std::min(x, double(bins - 1));
+    const int k0 = std::min(bins - 1, int(xc)), k1 = std::min(bins - 1, k0 + 1);
+    const double t = xc - k0;
+    a = a_[size_t(k0)] * (1 - t) + a_[size_t(k1)] * t;
+    b = b_[size_t(k0)] * (1 - t) + b_[size_t(k1)] * t;
+  }
+  const double scale = std::exp(double(g[0]) / kSqrt4Pi);
+  ShCoefficients out{};
+  out[0] = float(scale * a * kSqrt4Pi);
+  for (int i = 1; i < kShCoefficients; ++i) out[size_t(i)] = float(scale * b * g[size_t(i)]);
+  for (int s = 0; s < k; ++s) out = shProduct(out, out);
+  return out;
+}
+
+}  // namespace cloudbake
