@@ -4,9 +4,14 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cstdio>
+#include <filesystem>
 
 #include "core/error.h"
+#include "core/io/vdb_io.h"
+#include "core/volume/analytic.h"
 #include "core/shot/shot_parser.h"
 
 namespace cloudbake {
@@ -37,6 +42,36 @@ TEST(BasicVolumes, ThirtyProceduralFramesOnOneLatticeAndAnEndlessWalk) {
               "density change: input %.4f, 1000-frame walk %.4f\n", input, endless);
   EXPECT_GT(input, 0);
   EXPECT_LE(endless, 2.0 * input);
+}
+
+TEST(BasicVolumes, VdbFramesMustShareOneTransform) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("cloudbake_basic_volumes_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  VdbWriteOptions fine, coarse;
+  fine.voxel_size = 0.1;
+  coarse.voxel_size = 0.2;
+  const BoxDensity box(Vec3(0.0), Vec3(1.0), 1.0), moved(Vec3(0.2), Vec3(1.1), 1.0);
+  writeVdb((dir / "a.vdb").string(), box, fine);
+  writeVdb((dir / "b.vdb").string(), moved, fine);
+  writeVdb((dir / "c.vdb").string(), box, coarse);
+  SequenceVolumeSpec seq;
+  seq.paths = {(dir / "a.vdb").string(), (dir / "b.vdb").string()};
+  seq.frames = 2;
+  const BasicVolumeDatabase db = buildBasicVolumes(seq, 16);
+  ASSERT_EQ(db.frames.size(), 2u);
+  EXPECT_EQ(db.frames[0].size(), db.frames[1].size());  // one lattice over both
+  EXPECT_NE(db.frames[0], db.frames[1]);
+  seq.paths.push_back((dir / "c.vdb").string());
+  seq.frames = 3;
+  try {
+    buildBasicVolumes(seq, 16);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/volume/sequence/paths/2: voxel size"), std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(BasicVolumes, BadDatabasesAreRefused) {
