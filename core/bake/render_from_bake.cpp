@@ -59,14 +59,13 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <mutex>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -76,6 +75,7 @@
 #include "core/math/rng.h"
 #include "core/transport/camera.h"
 #include "core/transport/sky.h"
+#include "core/transport/tiled_render.h"
 
 namespace cloudbake {
 namespace {
@@ -637,35 +637,21 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
   const Vec3 sun_dir = normalize(bake.sun_direction);
 
   const int w = camera.width_px, h = camera.height_px;
-  const int tiles_x = (w + kTileSize - 1) / kTileSize, tiles_y = (h + kTileSize - 1) / kTileSize;
-  const int tiles = tiles_x * tiles_y;
   const int spp = options.samples_per_pixel;
   const double inv_spp = 1.0 / spp;
   // Stratified film positions: an sx x sy jittered grid, the remainder uniform in the pixel.
   const int sx = std::max(1, int(std::floor(std::sqrt(double(spp)))));
   const int sy = spp / sx;
 
-  RenderLayers out;
-  out.beauty = Image(w, h, 4);
-  out.sun = Image(w, h, 3);
-  out.sky = Image(w, h, 3);
-  out.single = Image(w, h, 3);
-  out.multiple = Image(w, h, 3);
-
-  std::atomic<bool> cancelled{false};
-  std::atomic<int> tiles_done{0};
-  std::mutex progress_mutex;
-  int reported = 0;
-
-  auto render_tile = [&](const BakeMarcher& marcher, int tile) {
-    const int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
-    const int x1 = std::min(x0 + kTileSize, w), y1 = std::min(y0 + kTileSize, h);
+  RenderLayers out = makeRenderLayers(w, h);
+  std::optional<BakeMarcher> marcher;
+  auto render_tile = [&](const TileRect& t, const std::atomic<bool>&) {
     Rng rng;
-    for (int y = y0; y < y1; ++y) {
-      for (int x = x0; x < x1; ++x) {
+    for (int y = t.y0; y < t.y1; ++y) {
+      for (int x = t.x0; x < t.x1; ++x) {
         PixelSum sum;
         if (spp == 1) {
-          marcher.trace(rays.generate(x + 0.5, y + 0.5), &sum);
+          marcher->trace(rays.generate(x + 0.5, y + 0.5), &sum);
         } else {
           // One stream per pixel: the image depends neither on threads nor on tiling.
           const uint64_t pixel = uint64_t(y) * uint64_t(w) + uint64_t(x);
@@ -679,7 +665,7 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
               fx = x + rng.uniform();
               fy = y + rng.uniform();
             }
-            marcher.trace(rays.generate(fx, fy), &sum);
+            marcher->trace(rays.generate(fx, fy), &sum);
           }
         }
         const Rgb sun_total = sum.sun_single + sum.multiple;
@@ -692,32 +678,13 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
         store(out.multiple, x, y, sum.multiple + sum.sky_multiple, inv_spp);
       }
     }
-    const int done = ++tiles_done;
-    if (progress) {
-      std::lock_guard<std::mutex> lock(progress_mutex);
-      reported = std::max(reported, done);  // monotonic fractions whatever the finishing order
-      if (!cancelled.load() && !progress(double(reported) / tiles)) cancelled = true;
-    }
   };
-
-  auto run = [&] {
-    // Built inside the arena: the block maxima are computed in parallel too.
-    const BakeMarcher marcher(bake, medium, sun, sky_light, sky_mean, sun_dir, step,
-                              options.min_transmittance);
-    tbb::parallel_for(tbb::blocked_range<int>(0, tiles, 1), [&](const tbb::blocked_range<int>& r) {
-      for (int t = r.begin(); t != r.end(); ++t) {
-        if (cancelled.load(std::memory_order_relaxed)) return;
-        render_tile(marcher, t);
-      }
-    });
-  };
-  if (options.threads > 0) {
-    tbb::task_arena arena(options.threads);
-    arena.execute(run);
-  } else {
-    run();
-  }
-  if (cancelled) throw Cancelled("render from bake of view '" + camera.name + "' cancelled");
+  // The marcher is built inside the render's arena: its block maxima are computed in parallel.
+  const bool finished = renderTiles(w, h, kTileSize, options.threads, progress, render_tile, [&] {
+    marcher.emplace(bake, medium, sun, sky_light, sky_mean, sun_dir, step,
+                    options.min_transmittance);
+  });
+  if (!finished) throw Cancelled("render from bake of view '" + camera.name + "' cancelled");
   return out;
 }
 

@@ -1,20 +1,16 @@
 #include "core/transport/path_tracer.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
-
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <limits>
-#include <mutex>
 #include <sstream>
 
 #include "core/error.h"
 #include "core/math/rng.h"
 #include "core/transport/camera.h"
 #include "core/transport/sky.h"
+#include "core/transport/tiled_render.h"
 #include "core/transport/tracking.h"
 
 namespace cloudbake {
@@ -217,42 +213,27 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
   const SkyLight sky_light(sky);
   const Integrator integrator(medium, sun_dir, sun.irradiance, sky_light, options.max_depth);
 
-  const int w = camera.width_px, h = camera.height_px, ts = options.tile_size;
-  const int tiles_x = (w + ts - 1) / ts, tiles_y = (h + ts - 1) / ts;
-  const int tiles = tiles_x * tiles_y;
+  const int w = camera.width_px, h = camera.height_px;
   const int spp = options.samples_per_pixel;
   const double inv_spp = 1.0 / spp;
+  RenderLayers out = makeRenderLayers(w, h);
 
-  RenderLayers out;
-  out.beauty = Image(w, h, 4);
-  out.sun = Image(w, h, 3);
-  out.sky = Image(w, h, 3);
-  out.single = Image(w, h, 3);
-  out.multiple = Image(w, h, 3);
-
-  std::atomic<bool> cancelled{false};
-  std::atomic<int> tiles_done{0};
-  std::mutex progress_mutex;
-  int reported = 0;
-
-  auto render_tile = [&](int tile) {
-    const int x0 = (tile % tiles_x) * ts, y0 = (tile / tiles_x) * ts;
-    const int x1 = std::min(x0 + ts, w), y1 = std::min(y0 + ts, h);
-    const int tw = x1 - x0;
-    std::vector<PathSample> acc(size_t(tw) * (y1 - y0));
+  auto render_tile = [&](const TileRect& t, const std::atomic<bool>& cancelled) {
+    const int tw = t.x1 - t.x0;
+    std::vector<PathSample> acc(size_t(tw) * (t.y1 - t.y0));
     const auto lookup = medium.density->lookup();
     Rng rng;
     for (int s = 0; s < spp; ++s) {
       if (cancelled.load(std::memory_order_relaxed)) return;
       // One stream per (tile, sample): the image does not depend on which thread runs a tile.
-      rng.setSeed(mixBits(options.seed, mixBits(uint64_t(tile), uint64_t(s))),
-                  mixBits(uint64_t(tile), options.seed));
-      for (int y = y0; y < y1; ++y) {
-        for (int x = x0; x < x1; ++x) {
+      rng.setSeed(mixBits(options.seed, mixBits(uint64_t(t.index), uint64_t(s))),
+                  mixBits(uint64_t(t.index), options.seed));
+      for (int y = t.y0; y < t.y1; ++y) {
+        for (int x = t.x0; x < t.x1; ++x) {
           const double fx = x + rng.uniform(), fy = y + rng.uniform();
           PathSample ps;
           integrator.trace(rays.generate(fx, fy), *lookup, rng, &ps);
-          PathSample& a = acc[size_t(y - y0) * tw + (x - x0)];
+          PathSample& a = acc[size_t(y - t.y0) * tw + (x - t.x0)];
           a.sun += ps.sun;
           a.sky += ps.sky;
           a.single += ps.single;
@@ -262,9 +243,9 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
         }
       }
     }
-    for (int y = y0; y < y1; ++y) {
-      for (int x = x0; x < x1; ++x) {
-        const PathSample& a = acc[size_t(y - y0) * tw + (x - x0)];
+    for (int y = t.y0; y < t.y1; ++y) {
+      for (int x = t.x0; x < t.x1; ++x) {
+        const PathSample& a = acc[size_t(y - t.y0) * tw + (x - t.x0)];
         store(out.beauty, x, y, a.sun + a.sky + a.background, inv_spp);
         out.beauty.at(x, y)[3] = static_cast<float>(a.alpha * inv_spp);
         store(out.sun, x, y, a.sun, inv_spp);
@@ -273,29 +254,10 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
         store(out.multiple, x, y, a.multiple, inv_spp);
       }
     }
-    const int done = ++tiles_done;
-    if (progress) {
-      std::lock_guard<std::mutex> lock(progress_mutex);
-      reported = std::max(reported, done);  // keep the reported fraction monotonic
-      if (!cancelled.load() && !progress(double(reported) / tiles)) cancelled = true;
-    }
   };
-
-  auto run = [&] {
-    tbb::parallel_for(tbb::blocked_range<int>(0, tiles, 1), [&](const tbb::blocked_range<int>& r) {
-      for (int t = r.begin(); t != r.end(); ++t) {
-        if (cancelled.load(std::memory_order_relaxed)) return;
-        render_tile(t);
-      }
-    });
-  };
-  if (options.threads > 0) {
-    tbb::task_arena arena(options.threads);
-    arena.execute(run);
-  } else {
-    run();
-  }
-  if (cancelled) throw Cancelled("path tracing of view '" + camera.name + "' cancelled");
+  const bool finished =
+      renderTiles(w, h, options.tile_size, options.threads, progress, render_tile);
+  if (!finished) throw Cancelled("path tracing of view '" + camera.name + "' cancelled");
   return out;
 }
 

@@ -20,6 +20,7 @@
 #include "core/bake/neighbour_grid.h"
 #include "core/bake/point_cloud.h"
 #include "core/bake/scattering_passes.h"
+#include "core/bake/sky_visibility.h"
 #include "core/error.h"
 #include "core/math/rng.h"
 #include "core/phase/henyey_greenstein.h"
@@ -284,6 +285,35 @@ TEST(NormalisedRule, TinyRadiusLeavesOnlyEachPointsOwnSphere) {
     const double expected = r.cloud.sun[j] * (q + q * q + q * q * q + q * q * q * q);
     ASSERT_NEAR(r.co[j].x, expected, 1e-6 * expected);
     EXPECT_EQ(r.mie_ratio[j], 0.f);  // all of it isotropic
+  }
+}
+
+TEST(NormalisedRule, TinyRadiusSkyOrdersAreTheOwnSphereSeries) {
+  // Header, step 8: the sky passes start from the fluence 4 pi V of a unit-radiance uniform sky
+  // and, with only each point's own sphere left, multiply it by q = albedo (1 - P_escape) per
+  // order (isotropic phase: the reduced medium is the medium, so there is no beam term).
+  const Lattice l = sphereLattice(1, 1, 16);
+  const double ext = 2, albedo = 0.8;
+  const Medium m = sphereMedium(1, ext, Rgb(albedo), isotropic());
+  BakedLight vis;
+  vis.grid = l.grid;
+  vis.density = l.density;
+  computeSkyVisibility(vis, ext);
+  PointcloudOptions o;
+  o.points = 2000;
+  o.passes = 3;
+  o.tolerance = 1e-9;
+  o.radius = 1e-6;
+  o.sky = true;
+  const PointCloudResult r =
+      runPointcloud(l.grid, l.density, vis.channels.at(bake_grids::kSkyVisibility).data, m,
+                    Vec3(0, 0, 1), o, false);
+  ASSERT_EQ(r.co_sky.size(), r.cloud.size());
+  for (size_t j = 0; j < r.cloud.size(); ++j) {
+    const double v = 1 - double(r.collision[j]);  // P_escape = sky visibility at the point
+    const double q = albedo * r.collision[j];
+    const double expected = 4 * kPi * v * (q + q * q + q * q * q);
+    ASSERT_NEAR(r.co_sky[j].x, expected, 1e-5 * expected + 1e-9);
   }
 }
 

@@ -575,6 +575,23 @@ TEST(BakeRender, AnalyticTermsThroughABox) {
         renderFromBake(bake, medium(extinction, albedo, iso), sunOf(bake, e), gradient, down, {});
     check(lg.sky, mean_l * (albedo * 0.6 * absorbed), "sky gradient");
   }
+  // Sky multiple scattering: sigma_s * mean sky radiance * Co_sky / (4 pi), isotropic, in the
+  // sky layer and the multiple layer (Vsky = 0: no ambient term).
+  {
+    BakedLight bake =
+        boxBake(Vec3(-0.5, -0.5, 0), Vec3(0.5, 0.5, 0.5), h, 2, density, -d, 0, false);
+    fillChannel(&bake, bake_grids::kSunTransmittance, {0.f});
+    fillChannel(&bake, bake_grids::kSkyVisibility, {0.f});
+    const Rgb co_sky(2.0, 1.5, 0.5), l_sky(0.2, 0.5, 1.0);
+    fillChannel(&bake, bake_grids::kSkyMultipleFluence,
+                {float(co_sky.x), float(co_sky.y), float(co_sky.z)});
+    const RenderLayers l = renderFromBake(bake, medium(extinction, albedo, hg), sunOf(bake, e),
+                                          constantSky(l_sky), down, {});
+    const Rgb expected = l_sky * co_sky * (albedo * kInv4Pi * absorbed);
+    check(l.sky, expected, "sky multiple");
+    check(l.multiple, expected, "multiple = sky multiple");
+    EXPECT_EQ(maxAbs(l.single), 0.0);
+  }
 }
 
 TEST(BakeRender, RejectsBadInput) {
