@@ -23,8 +23,9 @@ constexpr const char* kSunTransmittance = "sun_transmittance";
 /// float in [0, 1]: transmittance to the sky averaged over all directions (only when the shot's
 /// sky is not black).
 constexpr const char* kSkyVisibility = "sky_visibility";
-/// Vec3 (RGB), unitless: fluence (radiance integrated over the sphere) of light scattered more
-/// than once, per unit E (seed 000's Co; arbitrary scale under the paper's rule).
+/// Vec3 (RGB), unitless: fluence (radiance integrated over the sphere) of sun light that has
+/// already been scattered at least once, per unit E (seed 000's Co; what it scatters towards a
+/// view is multiple scattering; arbitrary scale under the paper's rule).
 constexpr const char* kMultipleFluence = "Co";
 /// Vec3 (RGB), unitless: fluence of sky light scattered at least once, per unit radiance of a
 /// uniform sky (the normalised pointcloud rule; a view scales it by the sky's mean radiance).
