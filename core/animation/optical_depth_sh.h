@@ -5,7 +5,7 @@
 #include <functional>
 #include <vector>
 
-#include "core/animation/spherical_harmonics.h"
+#include "core/math/spherical_harmonics.h"
 #include "core/bake/bake_grid.h"
 
 namespace cloudbake {

@@ -4,7 +4,7 @@
 
 #include <vector>
 
-#include "core/animation/spherical_harmonics.h"
+#include "core/math/spherical_harmonics.h"
 
 namespace cloudbake {
 

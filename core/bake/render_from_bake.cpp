@@ -25,6 +25,10 @@
 //                       A missing mie_ratio grid means R = 0, and where light_dir is zero (or
 //                       missing) only the isotropic part;
 //   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere;
+//                       or, when the bake holds sky_transmittance_sh_0..15 (method
+//                       precomputed), seed 002's Eq. 5: J_sky = integral Lsky(w) T(x, w)
+//                       p(w . d) dw = sum_i T_i(x) (Gamma y(d))_i (core/bake/sky_sh_scatter.h),
+//                       view-dependent and for any sky, not only its mean;
 //   sky multiple J_skm = Lsky_mean Co_sky(x) / (4 pi), only with a Co_sky grid (the normalised
 //                       pointcloud rule bakes the sky's scattered light for a uniform sky);
 // E = sun.irradiance (the baked grids are per unit E), p = medium.phase via a PhaseLut. Layers:
@@ -61,6 +65,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -71,6 +76,7 @@
 #include <vector>
 
 #include "core/bake/phase_lut.h"
+#include "core/bake/sky_sh_scatter.h"
 #include "core/error.h"
 #include "core/math/rng.h"
 #include "core/transport/camera.h"
@@ -85,7 +91,6 @@ std::string angularModel(const BakedLight& bake) {
   auto it = bake.metadata.find("cloudbake:angular_model");
   return it == bake.metadata.end() ? "beam" : it->second;
 }
-
 
 constexpr int kBlock = 8;      // empty-space block side, voxels (an OpenVDB leaf)
 constexpr int kTileSize = 16;  // pixels per tile side (work unit)
@@ -246,6 +251,14 @@ class BakeMarcher {
       vsky_ = channel(bake, bake_grids::kSkyVisibility, 1, true, " (needed under a non-black sky)");
     }
     if (!sky.black()) csky_ = channel(bake, bake_grids::kSkyMultipleFluence, 3, false, "");
+    if (!sky.black() && bake.find(bake_grids::skyTransmittanceSh(0))) {
+      // Seed 002's Eq. 5: the view-dependent sky term from the transmittance's SH vector.
+      for (int i = 0; i < kShCoefficients; ++i) {
+        sh_[size_t(i)] = channel(bake, bake_grids::skyTransmittanceSh(i).c_str(), 1, true, "");
+      }
+      sky_sh_.emplace(projectSkyRadiance(sky), lut_);
+      albedo_ = medium.albedo;
+    }
     co_ = channel(bake, bake_grids::kMultipleFluence, 3, false, "");
     if (co_) {
       ldir_ = channel(bake, bake_grids::kLightDir, 3, false, "");
@@ -284,6 +297,17 @@ class BakeMarcher {
     }
     if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
     if (s.sky > 0) sum->sky += scale_sky_ * s.sky;
+    if (sky_sh_) {
+      double wts[3 * kShCoefficients];
+      sky_sh_->weights(ray.d, wts);
+      Rgb sky_single;
+      for (int c = 0; c < 3; ++c) {
+        double v = 0;
+        for (int i = 0; i < kShCoefficients; ++i) v += s.sky_sh[i] * wts[c * kShCoefficients + i];
+        sky_single[c] = albedo_[c] * std::max(0.0, v);
+      }
+      sum->sky += sky_single;
+    }
     sum->sky_multiple += scale_sky_ * s.sky_ms;
     sum->multiple += s.ms;
     sum->alpha += 1 - s.transmittance;
@@ -296,9 +320,10 @@ class BakeMarcher {
   struct RayState {
     Vec3 w0, dw, d;
     double transmittance = 1;
-    double ss = 0, sky = 0;  // integrals of T_v sigma_t Tsun and T_v sigma_t Vsky
-    Rgb ms;                  // integral of T_v sigma_t J_ms, scaled
-    Rgb sky_ms;              // integral of T_v sigma_t Co_sky / (4 pi)
+    double ss = 0, sky = 0;               // integrals of T_v sigma_t Tsun and T_v sigma_t Vsky
+    Rgb ms;                               // integral of T_v sigma_t J_ms, scaled
+    Rgb sky_ms;                           // integral of T_v sigma_t Co_sky / (4 pi)
+    double sky_sh[kShCoefficients] = {};  // integrals of T_v sigma_t T_sky,i (Eq. 5)
     bool done = false;
   };
 
@@ -441,11 +466,16 @@ class BakeMarcher {
   struct Source {
     double tsun = 0, vsky = 0;
     Rgb ms, csky;  // csky: Co_sky / (4 pi)
+    float tsh[kShCoefficients] = {};
   };
 
   void source(const Cell& c, const Vec3& d, Source* s) const {
     s->tsun = read(tsun_, c);
-    if (vsky_) s->vsky = read(vsky_, c);
+    if (sky_sh_) {
+      for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = float(read(sh_[size_t(i)], c));
+    } else if (vsky_) {
+      s->vsky = read(vsky_, c);
+    }
     if (csky_) {
       float v[3];
       read3(csky_, c, v);
@@ -547,6 +577,11 @@ class BakeMarcher {
         s->sky += a0 * src_prev.vsky + a1 * src_cur.vsky;
         if (co_) s->ms += (src_prev.ms * a0 + src_cur.ms * a1) * scale_ms_;
         if (csky_) s->sky_ms += src_prev.csky * a0 + src_cur.csky * a1;
+        if (sky_sh_) {
+          for (int q = 0; q < kShCoefficients; ++q) {
+            s->sky_sh[q] += a0 * src_prev.tsh[q] + a1 * src_cur.tsh[q];
+          }
+        }
         transmittance *= e;
         src_prev = src_cur;
         have_prev = true;
@@ -572,10 +607,13 @@ class BakeMarcher {
   const float* csky_ = nullptr;
   const float* ldir_ = nullptr;
   const float* mie_ = nullptr;
+  std::array<const float*, kShCoefficients> sh_{};
+  std::optional<SkyShScatter> sky_sh_;
+  Rgb albedo_;
   const SkyLight& sky_;
   PhaseLut lut_;
-  Rgb g_;     // mean cosine per channel, for the P1 model
-  bool p1_;   // the multiple term's angular model (see the header comment)
+  Rgb g_;    // mean cosine per channel, for the P1 model
+  bool p1_;  // the multiple term's angular model (see the header comment)
   Vec3 sun_dir_;
   double extinction_;
   double step_;

@@ -1,4 +1,4 @@
-#include "core/animation/spherical_harmonics.h"
+#include "core/math/spherical_harmonics.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,0 +1,358 @@
+#include "core/animation/precomputed.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "core/animation/optical_depth_sh.h"
+#include "core/bake/sky_sh_scatter.h"
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+constexpr double kSqrt4Pi = 3.5449077018110318;
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void parallelVoxels(size_t n, const std::function<void(size_t)>& f) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i != r.end(); ++i) f(i);
+                    });
+}
+
+// The receiver lattice: `resolution` voxels along the longest side of the lattice's box, its
+// lower corner on the box's.
+BakeGrid receiverLattice(const BakeGrid& g, int resolution) {
+  const Bounds3 box = g.bounds();
+  const Vec3 extent = box.extent();
+  const double longest = std::max({extent.x, extent.y, extent.z});
+  BakeGrid r;
+  r.voxel_size = std::max(g.voxel_size, longest / resolution);
+  r.nx = std::max(1, int(std::ceil(extent.x / r.voxel_size - 1e-9)));
+  r.ny = std::max(1, int(std::ceil(extent.y / r.voxel_size - 1e-9)));
+  r.nz = std::max(1, int(std::ceil(extent.z / r.voxel_size - 1e-9)));
+  r.origin = box.min + Vec3(0.5 * r.voxel_size);
+  return r;
+}
+
+// The mean density of the lattice voxels whose centres fall in each receiver voxel.
+std::vector<float> boxFilter(const BakeGrid& g, const std::vector<float>& density,
+                             const BakeGrid& r) {
+  std::vector<double> sum(r.voxelCount(), 0.0);
+  std::vector<uint32_t> count(r.voxelCount(), 0);
+  for (int k = 0; k < g.nz; ++k)
+    for (int j = 0; j < g.ny; ++j)
+      for (int i = 0; i < g.nx; ++i) {
+        const Vec3 p = r.toIndex(g.center(i, j, k));
+        const int ri = std::clamp(int(std::lround(p.x)), 0, r.nx - 1);
+        const int rj = std::clamp(int(std::lround(p.y)), 0, r.ny - 1);
+        const int rk = std::clamp(int(std::lround(p.z)), 0, r.nz - 1);
+        sum[r.index(ri, rj, rk)] += density[g.index(i, j, k)];
+        ++count[r.index(ri, rj, rk)];
+      }
+  std::vector<float> out(r.voxelCount(), 0.f);
+  for (size_t v = 0; v < out.size(); ++v) out[v] = count[v] ? float(sum[v] / count[v]) : 0.f;
+  return out;
+}
+
+}  // namespace
+
+size_t BasicVolumePrecompute::bytes() const {
+  return optical_depth_sh.size() * sizeof(ShCoefficients) + receiver_density.size() * 4 +
+         cuts.offsets.size() * 8 + cuts.nodes.size() * 4 + cuts.values.size() * 4;
+}
+
+PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double extinction,
+                                           const PrecomputeOptions& options,
+                                           const std::function<bool(double)>& progress) {
+  if (options.sample_points < 1 || options.sample_points > (1 << 20)) {
+    throw InputError("sample_points: must be in [1, 2^20], got " +
+                     std::to_string(options.sample_points));
+  }
+  if (options.transfer_resolution < 4 || options.transfer_resolution > 512) {
+    throw InputError("transfer_resolution: must be in [4, 512], got " +
+                     std::to_string(options.transfer_resolution));
+  }
+  if (!(extinction >= 0 && extinction <= 1e6)) {
+    throw InputError("extinction: must be in [0, 1e6], got " + std::to_string(extinction));
+  }
+  if (volumes.frames.empty()) throw InputError("basic volumes: the database is empty");
+  const BakeGrid& g = volumes.grid;
+  const size_t n = g.voxelCount();
+  for (size_t f = 0; f < volumes.frames.size(); ++f) {
+    if (volumes.frames[f].size() != n) {
+      throw InputError("basic volumes: volume " + std::to_string(f) +
+                       " does not match the lattice");
+    }
+  }
+  PrecomputedDatabase db;
+  db.extinction = extinction;
+  db.receivers = receiverLattice(g, options.transfer_resolution);
+  const BakeGrid& rg = db.receivers;
+  std::vector<uint8_t> support(n, 0);
+  std::vector<uint8_t> near(rg.voxelCount(), 0);
+  db.basic.resize(volumes.frames.size());
+  for (size_t f = 0; f < volumes.frames.size(); ++f) {
+    for (size_t v = 0; v < n; ++v) support[v] |= volumes.frames[f][v] > 0;
+    db.basic[f].receiver_density = boxFilter(g, volumes.frames[f], rg);
+    for (size_t v = 0; v < near.size(); ++v) near[v] |= db.basic[f].receiver_density[v] > 0;
+  }
+  // Receivers next to density too: trilinear reads at the cloud's edge weight them.
+  db.receiver_mask.assign(rg.voxelCount(), 0);
+  for (int k = 0; k < rg.nz; ++k)
+    for (int j = 0; j < rg.ny; ++j)
+      for (int i = 0; i < rg.nx; ++i) {
+        bool any = false;
+        for (int dk = -1; dk <= 1 && !any; ++dk)
+          for (int dj = -1; dj <= 1 && !any; ++dj)
+            for (int di = -1; di <= 1 && !any; ++di) {
+              const int a = i + di, b = j + dj, c = k + dk;
+              if (a < 0 || b < 0 || c < 0 || a >= rg.nx || b >= rg.ny || c >= rg.nz) continue;
+              any = near[rg.index(a, b, c)] != 0;
+            }
+        db.receiver_mask[rg.index(i, j, k)] = any;
+      }
+  // Samples spread over the trilinear density's support (the voxels next to density too), so
+  // the sum over samples of sigma_t covers the integral of the field the render sees.
+  std::vector<uint8_t> spread(n, 0);
+  {
+    std::vector<float> any(n, 0.f);
+    for (size_t v = 0; v < n; ++v) any[v] = support[v] ? 1.f : 0.f;
+    spread = densitySupport(g, any);
+  }
+  db.tree = buildSampleTree(g, spread, options.sample_points, options.seed);
+
+  const double nvol = double(volumes.frames.size());
+  for (size_t f = 0; f < volumes.frames.size(); ++f) {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto part = [&](double lo, double hi) {
+      return [&, lo, hi](double x) {
+        return !progress || progress((double(f) + lo + (hi - lo) * x) / nvol);
+      };
+    };
+    BasicVolumePrecompute& b = db.basic[f];
+    b.optical_depth_sh = projectOpticalDepth(g, volumes.frames[f], extinction,
+                                             options.sh_directions, part(0.0, 0.3));
+    if (f == 0) {
+      // The SHEXP tables, fitted on up to 2000 voxels of the first basic volume's cloud.
+      std::vector<ShCoefficients> samples;
+      std::vector<size_t> inside;
+      for (size_t v = 0; v < n; ++v) {
+        if (volumes.frames[0][v] > 0) inside.push_back(v);
+      }
+      const size_t stride = std::max<size_t>(1, inside.size() / 2000);
+      for (size_t i = 0; i < inside.size(); i += stride) {
+        ShCoefficients c = b.optical_depth_sh[inside[i]];
+        for (float& x : c) x = -x;
+        samples.push_back(c);
+      }
+      while (samples.size() < 8) samples.push_back(ShCoefficients{});  // an all-empty volume
+      db.shexp = ShExp::fit(samples);
+    }
+    b.cuts = computeTransferCuts(db.tree, rg, b.receiver_density, extinction, db.receiver_mask,
+                                 options.cuts, part(0.3, 1.0));
+    b.seconds = secondsSince(t0);
+  }
+  db.volumes = std::move(volumes);
+  return db;
+}
+
+BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& frame,
+                               const Vec3& sun_direction, const Rgb& albedo,
+                               const std::array<ShCoefficients, 3>& sky_sh,
+                               const FrameLightOptions& options, FrameLightStats* stats) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int nvol = int(db.basic.size());
+  if (frame.a < 0 || frame.a >= nvol || frame.b < 0 || frame.b >= nvol ||
+      !(frame.w >= 0 && frame.w <= 1)) {
+    throw InputError("animation frame: basic volumes " + std::to_string(frame.a) + ", " +
+                     std::to_string(frame.b) + " or weight " + std::to_string(frame.w) +
+                     " out of range");
+  }
+  if (options.max_orders < 1 || options.max_orders > 1000) {
+    throw InputError("iterations: must be in [1, 1000], got " + std::to_string(options.max_orders));
+  }
+  if (!(options.tolerance > 0 && options.tolerance <= 1)) {
+    throw InputError("tolerance: must be in (0, 1], got " + std::to_string(options.tolerance));
+  }
+  const BakeGrid& g = db.volumes.grid;
+  const BakeGrid& rg = db.receivers;
+  const size_t n = g.voxelCount(), nr = rg.voxelCount();
+  const double w = frame.w;
+  const BasicVolumePrecompute& va = db.basic[size_t(frame.a)];
+  const BasicVolumePrecompute& vb = db.basic[size_t(frame.b)];
+
+  BakedLight bake;
+  bake.grid = g;
+  bake.method = "precomputed";
+  bake.sun_direction = normalize(sun_direction);
+  bake.density = blendFrame(db.volumes.frames, frame);
+  const std::vector<uint8_t> support = densitySupport(g, bake.density);
+
+  // Eq. 2's transmittance to the sun: one sweep through the blended density.
+  {
+    const std::vector<float> tau =
+        sweepOpticalDepth(g, bake.density, db.extinction, bake.sun_direction);
+    BakeChannel& t = bake.add(bake_grids::kSunTransmittance, 1);
+    parallelVoxels(n, [&](size_t v) { t.data[v] = float(std::exp(-double(tau[v]))); });
+  }
+  // Eq. 6 and 7: the blended optical depth's SH, exponentiated.
+  bool sky = false;
+  for (const auto& c : sky_sh)
+    for (float x : c) sky = sky || x != 0;
+  std::array<const float*, kShCoefficients> tsh{};
+  if (sky) {
+    std::array<float*, kShCoefficients> out{};
+    for (int i = 0; i < kShCoefficients; ++i) {
+      out[size_t(i)] = bake.add(bake_grids::skyTransmittanceSh(i), 1).data.data();
+    }
+    BakeChannel& vis = bake.add(bake_grids::kSkyVisibility, 1);
+    parallelVoxels(n, [&](size_t v) {
+      if (!support[v]) return;
+      ShCoefficients f;
+      for (int i = 0; i < kShCoefficients; ++i) {
+        f[size_t(i)] = float(
+            -(w * va.optical_depth_sh[v][size_t(i)] + (1 - w) * vb.optical_depth_sh[v][size_t(i)]));
+      }
+      const ShCoefficients t = db.shexp(f);
+      for (int i = 0; i < kShCoefficients; ++i) {
+        out[size_t(i)][v] = std::isfinite(t[size_t(i)]) ? t[size_t(i)] : 0.f;
+      }
+      vis.data[v] = float(std::clamp(double(out[0][v]) / kSqrt4Pi, 0.0, 1.0));
+    });
+    for (int i = 0; i < kShCoefficients; ++i) {
+      tsh[size_t(i)] = bake.find(bake_grids::skyTransmittanceSh(i))->data.data();
+    }
+  }
+
+  // Receivers: blended density, the merged cuts (Eq. 9) and the first-order sources.
+  std::vector<float> rdensity(nr);
+  for (size_t r = 0; r < nr; ++r) {
+    rdensity[r] = float(w * va.receiver_density[r] + (1 - w) * vb.receiver_density[r]);
+  }
+  std::vector<std::vector<uint32_t>> mnodes(nr);
+  std::vector<std::vector<float>> mvalues(nr);
+  const float* tsun = bake.find(bake_grids::kSunTransmittance)->data.data();
+  // Isotropic source radiance per unit sigma_t, sun (per unit E) then sky, 6 floats per receiver.
+  std::vector<float> source(6 * nr, 0.f);
+  const Rgb inv4pi_albedo = albedo / (4 * kPi);
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, nr, 64), [&](const tbb::blocked_range<size_t>& rr) {
+        for (size_t r = rr.begin(); r != rr.end(); ++r) {
+          if (!db.receiver_mask[r]) continue;
+          mergeCuts(va.cuts, vb.cuts, db.tree, r, w, [&](uint32_t node, double v) {
+            mnodes[r].push_back(node);
+            mvalues[r].push_back(float(v));
+          });
+          const int i = int(r % size_t(rg.nx)), j = int((r / size_t(rg.nx)) % size_t(rg.ny)),
+                    k = int(r / (size_t(rg.nx) * size_t(rg.ny)));
+          const Vec3 x = rg.center(i, j, k);
+          const double ts = sampleTrilinear(g, tsun, x);
+          for (int c = 0; c < 3; ++c) source[6 * r + size_t(c)] = float(inv4pi_albedo[c] * ts);
+          if (sky) {
+            double t[kShCoefficients];
+            for (int q = 0; q < kShCoefficients; ++q) t[q] = sampleTrilinear(g, tsh[size_t(q)], x);
+            for (int c = 0; c < 3; ++c) {
+              double e = 0;  // integral of L_sky T over the sphere
+              for (int q = 0; q < kShCoefficients; ++q) e += sky_sh[size_t(c)][size_t(q)] * t[q];
+              source[6 * r + 3 + size_t(c)] = float(inv4pi_albedo[c] * std::max(0.0, e));
+            }
+          }
+        }
+      });
+  size_t merged = 0;
+  for (const auto& m : mnodes) merged += m.size();
+
+  // Eq. 8, order by order: the illumination tree of the samples' scattered light, then the
+  // fluence at every receiver as the sum over its merged cut.
+  const SampleTree& tree = db.tree;
+  const size_t K = tree.points.size();
+  std::vector<float> sigma_q(K);
+  for (size_t k = 0; k < K; ++k) {
+    sigma_q[k] = float(db.extinction * sampleTrilinear(g, bake.density.data(), tree.points[k]) *
+                       tree.volume / double(K));
+  }
+  std::vector<float> co(6 * nr, 0.f), fluence(6 * nr, 0.f);
+  double total = 0;
+  int orders = 0;
+  for (int order = 0; order < options.max_orders; ++order) {
+    std::vector<float> leaf_sun(3 * K), leaf_sky(3 * K);
+    for (size_t k = 0; k < K; ++k) {
+      float s[6];
+      sampleTrilinear(rg, source.data(), 6, tree.points[k], s);
+      for (int c = 0; c < 3; ++c) {
+        leaf_sun[3 * k + size_t(c)] = sigma_q[k] * s[c];
+        leaf_sky[3 * k + size_t(c)] = sigma_q[k] * s[3 + c];
+      }
+    }
+    const std::vector<float> sun_tree = illuminationTree(tree, leaf_sun);
+    const std::vector<float> sky_tree = illuminationTree(tree, leaf_sky);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nr, 256),
+                      [&](const tbb::blocked_range<size_t>& rr) {
+                        for (size_t r = rr.begin(); r != rr.end(); ++r) {
+                          double phi[6] = {0, 0, 0, 0, 0, 0};
+                          for (size_t e = 0; e < mnodes[r].size(); ++e) {
+                            const size_t node = mnodes[r][e];
+                            const double v = mvalues[r][e];
+                            for (int c = 0; c < 3; ++c) {
+                              phi[c] += sun_tree[3 * node + size_t(c)] * v;
+                              phi[3 + c] += sky_tree[3 * node + size_t(c)] * v;
+                            }
+                          }
+                          for (int c = 0; c < 6; ++c) fluence[6 * r + size_t(c)] = float(phi[c]);
+                        }
+                      });
+    double added = 0;
+    for (size_t r = 0; r < nr; ++r) {
+      for (int c = 0; c < 6; ++c) {
+        co[6 * r + size_t(c)] += fluence[6 * r + size_t(c)];
+        added += fluence[6 * r + size_t(c)];
+        source[6 * r + size_t(c)] = float(inv4pi_albedo[c % 3] * fluence[6 * r + size_t(c)]);
+      }
+    }
+    total += added;
+    ++orders;
+    if (!(added > options.tolerance * total)) break;
+  }
+
+  // Back onto the lattice: Co per unit E; Co_sky per unit mean sky radiance (the render scales
+  // it by the sky's mean, so the sky's actual distribution is baked in).
+  BakeChannel& co_sun = bake.add(bake_grids::kMultipleFluence, 3);
+  Rgb sky_mean;
+  for (int c = 0; c < 3; ++c) sky_mean[c] = sky_sh[size_t(c)][0] / kSqrt4Pi;
+  BakeChannel* co_sky = sky ? &bake.add(bake_grids::kSkyMultipleFluence, 3) : nullptr;
+  parallelVoxels(n, [&](size_t v) {
+    if (!support[v]) return;
+    const int i = int(v % size_t(g.nx)), j = int((v / size_t(g.nx)) % size_t(g.ny)),
+              k = int(v / (size_t(g.nx) * size_t(g.ny)));
+    float s[6];
+    sampleTrilinear(rg, co.data(), 6, g.center(i, j, k), s);
+    for (int c = 0; c < 3; ++c) {
+      co_sun.data[3 * v + size_t(c)] = std::max(0.f, s[c]);
+      if (co_sky && sky_mean[c] > 0) {
+        co_sky->data[3 * v + size_t(c)] = float(std::max(0.0, s[3 + c] / sky_mean[c]));
+      }
+    }
+  });
+  bake.metadata["cloudbake:frame_blend"] =
+      std::to_string(frame.a) + "," + std::to_string(frame.b) + "," + std::to_string(w);
+  bake.metadata["cloudbake:orders"] = std::to_string(orders);
+  bake.metadata["cloudbake:sample_points"] = std::to_string(K);
+  bake.trimToSupport();
+  if (stats) {
+    stats->orders = orders;
+    stats->merged_entries = merged;
+    stats->seconds = secondsSince(t0);
+  }
+  return bake;
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,173 @@
+// Method `precomputed`: a frame lit from the precomputes alone against the path tracer, a
+// blended frame against the same method run on the blended density, and bad input.
+#include "core/animation/precomputed.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "core/bake/bake_lattice.h"
+#include "core/bake/render_from_bake.h"
+#include "core/bake/sky_sh_scatter.h"
+#include "core/error.h"
+#include "core/phase/isotropic.h"
+#include "core/transport/path_tracer.h"
+#include "core/transport/sky.h"
+#include "core/volume/analytic.h"
+
+namespace cloudbake {
+namespace {
+
+const Bounds3 kBox{Vec3(-1.3), Vec3(1.3)};
+
+std::vector<float> sphereOnLattice(const Vec3& c, double r, int res, BakeGrid* grid) {
+  BakedLight l = makeBakeLatticeOver(SphereDensity(c, r, 1.0), kBox, res);
+  *grid = l.grid;
+  return std::move(l.density);
+}
+
+Camera ortho(const Vec3& from, int px) {
+  Camera c;
+  c.name = "v";
+  c.type = Camera::Type::kOrthographic;
+  c.position = from;
+  c.look_at = Vec3(0.0);
+  c.up = std::abs(from.z) > 0.9 * length(from) ? Vec3(0, 1, 0) : Vec3(0, 0, 1);
+  c.width = 2.4;
+  c.width_px = c.height_px = px;
+  return c;
+}
+
+Rgb mean(const Image& im) {
+  Rgb s;
+  for (int y = 0; y < im.height; ++y)
+    for (int x = 0; x < im.width; ++x)
+      for (int c = 0; c < 3; ++c) s[c] += im.at(x, y)[c];
+  return s / double(im.width * im.height);
+}
+
+TEST(Precomputed, FrameMatchesThePathTracerOnASphere) {
+  // A homogeneous sphere, radius 1, optical radius 2, albedo 0.9: sun from the side
+  // and a uniform sky; a database of two identical basic volumes, frame w = 1.
+  BakeGrid g;
+  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 40, &g);
+  BasicVolumeDatabase vols{g, {d, d}};
+  const double extinction = 2.0;
+  PrecomputeOptions po;
+  po.sample_points = 4096;
+  po.transfer_resolution = 20;
+  const PrecomputedDatabase db = precomputeBasicVolumes(vols, extinction, po);
+  const Vec3 sun_dir = normalize(Vec3(1, 0, 0.3));
+  Sky sky;
+  sky.radiance = Rgb(0.2, 0.3, 0.5);
+  const SkyLight sky_light(sky);
+  FrameLightStats stats;
+  const BakedLight bake = lightAnimationFrame(db, {0, 1, 1.0}, sun_dir, Rgb(0.9),
+                                              projectSkyRadiance(sky_light), {}, &stats);
+  EXPECT_NO_THROW(bake.validate("frame"));
+  EXPECT_GT(stats.orders, 2);
+
+  Medium m;
+  m.extinction = extinction;
+  m.albedo = Rgb(0.9);
+  // Isotropic: the phase seed 002's multiple scattering assumes (its single scattering takes
+  // any phase, which the render evaluates exactly, as for method single).
+  m.phase = std::make_shared<IsotropicPhase>();
+  Sun sun;
+  sun.direction = sun_dir;
+  sun.irradiance = Rgb(2.0);
+  for (const Vec3& from : {Vec3(0, -4, 0), Vec3(-4, 0, -1.2)}) {  // side view, against the sun
+    const Camera cam = ortho(from, 24);
+    BakeRenderOptions bo;
+    bo.samples_per_pixel = 4;
+    const RenderLayers baked = renderFromBake(bake, m, sun, sky, cam, bo);
+    Medium mt = m;
+    mt.density = std::make_shared<SphereDensity>(Vec3(0.0), 1.0, 1.0);
+    PathTracerOptions pto;
+    pto.samples_per_pixel = 256;
+    const RenderLayers traced = renderPathTraced(mt, sun, sky, cam, pto);
+    // The path tracer's `sky` layer is all orders of sky light, `single` = sun single + sky
+    // single; ours: `sky` = sky single (Eq. 5) + sky multiple.
+    const Rgb bs = mean(baked.sun), ts = mean(traced.sun);
+    const Rgb bk = mean(baked.sky), tk = mean(traced.sky);
+    const Rgb bm = mean(baked.multiple), tm = mean(traced.multiple);
+    std::printf(
+        "view (%.1f %.1f %.1f): sun %.4f vs %.4f, sky %.4f vs %.4f, multiple %.4f vs "
+        "%.4f (orders %d)\n",
+        from.x, from.y, from.z, bs.y, ts.y, bk.z, tk.z, bm.y, tm.y, stats.orders);
+    // Measured: sun -11%/-8%, sky -11%/-10%, multiple -23%/-20% (docs/methods.md: the
+    // multiple term is low and the deficit does not shrink with K, so it is a bias, not
+    // noise; with HG 0.5 instead, multiple is -31%/-48%, the isotropic assumption's cost).
+    EXPECT_NEAR(bs.y / ts.y, 1.0, 0.15);
+    EXPECT_NEAR(bk.z / tk.z, 1.0, 0.15);
+    EXPECT_NEAR(bm.y / tm.y, 1.0, 0.3);
+  }
+}
+
+TEST(Precomputed, BlendedFrameFollowsTheBlendedDensity) {
+  // Two spheres side by side; the frame blended at w = 0.4 against the method run from scratch
+  // on the blended density (precomputed as a basic volume of its own).
+  BakeGrid g;
+  const std::vector<float> da = sphereOnLattice(Vec3(-0.25, 0, 0), 0.9, 32, &g);
+  const std::vector<float> db_ = sphereOnLattice(Vec3(0.25, 0, 0), 0.9, 32, &g);
+  const double w = 0.4;
+  std::vector<float> blend(da.size());
+  for (size_t i = 0; i < da.size(); ++i) blend[i] = float(w * da[i] + (1 - w) * db_[i]);
+  PrecomputeOptions po;
+  po.sample_points = 2048;
+  po.transfer_resolution = 16;
+  const PrecomputedDatabase db = precomputeBasicVolumes({g, {da, db_, blend}}, 2.0, po);
+  Sky sky;
+  sky.radiance = Rgb(0.3);
+  const auto sky_sh = projectSkyRadiance(SkyLight(sky));
+  const Vec3 sun_dir = normalize(Vec3(0.2, 0.5, 1));
+  const BakedLight blended = lightAnimationFrame(db, {0, 1, w}, sun_dir, Rgb(0.95), sky_sh, {});
+  const BakedLight scratch = lightAnimationFrame(db, {2, 2, 1.0}, sun_dir, Rgb(0.95), sky_sh, {});
+  // Same density, so the same sun transmittance to float precision (one sweep each).
+  for (size_t v = 0; v < blended.density.size(); ++v) {
+    ASSERT_NEAR(blended.density[v], scratch.density[v], 1e-6);
+  }
+  auto sum = [](const BakedLight& b, const std::string& name) {
+    double s = 0;
+    for (float x : b.find(name)->data) s += x;
+    return s;
+  };
+  const double co =
+      sum(blended, bake_grids::kMultipleFluence) / sum(scratch, bake_grids::kMultipleFluence);
+  const double vis =
+      sum(blended, bake_grids::kSkyVisibility) / sum(scratch, bake_grids::kSkyVisibility);
+  std::printf("blended / from scratch: Co %.4f, sky visibility %.4f\n", co, vis);
+  EXPECT_NEAR(co, 1.0, 0.08);
+  EXPECT_NEAR(vis, 1.0, 0.05);
+}
+
+TEST(Precomputed, RefusesBadKnobsAndFrames) {
+  BakeGrid g;
+  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 12, &g);
+  PrecomputeOptions po;
+  po.sample_points = 0;
+  EXPECT_THROW(precomputeBasicVolumes({g, {d, d}}, 1.0, po), InputError);
+  po.sample_points = 64;
+  po.transfer_resolution = 2;
+  EXPECT_THROW(precomputeBasicVolumes({g, {d, d}}, 1.0, po), InputError);
+  po.transfer_resolution = 8;
+  EXPECT_THROW(precomputeBasicVolumes({g, {}}, 1.0, po), InputError);
+  EXPECT_THROW(precomputeBasicVolumes({g, {d, std::vector<float>(5)}}, 1.0, po), InputError);
+  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, 1.0, po);  // one volume works
+  const std::array<ShCoefficients, 3> black{};
+  EXPECT_THROW(lightAnimationFrame(db, {0, 1, 0.5}, Vec3(0, 0, 1), Rgb(1.0), black, {}),
+               InputError);
+  EXPECT_THROW(lightAnimationFrame(db, {0, 0, 1.5}, Vec3(0, 0, 1), Rgb(1.0), black, {}),
+               InputError);
+  FrameLightOptions fo;
+  fo.tolerance = 0;
+  EXPECT_THROW(lightAnimationFrame(db, {0, 0, 1}, Vec3(0, 0, 1), Rgb(1.0), black, fo), InputError);
+  // A black sky: no sky grids, and the frame still validates.
+  const BakedLight b = lightAnimationFrame(db, {0, 0, 1}, Vec3(0, 0, 1), Rgb(1.0), black, {});
+  EXPECT_EQ(b.find(bake_grids::kSkyVisibility), nullptr);
+  EXPECT_NO_THROW(b.validate("frame"));
+}
+
+}  // namespace
+}  // namespace cloudbake
