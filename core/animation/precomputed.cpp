@@ -97,37 +97,23 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
   db.extinction = extinction;
   db.receivers = receiverLattice(g, options.transfer_resolution);
   const BakeGrid& rg = db.receivers;
-  std::vector<uint8_t> support(n, 0);
-  std::vector<uint8_t> near(rg.voxelCount(), 0);
+  // 1 where any basic volume has density, on the lattice and on the receivers.
+  std::vector<float> any(n, 0.f), near(rg.voxelCount(), 0.f);
   db.basic.resize(volumes.frames.size());
   for (size_t f = 0; f < volumes.frames.size(); ++f) {
-    for (size_t v = 0; v < n; ++v) support[v] |= volumes.frames[f][v] > 0;
+    for (size_t v = 0; v < n; ++v) {
+      if (volumes.frames[f][v] > 0) any[v] = 1.f;
+    }
     db.basic[f].receiver_density = boxFilter(g, volumes.frames[f], rg);
-    for (size_t v = 0; v < near.size(); ++v) near[v] |= db.basic[f].receiver_density[v] > 0;
+    for (size_t v = 0; v < near.size(); ++v) {
+      if (db.basic[f].receiver_density[v] > 0) near[v] = 1.f;
+    }
   }
-  // Receivers next to density too: trilinear reads at the cloud's edge weight them.
-  db.receiver_mask.assign(rg.voxelCount(), 0);
-  for (int k = 0; k < rg.nz; ++k)
-    for (int j = 0; j < rg.ny; ++j)
-      for (int i = 0; i < rg.nx; ++i) {
-        bool any = false;
-        for (int dk = -1; dk <= 1 && !any; ++dk)
-          for (int dj = -1; dj <= 1 && !any; ++dj)
-            for (int di = -1; di <= 1 && !any; ++di) {
-              const int a = i + di, b = j + dj, c = k + dk;
-              if (a < 0 || b < 0 || c < 0 || a >= rg.nx || b >= rg.ny || c >= rg.nz) continue;
-              any = near[rg.index(a, b, c)] != 0;
-            }
-        db.receiver_mask[rg.index(i, j, k)] = any;
-      }
-  // Samples spread over the trilinear density's support (the voxels next to density too), so
-  // the sum over samples of sigma_t covers the integral of the field the render sees.
-  std::vector<uint8_t> spread(n, 0);
-  {
-    std::vector<float> any(n, 0.f);
-    for (size_t v = 0; v < n; ++v) any[v] = support[v] ? 1.f : 0.f;
-    spread = densitySupport(g, any);
-  }
+  // Receivers next to density too: trilinear reads at the cloud's edge weight them. Samples
+  // spread over the trilinear density's support as well, so the sum over samples of sigma_t
+  // covers the integral of the field the render sees.
+  db.receiver_mask = densitySupport(rg, near);
+  const std::vector<uint8_t> spread = densitySupport(g, any);
   db.tree = buildSampleTree(g, spread, options.sample_points, options.seed);
 
   const double nvol = double(volumes.frames.size());

@@ -56,7 +56,7 @@ struct TransferCutOptions {
   /// A cut is refined (lightcuts-style, largest error first) until every node's estimated
   /// clustering error, count * L2 error of T~ over its samples, is at most cut_error times the
   /// receiver's total sum of T~ (0, 1].
-  double cut_error = 0.005;
+  double cut_error = 0.001;
   int max_cut = 4096;  ///< nodes per cut at most, [1, 2^20]
 };
 

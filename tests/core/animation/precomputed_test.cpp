@@ -96,12 +96,12 @@ TEST(Precomputed, FrameMatchesThePathTracerOnASphere) {
         "view (%.1f %.1f %.1f): sun %.4f vs %.4f, sky %.4f vs %.4f, multiple %.4f vs "
         "%.4f (orders %d)\n",
         from.x, from.y, from.z, bs.y, ts.y, bk.z, tk.z, bm.y, tm.y, stats.orders);
-    // Measured: sun -11%/-8%, sky -11%/-10%, multiple -23%/-20% (docs/methods.md: the
-    // multiple term is low and the deficit does not shrink with K, so it is a bias, not
-    // noise; with HG 0.5 instead, multiple is -31%/-48%, the isotropic assumption's cost).
-    EXPECT_NEAR(bs.y / ts.y, 1.0, 0.15);
-    EXPECT_NEAR(bk.z / tk.z, 1.0, 0.15);
-    EXPECT_NEAR(bm.y / tm.y, 1.0, 0.3);
+    // Measured: sun -8%/-4%, sky -7%/-6%, multiple -17%/-14% (docs/methods.md: the clusters
+    // underestimate the mean transmittance, exp(-tau) being convex, and the deficit compounds
+    // over orders: -23%/-20% at cut_error 0.005, -13%/-10% at 0.0003).
+    EXPECT_NEAR(bs.y / ts.y, 1.0, 0.12);
+    EXPECT_NEAR(bk.z / tk.z, 1.0, 0.12);
+    EXPECT_NEAR(bm.y / tm.y, 1.0, 0.25);
   }
 }
 
