@@ -129,4 +129,23 @@ ShCoefficients ShExp::operator()(const ShCoefficients& g_in) const {
   return out;
 }
 
+ShExp ShExp::fromTables(std::vector<double> a, std::vector<double> b, double range) {
+  if (a.size() != b.size() || a.size() < 4 || a.size() > 4096 || !(range >= 0) ||
+      !std::isfinite(range)) {
+    throw InputError("shexp: tables of " + std::to_string(a.size()) + " and " +
+                     std::to_string(b.size()) + " bins over range " + std::to_string(range) +
+                     " are not valid");
+  }
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (!std::isfinite(a[i]) || !std::isfinite(b[i])) {
+      throw InputError("shexp: table bin " + std::to_string(i) + " is not finite");
+    }
+  }
+  ShExp e;
+  e.a_ = std::move(a);
+  e.b_ = std::move(b);
+  e.range_ = range;
+  return e;
+}
+
 }  // namespace cloudbake

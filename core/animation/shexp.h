@@ -23,8 +23,11 @@ class ShExp {
   /// Fits the tables to `samples` (SH vectors of -tau, e.g. of a basic volume's voxels) with
   /// `bins` bins over [0, max |g^|]; empty bins take their neighbours' values. InputError for
   /// fewer than 8 samples, bins outside [4, 4096] or a non-finite sample.
-  static ShExp fit(const std::vector<ShCoefficients>& samples, int bins = 64,
-                   int directions = 256);
+  static ShExp fit(const std::vector<ShCoefficients>& samples, int bins = 64, int directions = 256);
+
+  /// Tables as fit() made them (a stored database): InputError unless a and b have equal sizes
+  /// in [4, 4096], finite values and range >= 0.
+  static ShExp fromTables(std::vector<double> a, std::vector<double> b, double range);
 
   /// exp_*(g). Beyond the fitted range the last bin's a and b are used (reported by range()).
   ShCoefficients operator()(const ShCoefficients& g) const;

@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/job/cache_key.h"
+#include "core/job/run_outputs.h"
 
 namespace cloudbake {
 namespace {
@@ -15,12 +16,6 @@ Json knobsOf(const ShotSpec& shot) {
   Json j = Json::parse(shot.bake.options_json, nullptr, /*allow_exceptions=*/false);
   if (!j.is_object()) throw InputError("/bake: method knobs are not a JSON object");
   return j;
-}
-
-std::string shortNumber(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
 }
 
 }  // namespace

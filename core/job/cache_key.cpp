@@ -139,10 +139,23 @@ ShotCacheKeys computeCacheKeys(const ShotSpec& shot) {
     knobs.erase("step");
     light["knobs"] = knobs;
     keys.light_family = keyOf("light-family", light);
-    const Vec3 d = quantiseDirection(shot.lighting.has_sun ? shot.lighting.sun.direction
-                                                           : Vec3(0, 0, 1));
+    const Vec3 d =
+        quantiseDirection(shot.lighting.has_sun ? shot.lighting.sun.direction : Vec3(0, 0, 1));
     light["sun_direction"] = {d.x, d.y, d.z};
     keys.light = keyOf("light", light);
+  }
+
+  if (shot.bake.method == BakeSpec::Method::kPrecomputed) {
+    const Json knobs = Json::parse(shot.bake.options_json);
+    Json pre;
+    pre["volume"] = keys.volume;
+    pre["extinction"] = canonical["medium"]["extinction"];
+    pre["seed"] = shot.bake.seed;
+    for (const char* k :
+         {"light_resolution", "sample_points", "transfer_resolution", "cut_error"}) {
+      pre[k] = knobs.contains(k) ? knobs[k] : Json(nullptr);
+    }
+    keys.precompute = keyOf("precompute", pre);
   }
 
   for (const Json& view : canonical["views"]) {

@@ -44,6 +44,12 @@ struct ShotCacheKeys {
   /// size. Empty for other methods. `light_family` is the same without the sun direction.
   std::string light;
   std::string light_family;
+  /// Method precomputed: the per-basic-volume precompute (optical-depth SH, sample tree, cuts),
+  /// keyed by volume key, extinction, seed and the precompute knobs (light_resolution,
+  /// sample_points, transfer_resolution, cut_error) + code version. Not in it: sun, sky, albedo,
+  /// phase, views, frames and the walk's knobs, so every lighting and every animation of the
+  /// same database reuses it. Empty for other methods.
+  std::string precompute;
 };
 
 /// True for the methods whose views render from a baked-light lattice (single, pointcloud).

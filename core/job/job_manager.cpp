@@ -16,6 +16,7 @@
 #include "core/job/cache_key.h"
 #include "core/job/file_util.h"
 #include "core/job/job_errors.h"
+#include "core/job/run_precomputed.h"
 #include "core/job/run_shot.h"
 #include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
@@ -250,40 +251,48 @@ JobPlan JobManager::plan(const SubmitInput& input) {
   plan.method = methodName(p.shot.bake.method);
   plan.bake_key = p.keys.bake;
   plan.vdb = p.shot.outputs.vdb;
-  const bool bake_method = bakesLight(p.shot);
-  if (bake_method) {
+  const bool precomputed = p.shot.bake.method == BakeSpec::Method::kPrecomputed;
+  const bool bake_method = bakesLight(p.shot) || precomputed;
+  if (precomputed) {
+    plan.bake_key = p.keys.precompute;
+    plan.bake_cached = cache_->lookup(p.keys.precompute).has_value();
+    plan.components = planPrecomputed(p.shot, plan.bake_cached);
+  } else if (bake_method) {
     plan.bake_key = p.keys.light;
     plan.bake_cached = cache_->lookup(p.keys.light).has_value();
     plan.components = planBake(p.shot, plan.bake_cached);
   }
+  const int frames = precomputed ? precomputedOptions(p.shot).frames : 1;
   if (p.shot.outputs.exr) {
     for (size_t i = 0; i < p.shot.views.size(); ++i) {
       const Camera& c = p.shot.views[i];
-      const bool cached = bake_method ? plan.bake_cached
-                                      : cache_->lookup(p.keys.views[i]).has_value();
+      const bool cached =
+          bake_method ? plan.bake_cached : cache_->lookup(p.keys.views[i]).has_value();
       plan.views.push_back(c.name);
       plan.view_cached.push_back(cached);
-      const double rays = double(c.width_px) * c.height_px * p.shot.bake.samples;
+      const double rays = double(c.width_px) * c.height_px * p.shot.bake.samples * frames;
       if (bake_method) {
         plan.pixel_samples += rays;
-        plan.components.push_back("view '" + c.name + "': ray march from the bake, " +
-                                  std::to_string(c.width_px) + "x" +
-                                  std::to_string(c.height_px) + ", " +
-                                  std::to_string(p.shot.bake.samples) + " ray(s) per pixel");
+        plan.components.push_back(
+            "view '" + c.name + "': ray march from " +
+            (precomputed ? "each frame's light, " + std::to_string(frames) + " frame(s), "
+                         : std::string("the bake, ")) +
+            std::to_string(c.width_px) + "x" + std::to_string(c.height_px) + ", " +
+            std::to_string(p.shot.bake.samples) + " ray(s) per pixel");
       } else if (!cached) {
         plan.pixel_samples += rays;
         plan.components.push_back("view '" + c.name + "': path trace " +
-                                  std::to_string(c.width_px) + "x" +
-                                  std::to_string(c.height_px) + " at " +
-                                  std::to_string(p.shot.bake.samples) + " spp");
+                                  std::to_string(c.width_px) + "x" + std::to_string(c.height_px) +
+                                  " at " + std::to_string(p.shot.bake.samples) + " spp");
       } else {
         plan.components.push_back("view '" + c.name + "': from the cache");
       }
     }
   }
   if (p.shot.outputs.vdb) {
-    plan.components.push_back(bake_method ? "bake.vdb: the baked light lattice"
-                                          : "bake.vdb: the density grid");
+    plan.components.push_back(precomputed   ? "bake.<frame>.vdb: each frame's light lattice"
+                              : bake_method ? "bake.vdb: the baked light lattice"
+                                            : "bake.vdb: the density grid");
   }
   return plan;
 }
@@ -595,17 +604,17 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
     r.outputs.push_back(f);
   }
   saveLocked(*job);
-  pushEventLocked(*job, "done", r.fraction,
-                  final_state == JobState::kSucceeded
-                      ? fmt::format("succeeded in {:.2f} s (", result.seconds) +
-                            (result.bakes_computed + result.bakes_cached > 0
-                                 ? std::string(result.bakes_computed ? "light baked, "
-                                                                     : "bake from cache, ") +
-                                       std::to_string(result.views_from_bake) +
-                                       " view(s) rendered from the bake)"
-                                 : std::to_string(result.views_rendered) + " view(s) rendered, " +
-                                       std::to_string(result.views_cached) + " from cache)")
-                      : error);
+  pushEventLocked(
+      *job, "done", r.fraction,
+      final_state == JobState::kSucceeded
+          ? fmt::format("succeeded in {:.2f} s (", result.seconds) +
+                (result.bakes_computed + result.bakes_cached > 0
+                     ? std::string(result.bakes_computed ? "light baked, " : "bake from cache, ") +
+                           std::to_string(result.views_from_bake) +
+                           " view(s) rendered from the bake)"
+                     : std::to_string(result.views_rendered) + " view(s) rendered, " +
+                           std::to_string(result.views_cached) + " from cache)")
+          : error);
   spdlog::info("job {}: {}{}", id, jobStateName(final_state), error.empty() ? "" : ": " + error);
 }
 

@@ -8,16 +8,18 @@
 #include <map>
 #include <utility>
 
+#include "core/bake/baked_light_vdb.h"
 #include "core/error.h"
 #include "core/io/exr_io.h"
 #include "core/io/png_writer.h"
-#include "core/bake/baked_light_vdb.h"
 #include "core/io/vdb_io.h"
-#include "core/job/bake_methods.h"
 #include "core/job/bake_cache.h"
+#include "core/job/bake_methods.h"
 #include "core/job/cache_key.h"
 #include "core/job/direction_index.h"
 #include "core/job/file_util.h"
+#include "core/job/run_outputs.h"
+#include "core/job/run_precomputed.h"
 #include "core/job/sha256.h"
 #include "core/job/volume_cache.h"
 #include "core/job/volume_limits.h"
@@ -30,101 +32,6 @@ namespace fs = std::filesystem;
 
 constexpr const char* kCachedViewFile = "view.exr";
 constexpr const char* kCachedVdbFile = "bake.vdb";
-
-// A number with `digits` decimals, for progress messages ("2.58 s" rather than "2.581958 s").
-std::string fixed(double value, int digits) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
-  return buf;
-}
-
-double secondsSince(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-
-uint8_t srgbByte(double linear) {
-  const double c = std::clamp(linear, 0.0, 1.0);
-  const double s = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
-  return static_cast<uint8_t>(std::lround(s * 255.0));
-}
-
-// Preview only: exposure puts the 99th percentile of luminance at 0.8, then sRGB encoding (as
-// `cloudbake render --png`). The EXR stays the authoritative, unexposed radiance.
-void writePreviewPng(const std::string& path, const Image& beauty, double fixed_exposure) {
-  std::vector<double> lum;
-  lum.reserve(size_t(beauty.width) * beauty.height);
-  for (int y = 0; y < beauty.height; ++y) {
-    for (int x = 0; x < beauty.width; ++x) {
-      const float* p = beauty.at(x, y);
-      lum.push_back(0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]);
-    }
-  }
-  const size_t k = std::min(lum.size() - 1, size_t(0.99 * double(lum.size())));
-  std::nth_element(lum.begin(), lum.begin() + std::ptrdiff_t(k), lum.end());
-  const double exposure = fixed_exposure > 0                          ? fixed_exposure
-                          : lum[k] > 0 && std::isfinite(lum[k]) ? 0.8 / lum[k]
-                                                                : 1.0;
-  std::vector<uint8_t> px(size_t(beauty.width) * beauty.height * 3);
-  for (int y = 0; y < beauty.height; ++y) {
-    for (int x = 0; x < beauty.width; ++x) {
-      const float* p = beauty.at(x, y);
-      for (int c = 0; c < 3; ++c) {
-        px[(size_t(y) * beauty.width + x) * 3 + c] = srgbByte(exposure * p[c]);
-      }
-    }
-  }
-  writePng(path, beauty.width, beauty.height, 3, px);
-}
-
-// Multiplies the RGB channels of a layer by the sun irradiance (alpha untouched).
-void scaleRgb(Image& image, const Rgb& e) {
-  const double s[3] = {e.x, e.y, e.z};
-  for (size_t i = 0; i < image.data.size(); ++i) {
-    const int c = int(i % size_t(image.channels));
-    if (c < 3) image.data[i] = float(image.data[i] * s[c]);
-  }
-}
-
-const char* const kLayerNames[] = {"", "sun", "sky", "single", "multiple"};
-
-std::vector<ExrLayer> toExrLayers(RenderLayers&& layers) {
-  return {{"", std::move(layers.beauty)},
-          {"sun", std::move(layers.sun)},
-          {"sky", std::move(layers.sky)},
-          {"single", std::move(layers.single)},
-          {"multiple", std::move(layers.multiple)}};
-}
-
-std::vector<ExrLayer> readLayers(const std::string& path) {
-  ExrContents contents = readExr(path);
-  std::vector<ExrLayer> layers;
-  for (const char* name : kLayerNames) {
-    auto it = contents.layers.find(name);
-    if (it == contents.layers.end()) {
-      throw std::runtime_error(path + ": cached view lacks layer '" + name + "'");
-    }
-    layers.push_back({name, std::move(it->second)});
-  }
-  return layers;
-}
-
-OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
-  OutputFile f;
-  f.name = name;
-  f.path = (fs::path(out_dir) / name).string();
-  f.size = fs::file_size(f.path);
-  f.sha256 = sha256File(f.path);
-  return f;
-}
-
-// DIR/<view>.png beside the view's EXR (a display preview; the EXR is the product).
-void addPreview(const RunOptions& opt, const std::string& view, const std::string& exr_path,
-                RunResult& result) {
-  const std::string png_name = view + ".png";
-  writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(exr_path),
-                  opt.png_exposure);
-  result.files.push_back(describeOutput(opt.out_dir, png_name));
-}
 
 // Methods single and pointcloud: the light is baked once per light direction (or taken from the
 // cache: then no scattering is computed at all), and every view is ray-marched from the bake.
@@ -250,14 +157,17 @@ void runBakeMethod(const ShotSpec& shot, const RunOptions& opt, const ShotCacheK
 }  // namespace
 
 void checkRunnable(const ShotSpec& shot, const std::string& source) {
-  if (shot.bake.method != BakeSpec::Method::kPathtrace && !bakesLight(shot)) {
+  const bool precomputed = shot.bake.method == BakeSpec::Method::kPrecomputed;
+  if (shot.bake.method != BakeSpec::Method::kPathtrace && !bakesLight(shot) && !precomputed) {
     throw InputError(source + ": /bake/method: '" + methodName(shot.bake.method) +
-                     "' is not implemented in this version (use 'pathtrace', 'single' or "
-                     "'pointcloud')");
+                     "' is not implemented in this version (use 'pathtrace', 'single', "
+                     "'pointcloud' or 'precomputed')");
   }
-  if (std::holds_alternative<SequenceVolumeSpec>(shot.volume)) {
-    throw InputError(source + ": /volume/sequence: animated volumes are not supported by method '" +
-                     methodName(shot.bake.method) + "' yet");
+  if (std::holds_alternative<SequenceVolumeSpec>(shot.volume) && !precomputed) {
+    throw InputError(source +
+                     ": /volume/sequence: animated volumes are rendered by method "
+                     "'precomputed' only, not '" +
+                     std::string(methodName(shot.bake.method)) + "'");
   }
 }
 
@@ -339,6 +249,20 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
                (result.volume_cached ? " (volume from memory cache)" : ""));
     return s;
   };
+  if (shot.bake.method == BakeSpec::Method::kPrecomputed) {
+    runPrecomputed(
+        shot, opt, keys, needLights(), [&] { return needScene().medium.density; },
+        [&](const std::string& stage, double fraction, const std::string& message) {
+          progress.stage = stage;
+          progress.fraction = std::clamp(fraction, 0.0, 1.0);
+          progress.message = message;
+          return !opt.progress || opt.progress(progress);
+        },
+        result);
+    result.seconds = secondsSince(t_start);
+    report("done", total, "done in " + fixed(result.seconds, 2) + " s");
+    return result;
+  }
   // Validate the medium, lights and cameras up front even when everything is cached, so bad
   // input fails the same way with and without a cache.
   if (!opt.cache) needScene();

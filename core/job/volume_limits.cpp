@@ -2,10 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <variant>
-
-#include <nlohmann/json.hpp>
 
 #include "core/error.h"
 #include "core/volume/grid_volume.h"
@@ -73,8 +72,7 @@ void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
     const double n = std::pow(double(res + 2), 3);
     if (n > limit) {
       overLimit(source, "/bake/light_resolution",
-                "a bake lattice of up to (" + std::to_string(res) + " + 2)^3",
-                n, max_voxels);
+                "a bake lattice of up to (" + std::to_string(res) + " + 2)^3", n, max_voxels);
     }
   }
   if (shot.outputs.vdb && shot.outputs.vdb_voxel_size > 0) {
@@ -102,6 +100,15 @@ void checkShotFrames(const ShotSpec& shot, int64_t max_frames, const std::string
     throw InputError(source + ": /volume/sequence/frames: " + std::to_string(s->frames) +
                      " frames exceed this server's limit of " + std::to_string(max_frames) +
                      " (--max-frames)");
+  }
+  if (shot.bake.method == BakeSpec::Method::kPrecomputed) {
+    const nlohmann::json knobs = nlohmann::json::parse(shot.bake.options_json);
+    const auto it = knobs.find("frames");
+    if (it != knobs.end() && it->is_number_integer() && it->get<int64_t>() > max_frames) {
+      throw InputError(source + ": /bake/frames: " + std::to_string(it->get<int64_t>()) +
+                       " output frames exceed this server's limit of " +
+                       std::to_string(max_frames) + " (--max-frames)");
+    }
   }
 }
 

@@ -25,7 +25,7 @@ double boxVoxels(const Vec3& extent, double h);
 void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::string& source);
 
 /// Throws InputError naming /volume/sequence/frames when a sequence has more than `max_frames`
-/// frames (0: no limit).
+/// frames, or /bake/frames when method precomputed asks for more output frames (0: no limit).
 void checkShotFrames(const ShotSpec& shot, int64_t max_frames, const std::string& source);
 
 /// Throws InputError naming /bake/points (pointcloud) or /bake/sample_points (precomputed) when

@@ -183,14 +183,20 @@ std::string parseMethodKnobs(const Object& o, BakeSpec::Method method) {
       }
       break;
     case BakeSpec::Method::kPrecomputed:
-      o.allowOnly({"method", "samples", "seed", "max_depth", "basic_volumes", "sample_points",
-                   "sh_order", "iterations", "tolerance"},
+      o.allowOnly({"method", "samples", "seed", "step", "light_resolution", "sample_points",
+                   "transfer_resolution", "cut_error", "iterations", "tolerance", "frames", "sigma",
+                   "dissolve"},
                   context);
-      integer("basic_volumes", 1, 10000);
-      integer("sample_points", 64, int64_t(1) << 20);
-      integer("sh_order", 1, 8);
+      num("step", 0, 1e12, true);
+      integer("light_resolution", 8, 1024);
+      integer("sample_points", 1, int64_t(1) << 20);
+      integer("transfer_resolution", 4, 512);
+      num("cut_error", 0, 1, true);
       integer("iterations", 1, 1000);
       num("tolerance", 0, 1, true);
+      integer("frames", 1, 1000000);
+      num("sigma", 0, 1e6, true);
+      integer("dissolve", 0, 10000);
       break;
     case BakeSpec::Method::kAuto:
       o.allowOnly({"method", "samples", "seed", "max_depth", "tolerance"}, context);
@@ -214,8 +220,9 @@ BakeSpec parseBake(const Object& o) {
     b.method = it->method;
   }
   // Paths per pixel for the path tracer; rays per pixel of each view rendered from a bake.
-  const bool from_bake =
-      b.method == BakeSpec::Method::kSingle || b.method == BakeSpec::Method::kPointcloud;
+  const bool from_bake = b.method == BakeSpec::Method::kSingle ||
+                         b.method == BakeSpec::Method::kPointcloud ||
+                         b.method == BakeSpec::Method::kPrecomputed;
   b.samples = from_bake ? 1 : 64;
   if (auto* v = o.find("samples"))
     b.samples = int(r.integer(*v, o.path("samples"), 1, kMaxSamples));
@@ -319,7 +326,8 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
   const OutputSpec& out = shot.outputs;
   // Bake methods write their own lattice (light_resolution), whatever the volume.
   const bool lattice = shot.bake.method == BakeSpec::Method::kSingle ||
-                       shot.bake.method == BakeSpec::Method::kPointcloud;
+                       shot.bake.method == BakeSpec::Method::kPointcloud ||
+                       shot.bake.method == BakeSpec::Method::kPrecomputed;
   if (lattice) {
     if (out.vdb_voxel_size > 0) {
       r.fail("/outputs/vdb_voxel_size",
@@ -349,6 +357,34 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
     os << "gives " << voxels << " voxels over the volume's bounds; the limit is "
        << std::int64_t(kMaxVdbVoxels) << " (use a larger voxel size)";
     r.fail("/outputs/vdb_voxel_size", os.str());
+  }
+}
+
+// Method precomputed: the walk's knobs need a database of basic volumes (a sequence), and the
+// dissolve must fit in it (seed 002: a jump to l plays l .. l + H - 1).
+void checkAnimationKnobs(const Reader& r, const ShotSpec& shot) {
+  if (shot.bake.method != BakeSpec::Method::kPrecomputed) return;
+  const Json knobs = Json::parse(shot.bake.options_json);
+  const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
+  if (!seq) {
+    for (const char* key : {"sigma", "dissolve"}) {
+      if (knobs.contains(key)) {
+        r.fail(std::string("/bake/") + key,
+               "applies to animated volumes only (a " + std::string(volumeTypeName(shot.volume)) +
+                   " volume is one basic volume: every frame is the same)");
+      }
+    }
+    return;
+  }
+  // Without the knob the dissolve is min(8, frames - 2) (core/job/run_precomputed.h).
+  if (!knobs.contains("dissolve")) return;
+  const int64_t h = knobs["dissolve"].get<int64_t>();
+  const int64_t n = seq->frames;
+  if (h > n - 2) {
+    r.fail("/bake/dissolve", std::to_string(h) +
+                                 " frames of cross-dissolve do not fit a database of " +
+                                 std::to_string(n) + " basic volumes (at most frames - 2 = " +
+                                 std::to_string(std::max<int64_t>(0, n - 2)) + ")");
   }
 }
 
@@ -430,6 +466,7 @@ ShotSpec parseShot(const std::string& json_text, const std::string& base_dir,
     r.fail("/views", "needs at least one view when outputs.exr is true");
   }
   checkOutputsAgainstVolume(r, shot);
+  checkAnimationKnobs(r, shot);
   return shot;
 }
 

@@ -363,7 +363,7 @@ TEST(RunShot, ProgressReturningFalseCancels) {
 
 TEST(RunShot, RejectsMethodsNotImplemented) {
   std::string shot = tinyShot();
-  shot.replace(shot.find("\"pathtrace\""), 11, "\"precomputed\"");
+  shot.replace(shot.find("\"pathtrace\""), 11, "\"auto\", \"tolerance\": 0.1");
   RunOptions opt;
   opt.out_dir = freshDir("method").string();
   try {

@@ -567,7 +567,7 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
       {"unknown top-level key", replaced(base, "\"version\": 1", "\"version\": 1, \"colour\": 3"),
        2, "colour"},
       {"unknown method", replaced(base, "\"pathtrace\"", "\"magic\""), 2, "/bake/method"},
-      {"method not implemented", replaced(base, "\"pathtrace\"", "\"precomputed\""), 2,
+      {"method not implemented", replaced(base, "\"pathtrace\"", "\"auto\", \"tolerance\": 0.1"), 2,
        "not implemented"},
       {"infinite extinction", replaced(base, "\"extinction\": 2", "\"extinction\": 1e999"), 2,
        "1e999"},

@@ -6,7 +6,9 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 
+#include "core/animation/precomputed_io.h"
 #include "core/bake/bake_lattice.h"
 #include "core/bake/render_from_bake.h"
 #include "core/bake/sky_sh_scatter.h"
@@ -96,13 +98,38 @@ TEST(Precomputed, FrameMatchesThePathTracerOnASphere) {
         "view (%.1f %.1f %.1f): sun %.4f vs %.4f, sky %.4f vs %.4f, multiple %.4f vs "
         "%.4f (orders %d)\n",
         from.x, from.y, from.z, bs.y, ts.y, bk.z, tk.z, bm.y, tm.y, stats.orders);
-    // Measured: sun -8%/-4%, sky -7%/-6%, multiple -17%/-14% (docs/methods.md: the clusters
-    // underestimate the mean transmittance, exp(-tau) being convex, and the deficit compounds
-    // over orders: -23%/-20% at cut_error 0.005, -13%/-10% at 0.0003).
-    EXPECT_NEAR(bs.y / ts.y, 1.0, 0.12);
-    EXPECT_NEAR(bk.z / tk.z, 1.0, 0.12);
-    EXPECT_NEAR(bm.y / tm.y, 1.0, 0.25);
+    // Measured: sun +0.3%/+5%, sky -0.2%/-0.3%, multiple -3%/-2% (docs/methods.md). Without
+    // the collision normalisation of Eq. 8's operator, multiple was -17%/-14% here and the
+    // orders diverged in thick clouds of albedo 0.99.
+    EXPECT_NEAR(bs.y / ts.y, 1.0, 0.1);
+    EXPECT_NEAR(bk.z / tk.z, 1.0, 0.05);
+    EXPECT_NEAR(bm.y / tm.y, 1.0, 0.1);
   }
+}
+
+TEST(Precomputed, OrdersConvergeInAThickConservativeCloud) {
+  // Optical radius 15, albedo 0.999, coarse cells (tau ~ 1 per receiver): the discrete operator
+  // must still lose energy every order (every column sums to at most 1 - P_esc).
+  BakeGrid g;
+  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 24, &g);
+  PrecomputeOptions po;
+  po.sample_points = 1024;
+  po.transfer_resolution = 12;
+  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, 15.0, po);
+  FrameLightOptions fo;
+  fo.max_orders = 400;
+  fo.tolerance = 1e-3;
+  FrameLightStats stats;
+  const BakedLight b = lightAnimationFrame(db, {0, 0, 1}, Vec3(0, 0, 1), Rgb(0.999),
+                                           std::array<ShCoefficients, 3>{}, fo, &stats);
+  EXPECT_LT(stats.orders, 400);
+  double co_max = 0;
+  for (float v : b.find(bake_grids::kMultipleFluence)->data) co_max = std::max(co_max, double(v));
+  std::printf("thick sphere: %d orders, largest Co %.3f (per unit E)\n", stats.orders, co_max);
+  // Far below a runaway; a conservative half-space under normal incidence has fluence ~ 4-5 E
+  // just below its surface.
+  EXPECT_GT(co_max, 0.5);
+  EXPECT_LT(co_max, 20.0);
 }
 
 TEST(Precomputed, BlendedFrameFollowsTheBlendedDensity) {
@@ -140,6 +167,42 @@ TEST(Precomputed, BlendedFrameFollowsTheBlendedDensity) {
   std::printf("blended / from scratch: Co %.4f, sky visibility %.4f\n", co, vis);
   EXPECT_NEAR(co, 1.0, 0.08);
   EXPECT_NEAR(vis, 1.0, 0.05);
+}
+
+TEST(Precomputed, DatabaseRoundTripsThroughFiles) {
+  BakeGrid g;
+  const std::vector<float> da = sphereOnLattice(Vec3(-0.2, 0, 0), 0.8, 16, &g);
+  const std::vector<float> db_ = sphereOnLattice(Vec3(0.2, 0, 0), 0.8, 16, &g);
+  PrecomputeOptions po;
+  po.sample_points = 256;
+  po.transfer_resolution = 8;
+  const PrecomputedDatabase db = precomputeBasicVolumes({g, {da, db_}}, 1.5, po);
+  const std::string dir = ::testing::TempDir() + "/precomputed_roundtrip";
+  std::filesystem::remove_all(dir);
+  writePrecomputedDatabase(dir, db);
+  const PrecomputedDatabase back = readPrecomputedDatabase(dir);
+  Sky sky;
+  sky.radiance = Rgb(0.4);
+  const auto sky_sh = projectSkyRadiance(SkyLight(sky));
+  const Vec3 sun(0, 0.6, 0.8);
+  const BakedLight a = lightAnimationFrame(db, {0, 1, 0.3}, sun, Rgb(0.9), sky_sh, {});
+  const BakedLight b = lightAnimationFrame(back, {0, 1, 0.3}, sun, Rgb(0.9), sky_sh, {});
+  ASSERT_EQ(a.channels.size(), b.channels.size());
+  for (const auto& [name, c] : a.channels) {
+    EXPECT_EQ(c.data, b.find(name)->data) << name;
+  }
+  // A truncated file is refused by name, never read as garbage.
+  const std::string basic = dir + "/basic_0001.bin";
+  std::filesystem::resize_file(basic, std::filesystem::file_size(basic) / 2);
+  try {
+    readPrecomputedDatabase(dir);
+    ADD_FAILURE() << "truncated file accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("basic_0001.bin: truncated"), std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove(dir + "/shared.bin");
+  EXPECT_THROW(readPrecomputedDatabase(dir), InputError);
 }
 
 TEST(Precomputed, RefusesBadKnobsAndFrames) {

@@ -216,11 +216,9 @@ TEST(ShotParser, EveryVariantRoundTripsThroughTheCanonicalForm) {
         j["medium"]["phase"] = {{"type", "mie_approx"}, {"diameter_um", 12.5}};
       },
       [](json& j) {
-        j["bake"] = {{"method", "precomputed"},
-                     {"sh_order", 4},
-                     {"iterations", 3},
-                     {"tolerance", 0.01},
-                     {"max_depth", 1}};
+        j["bake"] = {{"method", "precomputed"}, {"sample_points", 512}, {"transfer_resolution", 16},
+                     {"cut_error", 0.002},       {"iterations", 3},       {"tolerance", 0.01},
+                     {"frames", 4},              {"light_resolution", 32}, {"step", 0.1}};
       },
       [](json& j) {
         j["bake"] = {{"method", "single"}, {"step", 0.05}, {"light_resolution", 64}};
@@ -543,6 +541,25 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["volume"] = {{"sequence", {{"procedural", {{"type", "perlin_cloud"}}}, {"frames", 0}}}};
        },
        "/volume/sequence/frames: must be an integer in [1, 100000]"},
+      {"dissolve longer than the database",
+       [](json& j) {
+         j["volume"] = {{"sequence", {{"procedural", {{"type", "perlin_cloud"}}}, {"frames", 5}}}};
+         j["bake"] = {{"method", "precomputed"}, {"dissolve", 4}};
+       },
+       "/bake/dissolve: 4 frames of cross-dissolve do not fit a database of 5 basic volumes"},
+      {"walk knob on a static volume",
+       [](json& j) { j["bake"] = {{"method", "precomputed"}, {"sigma", 0.1}}; },
+       "/bake/sigma: applies to animated volumes only"},
+      {"sigma 0", [](json& j) { j["bake"] = {{"method", "precomputed"}, {"sigma", 0}}; },
+       "/bake/sigma: must be"},
+      {"0 output frames", [](json& j) { j["bake"] = {{"method", "precomputed"}, {"frames", 0}}; },
+       "/bake/frames: must be an integer in [1, 1000000]"},
+      {"0 sample points (K = 0)",
+       [](json& j) { j["bake"] = {{"method", "precomputed"}, {"sample_points", 0}}; },
+       "/bake/sample_points: must be an integer in [1, 1048576]"},
+      {"a knob of another method",
+       [](json& j) { j["bake"] = {{"method", "precomputed"}, {"points", 100}}; },
+       "/bake/points"},
       {"frames disagreeing with paths",
        [](json& j) {
          j["volume"] = {{"sequence", {{"paths", {"cloud.vdb"}}, {"frames", 3}}}};

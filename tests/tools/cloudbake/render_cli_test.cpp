@@ -116,8 +116,11 @@ TEST_F(RenderCli, EveryExampleRendersAtOneSample) {
         run("render '" + e.path().string() + "' --out '" + out.string() + "' --samples 1 --quiet");
     ASSERT_EQ(r.rc, 0) << r.err;
     const json shot = json::parse(text);
+    // Method precomputed writes a frame sequence: check its first frame.
+    const bool frames = shot["bake"].value("method", "") == "precomputed";
     for (const json& view : shot["views"]) {
-      const fs::path exr = out / (view["name"].get<std::string>() + ".exr");
+      const fs::path exr =
+          out / (view["name"].get<std::string>() + (frames ? ".0000.exr" : ".exr"));
       ASSERT_TRUE(fs::exists(exr)) << exr;
       const ExrContents c = readExr(exr.string());
       EXPECT_EQ(c.width, view["resolution"][0].get<int>());
@@ -204,11 +207,11 @@ TEST_F(RenderCli, MissingFilesExitWith3) {
 
 TEST_F(RenderCli, MethodsNotImplementedAreRefusedClearly) {
   json j = slab();
-  j["bake"] = {{"method", "precomputed"}, {"samples", 4}};
-  const CliResult r = run("render '" + writeShot("precomputed.json", j).string() + "' --out '" +
+  j["bake"] = {{"method", "auto"}, {"tolerance", 0.1}};
+  const CliResult r = run("render '" + writeShot("auto.json", j).string() + "' --out '" +
                           dir_.string() + "'");
   EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("/bake/method: 'precomputed' is not implemented in this version"),
+  EXPECT_NE(r.err.find("/bake/method: 'auto' is not implemented in this version"),
             std::string::npos)
       << r.err;
 }

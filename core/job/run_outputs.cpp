@@ -1,0 +1,115 @@
+#include "core/job/run_outputs.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <stdexcept>
+
+#include "core/io/png_writer.h"
+#include "core/job/sha256.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+uint8_t srgbByte(double linear) {
+  const double c = std::clamp(linear, 0.0, 1.0);
+  const double s = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+  return static_cast<uint8_t>(std::lround(s * 255.0));
+}
+
+// Preview only: exposure puts the 99th percentile of luminance at 0.8, then sRGB encoding (as
+// `cloudbake render --png`). The EXR stays the authoritative, unexposed radiance.
+void writePreviewPng(const std::string& path, const Image& beauty, double fixed_exposure) {
+  std::vector<double> lum;
+  lum.reserve(size_t(beauty.width) * beauty.height);
+  for (int y = 0; y < beauty.height; ++y) {
+    for (int x = 0; x < beauty.width; ++x) {
+      const float* p = beauty.at(x, y);
+      lum.push_back(0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]);
+    }
+  }
+  const size_t k = std::min(lum.size() - 1, size_t(0.99 * double(lum.size())));
+  std::nth_element(lum.begin(), lum.begin() + std::ptrdiff_t(k), lum.end());
+  const double exposure = fixed_exposure > 0                    ? fixed_exposure
+                          : lum[k] > 0 && std::isfinite(lum[k]) ? 0.8 / lum[k]
+                                                                : 1.0;
+  std::vector<uint8_t> px(size_t(beauty.width) * beauty.height * 3);
+  for (int y = 0; y < beauty.height; ++y) {
+    for (int x = 0; x < beauty.width; ++x) {
+      const float* p = beauty.at(x, y);
+      for (int c = 0; c < 3; ++c) {
+        px[(size_t(y) * beauty.width + x) * 3 + c] = srgbByte(exposure * p[c]);
+      }
+    }
+  }
+  writePng(path, beauty.width, beauty.height, 3, px);
+}
+
+const char* const kLayerNames[] = {"", "sun", "sky", "single", "multiple"};
+
+}  // namespace
+
+std::string fixed(double value, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
+  return buf;
+}
+
+std::string shortNumber(double value) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", value);
+  return buf;
+}
+
+double secondsSince(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+void scaleRgb(Image& image, const Rgb& e) {
+  const double s[3] = {e.x, e.y, e.z};
+  for (size_t i = 0; i < image.data.size(); ++i) {
+    const int c = int(i % size_t(image.channels));
+    if (c < 3) image.data[i] = float(image.data[i] * s[c]);
+  }
+}
+
+std::vector<ExrLayer> toExrLayers(RenderLayers&& layers) {
+  return {{"", std::move(layers.beauty)},
+          {"sun", std::move(layers.sun)},
+          {"sky", std::move(layers.sky)},
+          {"single", std::move(layers.single)},
+          {"multiple", std::move(layers.multiple)}};
+}
+
+std::vector<ExrLayer> readLayers(const std::string& path) {
+  ExrContents contents = readExr(path);
+  std::vector<ExrLayer> layers;
+  for (const char* name : kLayerNames) {
+    auto it = contents.layers.find(name);
+    if (it == contents.layers.end()) {
+      throw std::runtime_error(path + ": cached view lacks layer '" + name + "'");
+    }
+    layers.push_back({name, std::move(it->second)});
+  }
+  return layers;
+}
+
+OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
+  OutputFile f;
+  f.name = name;
+  f.path = (fs::path(out_dir) / name).string();
+  f.size = fs::file_size(f.path);
+  f.sha256 = sha256File(f.path);
+  return f;
+}
+
+void addPreview(const RunOptions& opt, const std::string& stem, const std::string& exr_path,
+                RunResult& result) {
+  const std::string png_name = stem + ".png";
+  writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(exr_path),
+                  opt.png_exposure);
+  result.files.push_back(describeOutput(opt.out_dir, png_name));
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,135 @@
+// runShot with method precomputed: an endless animation of a procedural sequence written as an
+// EXR frame sequence and per-frame VDBs, the precompute reused from the cache for new lighting
+// and more frames, a static volume as a one-volume database, cancellation and bad input.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/bake/baked_light_vdb.h"
+#include "core/bake/sky_sh_scatter.h"
+#include "core/error.h"
+#include "core/io/exr_io.h"
+#include "core/job/bake_cache.h"
+#include "core/job/cache_key.h"
+#include "core/job/run_precomputed.h"
+#include "core/job/run_shot.h"
+#include "core/shot/shot_parser.h"
+#include "tests/server/job_test_util.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+
+// A procedural cloud evolving over 6 basic volumes, sun and a sky, one small view.
+std::string animated(const std::string& knobs, const std::string& sun = "[1, 1, 1]",
+                     const std::string& volume = "") {
+  const std::string vol =
+      volume.empty() ? R"({"sequence": {"procedural": {"type": "perlin_cloud", "size": [2, 2, 1],
+                          "resolution": 24, "seed": 3}, "frames": 6, "time_step": 0.05}})"
+                     : volume;
+  return R"({"version": 1, "name": "anim", "volume": )" + vol + R"(,
+    "medium": {"extinction": 6, "albedo": 0.95, "phase": {"type": "hg", "g": 0.5}},
+    "lighting": {"sun": {"direction": [0.3, 0.2, 1], "irradiance": )" +
+         sun + R"(}, "sky": {"radiance": [0.1, 0.15, 0.3]}},
+    "bake": {"method": "precomputed", "light_resolution": 20, "sample_points": 512,
+             "transfer_resolution": 10)" +
+         knobs + R"(},
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 2],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 3}, "resolution": [16, 12]}],
+    "outputs": {"exr": true, "vdb": true}})";
+}
+
+ShotSpec parse(const std::string& text) { return parseShot(text, ""); }
+
+TEST(RunShotPrecomputed, WritesAFrameSequenceAndReusesThePrecompute) {
+  const fs::path dir = freshDir("precomputed");
+  BakeCache cache((dir / "cache").string(), 0);
+  RunOptions opt;
+  opt.out_dir = (dir / "a").string();
+  opt.cache = &cache;
+  const RunResult r = runShot(parse(animated(R"(, "frames": 4, "dissolve": 2)")), opt);
+  EXPECT_EQ(r.bakes_computed, 1);
+  EXPECT_EQ(r.views_from_bake, 4);
+  for (int f = 0; f < 4; ++f) {
+    const std::string exr = (dir / "a" / frameStem("v", f)).string() + ".exr";
+    ASSERT_TRUE(fs::exists(exr)) << exr;
+    const ExrContents c = readExr(exr);
+    EXPECT_EQ(c.attributes.at("cloudbake:frame"), std::to_string(f));
+    EXPECT_GT(sumOf(c.layers.at("single"), 1), 0);
+    EXPECT_GT(sumOf(c.layers.at("multiple"), 1), 0);
+    EXPECT_GT(sumOf(c.layers.at("sky"), 2), 0);
+    const BakedLight light = readBakedLight((dir / "a" / frameStem("bake", f)).string() + ".vdb");
+    EXPECT_EQ(light.method, "precomputed");
+    EXPECT_NE(light.find(bake_grids::skyTransmittanceSh(15)), nullptr);
+  }
+  std::ifstream walk_file(dir / "a" / "animation.json");
+  const nlohmann::json walk = nlohmann::json::parse(walk_file);
+  EXPECT_EQ(walk["basic_volumes"], 6);
+  EXPECT_EQ(walk["frames"].size(), 4u);
+
+  // Another sun colour, a sky and more frames: the precompute comes from the cache, and the
+  // images scale with the sun (the sun layer is linear in its irradiance).
+  opt.out_dir = (dir / "b").string();
+  const RunResult again =
+      runShot(parse(animated(R"(, "frames": 5, "dissolve": 2)", "[2, 2, 2]")), opt);
+  EXPECT_EQ(again.bakes_computed, 0);
+  EXPECT_EQ(again.bakes_cached, 1);
+  EXPECT_EQ(again.views_from_bake, 5);
+  const double sun_a = sumOf(readExr((dir / "a" / "v.0002.exr").string()).layers.at("sun"), 0);
+  const double sun_b = sumOf(readExr((dir / "b" / "v.0002.exr").string()).layers.at("sun"), 0);
+  EXPECT_NEAR(sun_b / sun_a, 2.0, 1e-4);
+  fs::remove_all(dir);
+}
+
+TEST(RunShotPrecomputed, AStaticVolumeIsOneBasicVolume) {
+  const fs::path dir = freshDir("precomputed_static");
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  const RunResult r =
+      runShot(parse(animated(R"(, "frames": 2)", "[1, 1, 1]",
+                             R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})")),
+              opt);
+  EXPECT_EQ(r.views_from_bake, 2);
+  // Every frame is the same volume: the same image.
+  const Image a = readExr((dir / "v.0000.exr").string()).layers.at("");
+  const Image b = readExr((dir / "v.0001.exr").string()).layers.at("");
+  EXPECT_EQ(a.data, b.data);
+  fs::remove_all(dir);
+}
+
+TEST(RunShotPrecomputed, CancelsAndRefusesBadInput) {
+  const fs::path dir = freshDir("precomputed_bad");
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  int calls = 0;
+  opt.progress = [&](const RunProgress&) { return ++calls < 5; };
+  EXPECT_THROW(runShot(parse(animated("")), opt), Cancelled);
+  opt.progress = {};
+  // Other methods refuse a sequence by name.
+  ShotSpec s = parse(animated(""));
+  s.bake.method = BakeSpec::Method::kSingle;
+  s.bake.options_json = "{}";
+  try {
+    checkRunnable(s, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/volume/sequence"), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
+}
+
+TEST(RunShotPrecomputed, PrecomputeKeyIgnoresLightingAndFrames) {
+  const ShotCacheKeys a = computeCacheKeys(parse(animated(R"(, "frames": 4)")));
+  const ShotCacheKeys b =
+      computeCacheKeys(parse(animated(R"(, "frames": 9, "sigma": 0.2)", "[3, 1, 1]")));
+  const ShotCacheKeys c = computeCacheKeys(parse(animated(R"(, "cut_error": 0.002)")));
+  EXPECT_FALSE(a.precompute.empty());
+  EXPECT_EQ(a.precompute, b.precompute);
+  EXPECT_NE(a.precompute, c.precompute);
+}
+
+}  // namespace
+}  // namespace cloudbake
