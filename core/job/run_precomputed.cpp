@@ -153,6 +153,7 @@ void runPrecomputed(
     const std::string path = (fs::path(opt.out_dir) / "animation.json").string();
     std::ofstream out(path);
     out << animation.dump(1) << "\n";
+    out.close();  // flushed before its size and checksum are recorded
     if (!out) throw std::runtime_error(path + ": write failed");
     result.files.push_back(describeOutput(opt.out_dir, "animation.json"));
   }

@@ -394,6 +394,45 @@ TEST_F(ServerTest, BakedLightServesNewViewsAndSunColoursWithoutScattering) {
   }
 }
 
+TEST_F(ServerTest, EndlessAnimationStreamsFramesAndReusesThePrecompute) {
+  auto shot = [](const std::string& irradiance, int frames) {
+    return R"({"version": 1, "name": "endless",
+      "volume": {"sequence": {"procedural": {"type": "perlin_cloud", "size": [2, 2, 1],
+                 "resolution": 20, "seed": 5}, "frames": 5, "time_step": 0.05}},
+      "medium": {"extinction": 6, "albedo": 0.95, "phase": {"type": "hg", "g": 0.6}},
+      "lighting": {"sun": {"direction": [0.3, 0.2, 1], "irradiance": )" +
+           irradiance + R"(}, "sky": {"radiance": [0.1, 0.2, 0.3]}},
+      "bake": {"method": "precomputed", "light_resolution": 16, "sample_points": 256,
+               "transfer_resolution": 8, "frames": )" +
+           std::to_string(frames) + R"(},
+      "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 1],
+                 "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 3}, "resolution": [16, 16]}],
+      "outputs": {"exr": true, "vdb": true}})";
+  };
+  const uint64_t before = infoStats(server_).at("scatter_computations");
+  CmdResult r =
+      run(server_.cloudctl(60) + " submit " + ws_.write("anim_a.json", shot("[1, 1, 1]", 3)) +
+          " --quiet --out " + ws_.path("anim_a"));
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (int f = 0; f < 3; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "anim_a/v.%04d.exr", f);
+    const ExrContents c = readExr(ws_.path(name));
+    EXPECT_EQ(c.attributes.at("cloudbake:method"), "precomputed");
+    std::snprintf(name, sizeof name, "anim_a/bake.%04d.vdb", f);
+    EXPECT_TRUE(fs::exists(ws_.path(name))) << name;
+  }
+  EXPECT_TRUE(fs::exists(ws_.path("anim_a/animation.json")));
+  EXPECT_EQ(infoStats(server_).at("scatter_computations"), before + 1);
+  // A new sun colour and more frames: the precompute comes from the cache.
+  r = run(server_.cloudctl(60) + " submit " + ws_.write("anim_b.json", shot("[2, 1, 1]", 4)) +
+          " --quiet --out " + ws_.path("anim_b"));
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(ws_.path("anim_b/v.0003.exr")));
+  EXPECT_EQ(infoStats(server_).at("scatter_computations"), before + 1)
+      << "the precompute was computed again";
+}
+
 TEST_F(ServerTest, SecondSunColourAndSecondViewRecomputeNoCachedPart) {
   const std::string first = ws_.write("a.json", sphereShot(64, 256));
   std::string first_id;
@@ -658,8 +697,7 @@ TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
        replaced(replaced(base, R"("method": "pathtrace")",
                          R"("method": "pointcloud", "points": 5000, "light_resolution": 8)"),
                 R"("vdb": false, "vdb_voxel_size": 0.1)", R"("vdb": false)"),
-       2,
-       "/bake/points: 5000 points exceed this server's limit of 1000 (--max-points)"},
+       2, "/bake/points: 5000 points exceed this server's limit of 1000 (--max-points)"},
       {"bake lattice over the voxel limit",
        replaced(replaced(base, R"("method": "pathtrace")",
                          R"("method": "single", "light_resolution": 64)"),
