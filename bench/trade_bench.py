@@ -17,7 +17,7 @@ it by sigma * sqrt(1 + 4), so its RMSE / sqrt(5) estimates the reference's noise
 References are cached under WORK/ref/ by scene, spp and seed.
 
 Usage: bench/trade_bench.py [--build build] [--threads 2] [--ref-spp 1024] [--scenes a,b]
-                            [--work DIR] [--quick]
+                            [--methods m1,m2] [--work DIR] [--quick]
 """
 import argparse
 import json
@@ -39,6 +39,10 @@ def methods(quick):
         ("pointcloud", "%d points" % pts[2], {"method": "pointcloud", "points": pts[2]}),
         ("pointcloud paper", "%d points, Eq. 2" % pts[1],
          {"method": "pointcloud", "points": pts[1], "rule": "paper", "output_mapping": True}),
+        ("precomputed", "K %d" % (pts[0] // 4), {"method": "precomputed", "light_resolution": 128,
+                                                   "sample_points": pts[0] // 4}),
+        ("precomputed", "K %d" % (pts[1] // 4), {"method": "precomputed", "light_resolution": 128,
+                                                   "sample_points": pts[1] // 4}),
         ("pathtrace", "16 spp", {"method": "pathtrace", "samples": 16, "seed": 3}),
     ]
 
@@ -70,8 +74,15 @@ def run(cloudbake, shot, out_dir, threads):
     if proc.returncode != 0:
         raise RuntimeError("cloudbake render failed (%d):\n%s" % (proc.returncode, err[-2000:]))
     bake = [float(x) for x in re.findall(r"light \S+ in ([0-9.]+) s", err)]
+    # precomputed: the precompute, plus lighting its one frame from it (a static volume).
+    bake += [float(x) for x in re.findall(r"precomputed \d+ basic volume\(s\) in ([0-9.]+) s", err)]
+    bake += [float(x) for x in re.findall(r"lit in ([0-9.]+) s", err)]
     views = [float(x) for x in re.findall(r"rendered in ([0-9.]+) s", err)]
-    return (bake[0] if bake else 0.0), views, usage.ru_maxrss / 1024.0, wall
+    if shot["bake"]["method"] == "precomputed":
+        for v in shot["views"]:  # frame 0 of its frame sequence is the view
+            os.replace(os.path.join(out_dir, v["name"] + ".0000.exr"),
+                       os.path.join(out_dir, v["name"] + ".exr"))
+    return sum(bake), views, usage.ru_maxrss / 1024.0, wall
 
 
 def rel_rmse(cloudbake, test, ref):
@@ -88,6 +99,8 @@ def main():
     ap.add_argument("--scenes", default="perlin_cloud,bunny_cloud,disney_cloud")
     ap.add_argument("--work", default=None, help="outputs and cached references "
                     "(default BUILD/bench_trade)")
+    ap.add_argument("--methods", default=None,
+                    help="only these methods, comma-separated (e.g. precomputed)")
     ap.add_argument("--quick", action="store_true",
                     help="smoke run: 64x48 views, reference 64 spp, few points")
     a = ap.parse_args()
@@ -131,6 +144,8 @@ def main():
         notes.append("%s: reference noise floor (rel. RMSE of the %d-spp reference) ~ %.4f"
                      % (scene, ref_spp, floor / 5 ** 0.5))
         for method, quality, bake in methods(a.quick):
+            if a.methods and method not in a.methods.split(","):
+                continue
             d = os.path.join(work, scene, (method + "_" + quality).replace(" ", "_"))
             print("trade_bench: %s %s %s..." % (scene, method, quality), file=sys.stderr)
             bake_s, views, peak, _ = run(cloudbake, shot_with(bake), d, a.threads)

@@ -655,7 +655,7 @@ int main(int argc, char** argv) {
   SubmitArgs sa;
   auto* submit = app.add_subcommand("submit", "submit a shot; by default wait and download");
   submit->add_option("shot", sa.shot, "shot file (JSON, format v1)")->required();
-  submit->add_option("--out", sa.out, "download DIR/<view>.exr and DIR/bake.vdb here");
+  submit->add_option("--out", sa.out, "download the outputs here (DIR/<view>.exr, DIR/bake.vdb; frame sequences for precomputed)");
   submit->add_flag("--wait", sa.wait, "wait for the job, showing progress (default)");
   submit->add_flag("--detach", sa.detach, "print the job id and return at once");
   submit->add_flag("--dry-run", sa.dry_run, "print the server's plan; bake nothing");

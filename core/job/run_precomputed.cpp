@@ -102,10 +102,13 @@ void runPrecomputed(
     PrecomputedDatabase db = precomputeBasicVolumes(
         std::move(vols), lights.medium.extinction, o.precompute,
         [&](double f) { return report("bake", 0.1 + 0.4 * f, "precomputing basic volumes"); });
+    size_t bytes = 0;
+    for (const BasicVolumePrecompute& b : db.basic) bytes += b.bytes();
     stage("bake", 0.5,
           "precomputed " + std::to_string(db.basic.size()) + " basic volume(s) in " +
               fixed(secondsSince(t0), 2) + " s (" + std::to_string(db.tree.points.size()) +
-              " sample points)");
+              " sample points; " + fixed(double(bytes) / db.basic.size() / (1 << 20), 1) +
+              " MiB per basic volume)");
     return db;
   };
   PrecomputedDatabase db;
@@ -177,6 +180,7 @@ void runPrecomputed(
               fixed(stats.seconds, 2) + " s, " + std::to_string(stats.orders) + " orders");
     for (int i = 0; i < n_views; ++i) {
       const Camera& camera = lights.cameras[size_t(i)];
+      const auto t_view = std::chrono::steady_clock::now();
       RenderLayers layers =
           renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro, [&](double fr) {
             return report("render", base + 0.5 * (1 + i + fr) / units,
@@ -196,6 +200,10 @@ void runPrecomputed(
                 {"cloudbake:units", "radiance, units of sun irradiance per sr"}});
       result.files.push_back(describeOutput(opt.out_dir, stem + ".exr"));
       ++result.views_from_bake;
+      stage("render", base + 0.5 * (2 + i) / units,
+            "frame " + std::to_string(f) + ", view '" + camera.name + "' " +
+                std::to_string(camera.width_px) + "x" + std::to_string(camera.height_px) +
+                " rendered in " + fixed(secondsSince(t_view), 2) + " s");
       if (opt.png) addPreview(opt, stem, path, result);
     }
     if (shot.outputs.vdb) {

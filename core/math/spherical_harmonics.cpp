@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 namespace cloudbake {
@@ -59,22 +60,34 @@ std::vector<double> buildTripleTensor() {
   return t;
 }
 
+// The non-zero entries of the tensor (the Gaunt coefficients of real SH are mostly zero by
+// symmetry): a product then costs a few hundred multiplications instead of 16^3.
+struct TensorEntry {
+  uint8_t i, j, k;
+  float value;
+};
+
+std::vector<TensorEntry> sparseTripleTensor() {
+  const std::vector<double> t = buildTripleTensor();
+  std::vector<TensorEntry> entries;
+  for (int i = 0; i < kShCoefficients; ++i)
+    for (int j = 0; j < kShCoefficients; ++j)
+      for (int k = 0; k < kShCoefficients; ++k) {
+        const double v = t[(size_t(i) * kShCoefficients + size_t(j)) * kShCoefficients + size_t(k)];
+        // Quadrature leaves ~1e-16 where the exact integral is 0; true entries are >= ~0.01.
+        if (std::abs(v) > 1e-7) entries.push_back({uint8_t(i), uint8_t(j), uint8_t(k), float(v)});
+      }
+  return entries;
+}
+
 }  // namespace
 
 ShCoefficients shProduct(const ShCoefficients& a, const ShCoefficients& b) {
-  static const std::vector<double> tensor = buildTripleTensor();  // thread-safe initialisation
+  static const std::vector<TensorEntry> tensor = sparseTripleTensor();  // thread-safe init
+  std::array<double, kShCoefficients> sum{};
+  for (const TensorEntry& e : tensor) sum[e.k] += double(a[e.i]) * b[e.j] * e.value;
   ShCoefficients out{};
-  for (int k = 0; k < kShCoefficients; ++k) {
-    double s = 0;
-    for (int i = 0; i < kShCoefficients; ++i) {
-      if (a[size_t(i)] == 0) continue;
-      for (int j = 0; j < kShCoefficients; ++j) {
-        s += double(a[size_t(i)]) * b[size_t(j)] *
-             tensor[(size_t(i) * kShCoefficients + size_t(j)) * kShCoefficients + size_t(k)];
-      }
-    }
-    out[size_t(k)] = float(s);
-  }
+  for (int k = 0; k < kShCoefficients; ++k) out[size_t(k)] = float(sum[size_t(k)]);
   return out;
 }
 

@@ -108,6 +108,19 @@ TEST(RunShotPrecomputed, CancelsAndRefusesBadInput) {
   opt.progress = [&](const RunProgress&) { return ++calls < 5; };
   EXPECT_THROW(runShot(parse(animated("")), opt), Cancelled);
   opt.progress = {};
+  // A database of one basic volume cannot animate: the error names the frame count.
+  try {
+    runShot(
+        parse(animated("", "[1, 1, 1]",
+                       R"({"sequence": {"procedural": {"type": "perlin_cloud"}, "frames": 1}})")),
+        opt);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/volume/sequence/frames: an endless animation needs at "
+                                         "least 2 basic volumes"),
+              std::string::npos)
+        << e.what();
+  }
   // Other methods refuse a sequence by name.
   ShotSpec s = parse(animated(""));
   s.bake.method = BakeSpec::Method::kSingle;
