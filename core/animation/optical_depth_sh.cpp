@@ -31,43 +31,37 @@ std::vector<float> sweepOpticalDepth(const BakeGrid& g, const std::vector<float>
     if (std::abs(w[c]) > std::abs(w[a])) a = c;
   }
   const int b = (a + 1) % 3, c = (a + 2) % 3;
-  const int up = w[a] > 0 ? 1 : -1;                 // the upstream slice along a
+  const int up = w[a] > 0 ? 1 : -1;  // the upstream slice along a
   const double ub = w[b] / std::abs(w[a]), uc = w[c] / std::abs(w[a]);  // offsets in b, c
   const double seg = extinction * g.voxel_size / std::abs(w[a]) * 0.5;  // half a step's tau per
-                                                                         // unit density
+                                                                        // unit density
   std::vector<float> tau(g.voxelCount(), 0.f);
-  auto index = [&](int ia, int ib, int ic) {
-    int ijk[3];
-    ijk[a] = ia;
-    ijk[b] = ib;
-    ijk[c] = ic;
-    return g.index(ijk[0], ijk[1], ijk[2]);
-  };
-  // Bilinear read of `values` in slice `ia` at fractional (fb, fc); 0 outside.
-  auto bilinear = [&](const float* values, int ia, double fb, double fc) {
-    const double b0 = std::floor(fb), c0 = std::floor(fc);
-    const double tb = fb - b0, tc = fc - c0;
-    double sum = 0;
-    for (int db = 0; db < 2; ++db)
-      for (int dc = 0; dc < 2; ++dc) {
-        const int ib = int(b0) + db, ic = int(c0) + dc;
-        if (ib < 0 || ic < 0 || ib >= dims[b] || ic >= dims[c]) continue;
-        sum += (db ? tb : 1 - tb) * (dc ? tc : 1 - tc) * values[index(ia, ib, ic)];
-      }
-    return sum;
-  };
+  const size_t stride[3] = {1, size_t(g.nx), size_t(g.nx) * size_t(g.ny)};
+  const size_t sa = stride[a], sb = stride[b], sc = stride[c];
+  // The upstream point of voxel (ib, ic) is (ib + ub, ic + uc) in the upstream slice: the same
+  // fractional offset for every voxel, so the bilinear weights are constants of the sweep.
+  const int ob = int(std::floor(ub)), oc = int(std::floor(uc));
+  const double tb = ub - ob, tc = uc - oc;
+  const double wq[4] = {(1 - tb) * (1 - tc), (1 - tb) * tc, tb * (1 - tc), tb * tc};
   for (int s = 0; s < dims[a]; ++s) {
     const int ia = up > 0 ? dims[a] - 1 - s : s;
     const int iu = ia + up;
     const bool inside = iu >= 0 && iu < dims[a];
     tbb::parallel_for(tbb::blocked_range<int>(0, dims[b]), [&](const tbb::blocked_range<int>& r) {
       for (int ib = r.begin(); ib != r.end(); ++ib) {
+        const size_t row = size_t(ia) * sa + size_t(ib) * sb;
         for (int ic = 0; ic < dims[c]; ++ic) {
-          const size_t v = index(ia, ib, ic);
+          const size_t v = row + size_t(ic) * sc;
           double t = 0, rho_up = 0;
           if (inside) {
-            t = bilinear(tau.data(), iu, ib + ub, ic + uc);
-            rho_up = bilinear(density.data(), iu, ib + ub, ic + uc);
+            // Corners (ib + ob + db, ic + oc + dc), db, dc in {0, 1}; outside the lattice is 0.
+            for (int q = 0; q < 4; ++q) {
+              const int jb = ib + ob + (q >> 1), jc = ic + oc + (q & 1);
+              if (jb < 0 || jc < 0 || jb >= dims[b] || jc >= dims[c]) continue;
+              const size_t u = size_t(iu) * sa + size_t(jb) * sb + size_t(jc) * sc;
+              t += wq[q] * tau[u];
+              rho_up += wq[q] * density[u];
+            }
           }
           tau[v] = float(t + seg * (double(density[v]) + rho_up));
         }
@@ -99,17 +93,20 @@ std::vector<ShCoefficients> projectOpticalDepth(const BakeGrid& grid,
   for (int d = 0; d < directions; ++d) {
     const std::vector<float> tau = sweepOpticalDepth(grid, density, extinction, dirs[size_t(d)]);
     const auto y = shBasis(dirs[size_t(d)]);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t v = r.begin(); v != r.end(); ++v) {
-        const double t = tau[v] * weight;
-        if (t == 0) continue;
-        for (int i = 0; i < kShCoefficients; ++i) acc[v * kShCoefficients + size_t(i)] += t * y[size_t(i)];
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t v = r.begin(); v != r.end(); ++v) {
+                          const double t = tau[v] * weight;
+                          if (t == 0) continue;
+                          for (int i = 0; i < kShCoefficients; ++i)
+                            acc[v * kShCoefficients + size_t(i)] += t * y[size_t(i)];
+                        }
+                      });
     if (progress && !progress(double(d + 1) / directions)) throw Cancelled();
   }
   for (size_t v = 0; v < n; ++v)
-    for (int i = 0; i < kShCoefficients; ++i) out[v][size_t(i)] = float(acc[v * kShCoefficients + size_t(i)]);
+    for (int i = 0; i < kShCoefficients; ++i)
+      out[v][size_t(i)] = float(acc[v * kShCoefficients + size_t(i)]);
   return out;
 }
 
