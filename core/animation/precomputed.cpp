@@ -77,7 +77,7 @@ std::vector<float> boxFilter(const BakeGrid& g, const std::vector<float>& densit
 std::vector<double> collisionNormalisation(const PrecomputedDatabase& db, const BlendFrame& frame,
                                            const std::vector<std::vector<uint32_t>>& nodes,
                                            const std::vector<std::vector<float>>& values,
-                                           const std::vector<float>& sigma_q) {
+                                           const std::vector<float>& sigma_q, double s) {
   const SampleTree& tree = db.tree;
   const BakeGrid& rg = db.receivers;
   std::vector<double> weight(rg.voxelCount(), 0.0);
@@ -121,7 +121,7 @@ std::vector<double> collisionNormalisation(const PrecomputedDatabase& db, const 
                                         kShCoefficients, q, fb);
                         ShCoefficients g;
                         for (int i = 0; i < kShCoefficients; ++i) {
-                          g[size_t(i)] = float(-(frame.w * fa[i] + (1 - frame.w) * fb[i]));
+                          g[size_t(i)] = float(-s * (frame.w * fa[i] + (1 - frame.w) * fb[i]));
                         }
                         const double escape =
                             std::clamp(double(db.shexp(g)[0]) / kSqrt4Pi, 0.0, 1.0);
@@ -238,6 +238,27 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   if (!(options.tolerance > 0 && options.tolerance <= 1)) {
     throw InputError("tolerance: must be in (0, 1], got " + std::to_string(options.tolerance));
   }
+  for (int c = 0; c < 3; ++c) {
+    if (!(std::abs(options.mean_cosine[c]) < 1)) {
+      throw InputError("mean cosine: must be in (-1, 1) per channel, got " +
+                       std::to_string(options.mean_cosine[c]));
+    }
+  }
+  // The similarity reduction (forward-peaked phases only): multiple scattering on a medium of
+  // extinction s sigma_t and albedo a (1 - g) / s, s = 1 - lum(a g).
+  double s = 1;
+  Rgb albedo_ms = albedo;
+  if (options.similarity) {
+    const Rgb ag(albedo.x * options.mean_cosine.x, albedo.y * options.mean_cosine.y,
+                 albedo.z * options.mean_cosine.z);
+    const double lum = 0.2126 * ag.x + 0.7152 * ag.y + 0.0722 * ag.z;
+    if (lum > 0) {
+      s = 1 - lum;
+      for (int c = 0; c < 3; ++c) {
+        albedo_ms[c] = std::min(1.0, albedo[c] * (1 - options.mean_cosine[c]) / s);
+      }
+    }
+  }
   const BakeGrid& g = db.volumes.grid;
   const BakeGrid& rg = db.receivers;
   const size_t n = g.voxelCount(), nr = rg.voxelCount();
@@ -263,7 +284,6 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   bool sky = false;
   for (const auto& c : sky_sh)
     for (float x : c) sky = sky || x != 0;
-  std::array<const float*, kShCoefficients> tsh{};
   if (sky) {
     std::array<float*, kShCoefficients> out{};
     for (int i = 0; i < kShCoefficients; ++i) {
@@ -283,9 +303,6 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
       }
       vis.data[v] = float(std::clamp(double(out[0][v]) / kSqrt4Pi, 0.0, 1.0));
     });
-    for (int i = 0; i < kShCoefficients; ++i) {
-      tsh[size_t(i)] = bake.find(bake_grids::skyTransmittanceSh(i))->data.data();
-    }
   }
 
   // Receivers: blended density, the merged cuts (Eq. 9) and the first-order sources.
@@ -298,27 +315,49 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   const float* tsun = bake.find(bake_grids::kSunTransmittance)->data.data();
   // Isotropic source radiance per unit sigma_t, sun (per unit E) then sky, 6 floats per receiver.
   std::vector<float> source(6 * nr, 0.f);
-  const Rgb inv4pi_albedo = albedo / (4 * kPi);
+  // Sky light scattered into the forward peak, integral L_sky (T^s - T): its fluence is added to
+  // Co_sky as it is (light from every direction, so no one beam direction).
+  std::vector<float> sky_beam(3 * nr, 0.f);
+  const Rgb inv4pi_albedo = albedo_ms / (4 * kPi);
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, nr, 64), [&](const tbb::blocked_range<size_t>& rr) {
         for (size_t r = rr.begin(); r != rr.end(); ++r) {
           if (!db.receiver_mask[r]) continue;
-          mergeCuts(va.cuts, vb.cuts, db.tree, r, w, [&](uint32_t node, double v) {
-            mnodes[r].push_back(node);
-            mvalues[r].push_back(float(v));
-          });
           const int i = int(r % size_t(rg.nx)), j = int((r / size_t(rg.nx)) % size_t(rg.ny)),
                     k = int(r / (size_t(rg.nx) * size_t(rg.ny)));
           const Vec3 x = rg.center(i, j, k);
-          const double ts = sampleTrilinear(g, tsun, x);
+          mergeCuts(va.cuts, vb.cuts, db.tree, r, w, [&](uint32_t node, double v) {
+            if (s < 1 && v > 0) {
+              // The reduced medium's transfer G T^s from the cut's G T.
+              const double geo = representativeGeometry(db.tree, int(node), x);
+              v = std::exp(s * std::log(v) + (1 - s) * std::log(geo));
+            }
+            mnodes[r].push_back(node);
+            mvalues[r].push_back(float(v));
+          });
+          const double ts = std::pow(sampleTrilinear(g, tsun, x), s);
           for (int c = 0; c < 3; ++c) source[6 * r + size_t(c)] = float(inv4pi_albedo[c] * ts);
           if (sky) {
-            double t[kShCoefficients];
-            for (int q = 0; q < kShCoefficients; ++q) t[q] = sampleTrilinear(g, tsh[size_t(q)], x);
+            float fa[kShCoefficients], fb[kShCoefficients];
+            sampleTrilinear(g, reinterpret_cast<const float*>(va.optical_depth_sh.data()),
+                            kShCoefficients, x, fa);
+            sampleTrilinear(g, reinterpret_cast<const float*>(vb.optical_depth_sh.data()),
+                            kShCoefficients, x, fb);
+            ShCoefficients full, reduced;
+            for (int q = 0; q < kShCoefficients; ++q) {
+              full[size_t(q)] = float(-(w * fa[q] + (1 - w) * fb[q]));
+              reduced[size_t(q)] = float(s * full[size_t(q)]);
+            }
+            const ShCoefficients t = db.shexp(reduced);
+            const ShCoefficients t_full = s < 1 ? db.shexp(full) : t;
             for (int c = 0; c < 3; ++c) {
-              double e = 0;  // integral of L_sky T over the sphere
-              for (int q = 0; q < kShCoefficients; ++q) e += sky_sh[size_t(c)][size_t(q)] * t[q];
+              double e = 0, beam = 0;  // integrals of L_sky T^s and of L_sky (T^s - T)
+              for (int q = 0; q < kShCoefficients; ++q) {
+                e += sky_sh[size_t(c)][size_t(q)] * t[size_t(q)];
+                beam += sky_sh[size_t(c)][size_t(q)] * (t[size_t(q)] - t_full[size_t(q)]);
+              }
               source[6 * r + 3 + size_t(c)] = float(inv4pi_albedo[c] * std::max(0.0, e));
+              sky_beam[3 * r + size_t(c)] = float(std::max(0.0, beam));
             }
           }
         }
@@ -332,10 +371,10 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   const size_t K = tree.points.size();
   std::vector<float> sigma_q(K);
   for (size_t k = 0; k < K; ++k) {
-    sigma_q[k] = float(db.extinction * sampleTrilinear(g, bake.density.data(), tree.points[k]) *
+    sigma_q[k] = float(s * db.extinction * sampleTrilinear(g, bake.density.data(), tree.points[k]) *
                        tree.volume / double(K));
   }
-  const std::vector<double> scale = collisionNormalisation(db, frame, mnodes, mvalues, sigma_q);
+  const std::vector<double> scale = collisionNormalisation(db, frame, mnodes, mvalues, sigma_q, s);
   for (size_t k = 0; k < K; ++k) sigma_q[k] = float(sigma_q[k] * scale[k]);
   std::vector<float> co(6 * nr, 0.f), fluence(6 * nr, 0.f);
   double total = 0, previous = 0, ratio = 0;
@@ -388,6 +427,9 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
     const double tail = std::min(ratio, 0.99) / (1 - std::min(ratio, 0.99));
     for (size_t i = 0; i < co.size(); ++i) co[i] += float(tail * fluence[i]);
   }
+  for (size_t r = 0; r < nr; ++r) {
+    for (int c = 0; c < 3; ++c) co[6 * r + 3 + size_t(c)] += sky_beam[3 * r + size_t(c)];
+  }
 
   // Back onto the lattice: Co per unit E; Co_sky per unit mean sky radiance (the render scales
   // it by the sky's mean, so the sky's actual distribution is baked in).
@@ -395,22 +437,35 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   Rgb sky_mean;
   for (int c = 0; c < 3; ++c) sky_mean[c] = sky_sh[size_t(c)][0] / kSqrt4Pi;
   BakeChannel* co_sky = sky ? &bake.add(bake_grids::kSkyMultipleFluence, 3) : nullptr;
+  // The sun light scattered into the forward peak travels on with the sun: the beam
+  // T^s - T (per unit E), scattered towards a view with the full phase function.
+  float* ratio_out = s < 1 ? bake.add(bake_grids::kMieRatio, 1).data.data() : nullptr;
+  float* dir_out = s < 1 ? bake.add(bake_grids::kLightDir, 3).data.data() : nullptr;
+  const Vec3 travel = -bake.sun_direction;
   parallelVoxels(n, [&](size_t v) {
     if (!support[v]) return;
     const int i = int(v % size_t(g.nx)), j = int((v / size_t(g.nx)) % size_t(g.ny)),
               k = int(v / (size_t(g.nx) * size_t(g.ny)));
-    float s[6];
-    sampleTrilinear(rg, co.data(), 6, g.center(i, j, k), s);
+    float f[6];
+    sampleTrilinear(rg, co.data(), 6, g.center(i, j, k), f);
+    const double beam = ratio_out ? std::pow(double(tsun[v]), s) - tsun[v] : 0.0;
     for (int c = 0; c < 3; ++c) {
-      co_sun.data[3 * v + size_t(c)] = std::max(0.f, s[c]);
+      co_sun.data[3 * v + size_t(c)] = float(std::max(0.0, double(f[c]) + std::max(0.0, beam)));
       if (co_sky && sky_mean[c] > 0) {
-        co_sky->data[3 * v + size_t(c)] = float(std::max(0.0, s[3 + c] / sky_mean[c]));
+        co_sky->data[3 * v + size_t(c)] = float(std::max(0.0, f[3 + c] / sky_mean[c]));
       }
+    }
+    if (ratio_out && beam > 0) {
+      const double diffuse = std::max(0.0, 0.2126 * f[0] + 0.7152 * f[1] + 0.0722 * f[2]);
+      ratio_out[v] = float(std::clamp(beam / (beam + diffuse), 0.0, 1.0));
+      for (int c = 0; c < 3; ++c) dir_out[3 * v + size_t(c)] = float(travel[c]);
     }
   });
   bake.metadata["cloudbake:frame_blend"] =
       std::to_string(frame.a) + "," + std::to_string(frame.b) + "," + std::to_string(w);
   bake.metadata["cloudbake:orders"] = std::to_string(orders);
+  bake.metadata["cloudbake:similarity_scale"] = std::to_string(s);
+  if (s < 1) bake.metadata["cloudbake:angular_model"] = "p1";
   bake.metadata["cloudbake:sample_points"] = std::to_string(K);
   bake.trimToSupport();
   if (stats) {

@@ -60,6 +60,12 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
 struct FrameLightOptions {
   int max_orders = 64;      ///< multiple-scattering orders after the first, [1, 1000]
   double tolerance = 0.01;  ///< stop when an order adds less than this fraction, (0, 1]
+  /// The phase function's mean cosine g per channel. With `similarity`, multiple scattering runs
+  /// on the similarity-reduced medium (extinction (1 - lum(a g)) sigma_t, albedo a (1 - g) / that
+  /// factor; van de Hulst), and the light scattered into the forward peak travels on with the
+  /// sun as a beam; without it (or for g = 0) it is seed 002's plain isotropic scattering.
+  Rgb mean_cosine{0, 0, 0};
+  bool similarity = true;
 };
 
 /// What computing one frame measured.
@@ -79,8 +85,10 @@ struct FrameLightStats {
 ///   it): isotropic multiple scattering by Eq. 8 over the merged cuts (Eq. 9), starting from
 ///   the single-scattered light of sun and sky, orders until an order adds less than the
 ///   tolerance.
-/// `albedo` is the medium's single-scattering albedo. The result holds no light_dir or
-/// mie_ratio (isotropic multiple scattering) and validates.
+/// `albedo` is the medium's single-scattering albedo. With the similarity reduction
+/// (FrameLightOptions) Co also holds the forward-scattered sun beam T_sun^s - T_sun, with
+/// light_dir = -sun_direction and mie_ratio its share of Co, so a view scatters it with the full
+/// phase function; otherwise the result holds no light_dir or mie_ratio. It validates.
 BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& frame,
                                const Vec3& sun_direction, const Rgb& albedo,
                                const std::array<ShCoefficients, 3>& sky_sh,

@@ -74,6 +74,15 @@ double opticalDepth(const BakeGrid& g, const float* density, double extinction, 
 
 }  // namespace
 
+double representativeGeometry(const SampleTree& tree, int node, const Vec3& x) {
+  const SampleTreeNode& nd = tree.nodes[size_t(node)];
+  const Vec3 p = nd.leaf() ? tree.points[size_t(nd.begin)] : nd.centroid;
+  const double r2 = dot(p - x, p - x);
+  const double a = tree.cell_radius;
+  const double convexity = nd.leaf() ? 1.0 : 1.0 + nd.spread2 / (3.0 * std::max(r2, a * a));
+  return geometricTerm(r2, a) * convexity;
+}
+
 SampleTree buildSampleTree(const BakeGrid& grid, const std::vector<uint8_t>& inside, int count,
                            uint64_t seed) {
   if (count < 1) {
@@ -158,10 +167,7 @@ TransferCuts computeTransferCuts(const SampleTree& tree, const BakeGrid& receive
             auto transfer = [&](int id) {
               const SampleTreeNode& nd = tree.nodes[size_t(id)];
               const Vec3 p = nd.leaf() ? tree.points[size_t(nd.begin)] : nd.centroid;
-              const double r2 = dot(p - x, p - x);
-              const double convexity =
-                  nd.leaf() ? 1.0 : 1.0 + nd.spread2 / (3.0 * std::max(r2, a * a));
-              return geometricTerm(r2, a) * convexity *
+              return representativeGeometry(tree, id, x) *
                      std::exp(-opticalDepth(receivers, density.data(), extinction, x, p));
             };
             // A node's entry from its children's representative transfers.

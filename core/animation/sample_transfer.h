@@ -51,6 +51,11 @@ inline double geometricTerm(double r2, double cell_radius) {
   return 1.0 / std::max(r2, cell_radius * cell_radius / 3.0);
 }
 
+/// The geometric part of a cut entry's transfer at receiver `x`: G of the node's representative
+/// (a leaf's sample; an inner node's centroid with the convexity correction), as the cut
+/// estimate used it. A cut value divided by it is the node's transmittance.
+double representativeGeometry(const SampleTree& tree, int node, const Vec3& x);
+
 /// Options of computeTransferCuts.
 struct TransferCutOptions {
   /// A cut is refined (lightcuts-style, largest error first) until every node's estimated

@@ -35,6 +35,7 @@ PrecomputedShotOptions precomputedOptions(const ShotSpec& shot) {
   o.precompute.seed = shot.bake.seed;
   o.frame.max_orders = k.value("iterations", o.frame.max_orders);
   o.frame.tolerance = k.value("tolerance", o.frame.tolerance);
+  o.frame.similarity = k.value("similarity", o.frame.similarity);
   const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
   o.basic_volumes = seq ? seq->frames : 1;
   o.walk.sigma = k.value("sigma", o.walk.sigma);
@@ -165,6 +166,8 @@ void runPrecomputed(
   const std::array<ShCoefficients, 3> sky_sh =
       needsSky(shot) ? projectSkyRadiance(SkyLight(lights.sky)) : std::array<ShCoefficients, 3>{};
   const BakeRenderOptions ro = bakeRenderOptions(shot, opt.threads);
+  FrameLightOptions frame_options = o.frame;
+  frame_options.mean_cosine = lights.medium.phase->meanCosine();
   const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
   const double units = double(o.frames) * per_frame;
   for (int f = 0; f < o.frames; ++f) {
@@ -173,7 +176,7 @@ void runPrecomputed(
     const auto t0 = std::chrono::steady_clock::now();
     FrameLightStats stats;
     const BakedLight light =
-        lightAnimationFrame(db, bf, sun_dir, lights.medium.albedo, sky_sh, o.frame, &stats);
+        lightAnimationFrame(db, bf, sun_dir, lights.medium.albedo, sky_sh, frame_options, &stats);
     stage("render", base,
           "frame " + std::to_string(f) + " (basic volumes " + std::to_string(bf.a) + ", " +
               std::to_string(bf.b) + ", w " + fixed(bf.w, 3) + "): lit in " +

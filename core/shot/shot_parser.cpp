@@ -185,7 +185,7 @@ std::string parseMethodKnobs(const Object& o, BakeSpec::Method method) {
     case BakeSpec::Method::kPrecomputed:
       o.allowOnly({"method", "samples", "seed", "step", "light_resolution", "sample_points",
                    "transfer_resolution", "cut_error", "iterations", "tolerance", "frames", "sigma",
-                   "dissolve"},
+                   "dissolve", "similarity"},
                   context);
       num("step", 0, 1e12, true);
       integer("light_resolution", 8, 1024);
@@ -197,6 +197,7 @@ std::string parseMethodKnobs(const Object& o, BakeSpec::Method method) {
       integer("frames", 1, 1000000);
       num("sigma", 0, 1e6, true);
       integer("dissolve", 0, 10000);
+      if (auto* v = o.find("similarity")) knobs["similarity"] = r.boolean(*v, o.path("similarity"));
       break;
     case BakeSpec::Method::kAuto:
       o.allowOnly({"method", "samples", "seed", "max_depth", "tolerance"}, context);

@@ -13,6 +13,7 @@
 #include "core/bake/render_from_bake.h"
 #include "core/bake/sky_sh_scatter.h"
 #include "core/error.h"
+#include "core/phase/henyey_greenstein.h"
 #include "core/phase/isotropic.h"
 #include "core/transport/path_tracer.h"
 #include "core/transport/sky.h"
@@ -105,6 +106,57 @@ TEST(Precomputed, FrameMatchesThePathTracerOnASphere) {
     EXPECT_NEAR(bk.z / tk.z, 1.0, 0.05);
     EXPECT_NEAR(bm.y / tm.y, 1.0, 0.1);
   }
+}
+
+TEST(Precomputed, SimilarityReductionCarriesForwardScatteredLight) {
+  // HG 0.8, albedo 0.99, optical radius 4: the seed's isotropic multiple scattering traps the
+  // forward-scattered light; the similarity-reduced medium with its beam lets it through.
+  BakeGrid g;
+  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 32, &g);
+  const double extinction = 4.0;
+  PrecomputeOptions po;
+  po.sample_points = 4096;
+  po.transfer_resolution = 16;
+  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, extinction, po);
+  const Vec3 sun_dir = normalize(Vec3(1, 0, 0.2));
+  Medium m;
+  m.extinction = extinction;
+  m.albedo = Rgb(0.99);
+  m.phase = std::make_shared<HenyeyGreensteinPhase>(0.8);
+  Sun sun;
+  sun.direction = sun_dir;
+  sun.irradiance = Rgb(1.0);
+  const std::array<ShCoefficients, 3> black{};
+  FrameLightOptions with, without;
+  with.mean_cosine = without.mean_cosine = Rgb(0.8);
+  without.similarity = false;
+  const BakedLight reduced = lightAnimationFrame(db, {0, 0, 1}, sun_dir, m.albedo, black, with);
+  const BakedLight plain = lightAnimationFrame(db, {0, 0, 1}, sun_dir, m.albedo, black, without);
+  EXPECT_NO_THROW(reduced.validate("reduced"));
+  EXPECT_NE(reduced.find(bake_grids::kMieRatio), nullptr);
+  EXPECT_EQ(plain.find(bake_grids::kMieRatio), nullptr);
+  double worst_reduced = 0, worst_plain = 0;
+  for (const Vec3& from : {Vec3(0, -4, 0), Vec3(-4, 0, -0.8)}) {  // side view, against the sun
+    const Camera cam = ortho(from, 24);
+    BakeRenderOptions bo;
+    bo.samples_per_pixel = 4;
+    Medium mt = m;
+    mt.density = std::make_shared<SphereDensity>(Vec3(0.0), 1.0, 1.0);
+    PathTracerOptions pto;
+    pto.samples_per_pixel = 256;
+    const double ref = mean(renderPathTraced(mt, sun, Sky{}, cam, pto).multiple).y;
+    const double a = mean(renderFromBake(reduced, m, sun, Sky{}, cam, bo).multiple).y;
+    const double b = mean(renderFromBake(plain, m, sun, Sky{}, cam, bo).multiple).y;
+    std::printf(
+        "view (%.1f %.1f %.1f): multiple %.4f with the similarity reduction, %.4f "
+        "without, path tracer %.4f\n",
+        from.x, from.y, from.z, a, b, ref);
+    worst_reduced = std::max(worst_reduced, std::abs(a / ref - 1));
+    worst_plain = std::max(worst_plain, std::abs(b / ref - 1));
+  }
+  // Measured: side view +11% with, +21% without; against the sun -54% with, -88% without (the
+  // P1 model still spreads the forward beam too widely to be seen straight through).
+  EXPECT_LT(worst_reduced, 0.7 * worst_plain);
 }
 
 TEST(Precomputed, OrdersConvergeInAThickConservativeCloud) {
