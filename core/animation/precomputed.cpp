@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <string>
 
 #include "core/animation/optical_depth_sh.h"
@@ -185,36 +186,44 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
   const std::vector<uint8_t> spread = densitySupport(g, any);
   db.tree = buildSampleTree(g, spread, options.sample_points, options.seed);
 
-  const double nvol = double(volumes.frames.size());
-  for (size_t f = 0; f < volumes.frames.size(); ++f) {
+  // Basic volumes in parallel (each also parallel inside: TBB shares the threads). Progress
+  // is the mean of the volumes' fractions, reported under a lock since any task may report.
+  const size_t nvol = volumes.frames.size();
+  std::vector<double> fraction(nvol, 0.0);
+  std::mutex progress_mutex;
+  auto report = [&](size_t f, double x) {
+    if (!progress) return true;
+    std::lock_guard<std::mutex> lock(progress_mutex);
+    fraction[f] = x;
+    double sum = 0;
+    for (double v : fraction) sum += v;
+    return progress(sum / double(nvol));
+  };
+  tbb::parallel_for(size_t(0), nvol, [&](size_t f) {
     const auto t0 = std::chrono::steady_clock::now();
-    auto part = [&](double lo, double hi) {
-      return [&, lo, hi](double x) {
-        return !progress || progress((double(f) + lo + (hi - lo) * x) / nvol);
-      };
-    };
     BasicVolumePrecompute& b = db.basic[f];
-    b.optical_depth_sh = projectOpticalDepth(g, volumes.frames[f], extinction,
-                                             options.sh_directions, part(0.0, 0.3));
-    if (f == 0) {
-      // The SHEXP tables, fitted on up to 2000 voxels of the first basic volume's cloud.
-      std::vector<ShCoefficients> samples;
-      std::vector<size_t> inside;
-      for (size_t v = 0; v < n; ++v) {
-        if (volumes.frames[0][v] > 0) inside.push_back(v);
-      }
-      const size_t stride = std::max<size_t>(1, inside.size() / 2000);
-      for (size_t i = 0; i < inside.size(); i += stride) {
-        ShCoefficients c = b.optical_depth_sh[inside[i]];
-        for (float& x : c) x = -x;
-        samples.push_back(c);
-      }
-      while (samples.size() < 8) samples.push_back(ShCoefficients{});  // an all-empty volume
-      db.shexp = ShExp::fit(samples);
-    }
+    b.optical_depth_sh =
+        projectOpticalDepth(g, volumes.frames[f], extinction, options.sh_directions,
+                            [&](double x) { return report(f, 0.3 * x); });
     b.cuts = computeTransferCuts(db.tree, rg, b.receiver_density, extinction, db.receiver_mask,
-                                 options.cuts, part(0.3, 1.0));
+                                 options.cuts, [&](double x) { return report(f, 0.3 + 0.7 * x); });
     b.seconds = secondsSince(t0);
+  });
+  {
+    // The SHEXP tables, fitted on up to 2000 voxels of the first basic volume's cloud.
+    std::vector<ShCoefficients> samples;
+    std::vector<size_t> inside;
+    for (size_t v = 0; v < n; ++v) {
+      if (volumes.frames[0][v] > 0) inside.push_back(v);
+    }
+    const size_t stride = std::max<size_t>(1, inside.size() / 2000);
+    for (size_t i = 0; i < inside.size(); i += stride) {
+      ShCoefficients c = db.basic[0].optical_depth_sh[inside[i]];
+      for (float& x : c) x = -x;
+      samples.push_back(c);
+    }
+    while (samples.size() < 8) samples.push_back(ShCoefficients{});  // an all-empty volume
+    db.shexp = ShExp::fit(samples);
   }
   db.volumes = std::move(volumes);
   return db;

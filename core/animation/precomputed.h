@@ -50,7 +50,7 @@ struct PrecomputedDatabase {
 
 /// Precomputes every basic volume of `volumes` (optical depth SH by sweeps, SHEXP tables fitted
 /// on voxels of the first volume, cuts over K samples of the union of their supports).
-/// Parallel inside each volume. InputError for knobs out of range or an empty database;
+/// Parallel over volumes and inside each. InputError for knobs out of range or an empty database;
 /// `progress(fraction)` returning false cancels (Cancelled).
 PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double extinction,
                                            const PrecomputeOptions& options,
