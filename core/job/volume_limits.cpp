@@ -75,6 +75,22 @@ void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
                 "a bake lattice of up to (" + std::to_string(res) + " + 2)^3", n, max_voxels);
     }
   }
+  if (shot.bake.method == BakeSpec::Method::kPrecomputed) {
+    // The database in memory: every basic volume's lattice, each voxel holding its density and
+    // 16 optical-depth SH coefficients, so it counts 17 times (the cuts are on the much coarser
+    // receiver lattice).
+    const auto knobs = nlohmann::json::parse(shot.bake.options_json, nullptr, false);
+    const int res = knobs.is_object() ? knobs.value("light_resolution", 64) : 64;
+    const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
+    const int volumes = seq ? seq->frames : 1;
+    const double n = 17.0 * volumes * std::pow(double(res + 2), 3);
+    if (n > limit) {
+      overLimit(source, "/bake/light_resolution",
+                "a database of " + std::to_string(volumes) + " basic volume(s) of up to (" +
+                    std::to_string(res) + " + 2)^3 voxels, 17 floats each,",
+                n, max_voxels);
+    }
+  }
   if (shot.outputs.vdb && shot.outputs.vdb_voxel_size > 0) {
     Vec3 extent;
     bool analytic = true;

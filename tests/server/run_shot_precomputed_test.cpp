@@ -16,6 +16,7 @@
 #include "core/job/cache_key.h"
 #include "core/job/run_precomputed.h"
 #include "core/job/run_shot.h"
+#include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
 #include "tests/server/job_test_util.h"
 
@@ -132,6 +133,20 @@ TEST(RunShotPrecomputed, CancelsAndRefusesBadInput) {
     EXPECT_NE(std::string(e.what()).find("/volume/sequence"), std::string::npos) << e.what();
   }
   fs::remove_all(dir);
+}
+
+TEST(RunShotPrecomputed, TheDatabaseCountsAgainstTheServersVoxelLimit) {
+  // 6 basic volumes of (20 + 2)^3 voxels, 17 floats each: 1086096 voxel-equivalents.
+  const ShotSpec s = parse(animated(""));
+  EXPECT_NO_THROW(checkShotVoxels(s, 1100000, "shot.json"));
+  try {
+    checkShotVoxels(s, 1000000, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/bake/light_resolution: a database of 6 basic volume(s)"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(RunShotPrecomputed, PrecomputeKeyIgnoresLightingAndFrames) {
