@@ -85,6 +85,38 @@ TEST(RunShotPrecomputed, WritesAFrameSequenceAndReusesThePrecompute) {
   fs::remove_all(dir);
 }
 
+TEST(RunShotPrecomputed, ThirtyBasicVolumesWalkEndlessly) {
+  // The issue's database size for tests: 30 basic volumes, 60 frames of endless animation.
+  const fs::path dir = freshDir("precomputed_30");
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  const std::string shot = R"({"version": 1, "name": "thirty",
+    "volume": {"sequence": {"procedural": {"type": "perlin_cloud", "size": [2, 2, 1],
+               "resolution": 12, "seed": 9}, "frames": 30, "time_step": 0.03}},
+    "medium": {"extinction": 6, "albedo": 0.95, "phase": {"type": "isotropic"}},
+    "lighting": {"sun": {"direction": [0, 0.3, 1], "irradiance": [1, 1, 1]}},
+    "bake": {"method": "precomputed", "light_resolution": 12, "sample_points": 128,
+             "transfer_resolution": 6, "frames": 60, "dissolve": 3},
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 1],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 3}, "resolution": [8, 8]}],
+    "outputs": {"exr": true, "vdb": false}})";
+  const RunResult r = runShot(parse(shot), opt);
+  EXPECT_EQ(r.views_from_bake, 60);
+  std::ifstream walk_file(dir / "animation.json");
+  const nlohmann::json walk = nlohmann::json::parse(walk_file);
+  ASSERT_EQ(walk["frames"].size(), 60u);
+  int jumps = 0;
+  for (size_t f = 0; f < 60; ++f) {
+    const auto& fr = walk["frames"][f];
+    EXPECT_GE(fr["a"].get<int>(), 0);
+    EXPECT_LT(fr["b"].get<int>(), 30);
+    if (fr["w"].get<double>() < 1) ++jumps;
+    EXPECT_TRUE(fs::exists(dir / (frameStem("v", int(f)) + ".exr")));
+  }
+  EXPECT_GT(jumps, 0) << "60 frames of 30 volumes cannot play without a jump";
+  fs::remove_all(dir);
+}
+
 TEST(RunShotPrecomputed, AStaticVolumeIsOneBasicVolume) {
   const fs::path dir = freshDir("precomputed_static");
   RunOptions opt;
