@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <stdexcept>
 #include <string>
 
 #include "core/animation/optical_depth_sh.h"
@@ -477,6 +478,12 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   if (s < 1) bake.metadata["cloudbake:angular_model"] = "p1";
   bake.metadata["cloudbake:sample_points"] = std::to_string(K);
   bake.trimToSupport();
+  try {
+    bake.validate("precomputed frame");
+  } catch (const InputError& e) {
+    // Never NaN or out-of-range light in an output; and not the shot's fault if it happens.
+    throw std::runtime_error(std::string("internal error: ") + e.what());
+  }
   if (stats) {
     stats->orders = orders;
     stats->merged_entries = merged;

@@ -184,6 +184,44 @@ TEST(Precomputed, OrdersConvergeInAThickConservativeCloud) {
   EXPECT_LT(co_max, 20.0);
 }
 
+TEST(Precomputed, ExtremesStayFinite) {
+  // Extinction 0 to 1e4, albedo 0 and 1, phases from backward to sharply forward, sun at the
+  // horizon: every frame validates (finite, in range) and renders finite pixels.
+  BakeGrid g;
+  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 12, &g);
+  Sky sky;
+  sky.radiance = Rgb(0.5);
+  const auto sky_sh = projectSkyRadiance(SkyLight(sky));
+  int frames = 0;
+  for (const double extinction : {0.0, 1.0, 1e4}) {
+    PrecomputeOptions po;
+    po.sample_points = 128;
+    po.transfer_resolution = 6;
+    const PrecomputedDatabase db = precomputeBasicVolumes({g, {d, d}}, extinction, po);
+    for (const double albedo : {0.0, 1.0}) {
+      for (const double mean_cosine : {-0.9, 0.0, 0.99}) {
+        FrameLightOptions fo;
+        fo.mean_cosine = Rgb(mean_cosine);
+        const BakedLight b =
+            lightAnimationFrame(db, {0, 1, 0.5}, Vec3(1, 0, 0), Rgb(albedo), sky_sh, fo);
+        Medium m;
+        m.extinction = extinction;
+        m.albedo = Rgb(albedo);
+        m.phase = mean_cosine == 0
+                      ? std::shared_ptr<const PhaseFunction>(std::make_shared<IsotropicPhase>())
+                      : std::make_shared<HenyeyGreensteinPhase>(mean_cosine);
+        Sun sun;
+        sun.direction = Vec3(1, 0, 0);
+        sun.irradiance = Rgb(1.0);
+        const RenderLayers l = renderFromBake(b, m, sun, sky, ortho(Vec3(0, -4, 0), 8), {});
+        for (float v : l.beauty.data) ASSERT_TRUE(std::isfinite(v));
+        ++frames;
+      }
+    }
+  }
+  EXPECT_EQ(frames, 18);
+}
+
 TEST(Precomputed, BlendedFrameFollowsTheBlendedDensity) {
   // Two spheres side by side; the frame blended at w = 0.4 against the method run from scratch
   // on the blended density (precomputed as a basic volume of its own).
