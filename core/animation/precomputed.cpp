@@ -477,6 +477,7 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   bake.metadata["cloudbake:similarity_scale"] = std::to_string(s);
   if (s < 1) bake.metadata["cloudbake:angular_model"] = "p1";
   bake.metadata["cloudbake:sample_points"] = std::to_string(K);
+  bake.addMeanRadiance();
   bake.trimToSupport();
   try {
     bake.validate("precomputed frame");

@@ -45,6 +45,20 @@ BakeChannel& BakedLight::add(const std::string& name, int components) {
   return c;
 }
 
+void BakedLight::addMeanRadiance() {
+  const BakeChannel* sun = find(bake_grids::kSunTransmittance);
+  const BakeChannel* co = find(bake_grids::kMultipleFluence);
+  std::vector<float>& cd = add(bake_grids::kCd, 3).data;
+  const size_t voxels = grid.voxelCount();
+  for (size_t v = 0; v < voxels; ++v) {
+    const double s = sun ? double(sun->data[v]) : 0.0;
+    for (size_t c = 0; c < 3; ++c) {
+      const double m = co ? double(co->data[3 * v + c]) : 0.0;
+      cd[3 * v + c] = float((s + m) / (4 * kPi));
+    }
+  }
+}
+
 void BakedLight::trimToSupport() {
   if (density.size() != grid.voxelCount()) return;  // validate() reports it
   const std::vector<uint8_t> support = densitySupport(grid, density);
@@ -113,7 +127,8 @@ void BakedLight::validate(const std::string& what) const {
         if (non_negative && x[e] < 0) fail(name, v, "negative value " + std::to_string(x[e]));
       }
       if (direction && c.components == 3) {
-        const double len = std::sqrt(double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
+        const double len =
+            std::sqrt(double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
         if (len != 0 && std::abs(len - 1) > 1e-3) {
           fail(name, v, "direction of length " + std::to_string(len) + " (unit or zero expected)");
         }

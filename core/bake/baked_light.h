@@ -71,6 +71,10 @@ struct BakedLight {
   /// Adds (or replaces) a zero-filled channel of grid.voxelCount() * components floats.
   BakeChannel& add(const std::string& name, int components);
 
+  /// Adds (or replaces) Cd = (sun_transmittance + Co) / (4 pi) per channel, the mean radiance
+  /// arriving per unit E for an isotropic preview; a missing grid counts as 0.
+  void addMeanRadiance();
+
   /// Zeroes every light channel outside the support of the density (voxels within one voxel,
   /// in the 26-neighbourhood, of a voxel with density > 0): trilinear lookups never read them
   /// with a non-zero density weight, and a .vdb file stores only that support, so a bake and its

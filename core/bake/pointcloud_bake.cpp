@@ -82,15 +82,7 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
   const double splat_radius = splatPoints(bake, result, [&](double f) {
     return progress && !progress(kPoints + (1 - kPoints) * f, "splat");
   });
-  // Cd = (sun_transmittance + Co) / (4 pi): the mean radiance arriving per unit E.
-  const BakeChannel* sun = bake.find(bake_grids::kSunTransmittance);
-  const std::vector<float>& co = bake.find(bake_grids::kMultipleFluence)->data;
-  std::vector<float>& cd = bake.add(bake_grids::kCd, 3).data;
-  const size_t voxels = bake.grid.voxelCount();
-  for (size_t v = 0; v < voxels; ++v) {
-    const double s = sun ? double(sun->data[v]) : 0.0;
-    for (int c = 0; c < 3; ++c) cd[3 * v + c] = float((s + co[3 * v + c]) * kInv4Pi);
-  }
+  bake.addMeanRadiance();
   bake.trimToSupport();
   const double seconds_splat = secondsSince(t0);
 

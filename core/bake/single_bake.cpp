@@ -59,14 +59,8 @@ BakedLight bakeSingle(const Medium& medium, const Vec3& sun_dir, const SingleBak
     computeSkyVisibility(bake, medium.extinction, stage(0.1 + w_sun, 0.9 - w_sun));
     bake.metadata["cloudbake:seconds_sky_visibility"] = num(seconds(t0));
   }
-  // Cd: the isotropic preview, mean radiance arriving per unit sun irradiance (grey: direct sun
-  // only, since method single models no multiple scattering).
-  const BakeChannel& t = *bake.find(bake_grids::kSunTransmittance);
-  BakeChannel& cd = bake.add(bake_grids::kCd, 3);
-  for (size_t v = 0; v < t.data.size(); ++v) {
-    const float c = float(t.data[v] * kInv4Pi);
-    cd.data[3 * v] = cd.data[3 * v + 1] = cd.data[3 * v + 2] = c;
-  }
+  // Cd: the isotropic preview (grey: direct sun only, since single models no multiple scattering).
+  bake.addMeanRadiance();
   bake.metadata["cloudbake:step"] = num(options.step);
   bake.metadata["cloudbake:extinction"] = num(medium.extinction);
   bake.metadata["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";
