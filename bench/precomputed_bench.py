@@ -19,7 +19,8 @@ import os
 import re
 import subprocess
 import sys
-import time
+
+from trade_bench import render as run  # a child render: (stderr, peak MiB, wall s)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -35,22 +36,6 @@ def view(w, h):
     return [{"name": "side", "resolution": [w, h],
              "camera": {"type": "perspective", "fov_deg": 40, "position": [0.6, -3.0, 0.35],
                         "look_at": [0, 0, 0.5], "up": [0, 0, 1]}}]
-
-
-def run(cloudbake, shot, out_dir, threads):
-    """Renders `shot`; returns (stderr text, peak MiB, wall s)."""
-    os.makedirs(out_dir, exist_ok=True)
-    path = os.path.join(out_dir, "shot.json")
-    with open(path, "w") as f:
-        json.dump(shot, f, indent=1)
-    t0 = time.time()
-    proc = subprocess.Popen([cloudbake, "render", path, "--out", out_dir, "--threads",
-                             str(threads)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    err = proc.stderr.read().decode()
-    _, status, usage = os.wait4(proc.pid, 0)
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError("cloudbake render failed:\n" + err[-2000:])
-    return err, usage.ru_maxrss / 1024.0, time.time() - t0
 
 
 def compare(cloudbake, test, ref):

@@ -58,8 +58,8 @@ def absolutise(shot, folder):
     return None
 
 
-def run(cloudbake, shot, out_dir, threads):
-    """Renders `shot` in a child; returns (bake_s, [view seconds], peak MiB, wall s)."""
+def render(cloudbake, shot, out_dir, threads):
+    """Renders `shot` in a child `cloudbake render`; returns (stderr text, peak MiB, wall s)."""
     os.makedirs(out_dir, exist_ok=True)
     shot_path = os.path.join(out_dir, "shot.json")
     with open(shot_path, "w") as f:
@@ -73,6 +73,12 @@ def run(cloudbake, shot, out_dir, threads):
     wall = time.time() - t0
     if proc.returncode != 0:
         raise RuntimeError("cloudbake render failed (%d):\n%s" % (proc.returncode, err[-2000:]))
+    return err, usage.ru_maxrss / 1024.0, wall
+
+
+def run(cloudbake, shot, out_dir, threads):
+    """Renders `shot`; returns (bake_s, [view seconds], peak MiB, wall s)."""
+    err, peak, wall = render(cloudbake, shot, out_dir, threads)
     bake = [float(x) for x in re.findall(r"light \S+ in ([0-9.]+) s", err)]
     # precomputed: the precompute, plus lighting its one frame from it (a static volume).
     bake += [float(x) for x in re.findall(r"precomputed \d+ basic volume\(s\) in ([0-9.]+) s", err)]
@@ -82,7 +88,7 @@ def run(cloudbake, shot, out_dir, threads):
         for v in shot["views"]:  # frame 0 of its frame sequence is the view
             os.replace(os.path.join(out_dir, v["name"] + ".0000.exr"),
                        os.path.join(out_dir, v["name"] + ".exr"))
-    return sum(bake), views, usage.ru_maxrss / 1024.0, wall
+    return sum(bake), views, peak, wall
 
 
 def rel_rmse(cloudbake, test, ref):

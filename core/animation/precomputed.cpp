@@ -65,6 +65,24 @@ std::vector<float> boxFilter(const BakeGrid& g, const std::vector<float>& densit
   return out;
 }
 
+// Eq. 6 at a world point: the SH vector of minus the blended frame's optical depth to the sky,
+// trilinear in the two basic volumes' precomputed vectors (SHEXP's argument for T).
+ShCoefficients negativeBlendedDepth(const PrecomputedDatabase& db, const BlendFrame& frame,
+                                    const Vec3& p) {
+  float fa[kShCoefficients], fb[kShCoefficients];
+  sampleTrilinear(db.volumes.grid,
+                  reinterpret_cast<const float*>(db.basic[size_t(frame.a)].optical_depth_sh.data()),
+                  kShCoefficients, p, fa);
+  sampleTrilinear(db.volumes.grid,
+                  reinterpret_cast<const float*>(db.basic[size_t(frame.b)].optical_depth_sh.data()),
+                  kShCoefficients, p, fb);
+  ShCoefficients g;
+  for (int i = 0; i < kShCoefficients; ++i) {
+    g[size_t(i)] = float(-(frame.w * fa[i] + (1 - frame.w) * fb[i]));
+  }
+  return g;
+}
+
 // Energy conservation of Eq. 8's discrete operator, per emitting sample k: the light it
 // scatters collides again somewhere with probability 1 - P_esc(q_k), where P_esc is its mean
 // transmittance to outside (the DC term of its transmittance SH: Eq. 6 and 7 at q_k). The
@@ -107,38 +125,28 @@ std::vector<double> collisionNormalisation(const PrecomputedDatabase& db, const 
     mass[size_t(n.left)] += mass[id];
     mass[size_t(n.right)] += mass[id];
   }
-  const auto& a = db.basic[size_t(frame.a)].optical_depth_sh;
-  const auto& b = db.basic[size_t(frame.b)].optical_depth_sh;
   std::vector<double> scale(tree.points.size(), 1.0);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, tree.nodes.size(), 256),
-                    [&](const tbb::blocked_range<size_t>& range) {
-                      for (size_t id = range.begin(); id != range.end(); ++id) {
-                        const SampleTreeNode& n = tree.nodes[id];
-                        if (!n.leaf()) continue;
-                        const Vec3& q = tree.points[size_t(n.begin)];
-                        float fa[kShCoefficients], fb[kShCoefficients];
-                        sampleTrilinear(db.volumes.grid, reinterpret_cast<const float*>(a.data()),
-                                        kShCoefficients, q, fa);
-                        sampleTrilinear(db.volumes.grid, reinterpret_cast<const float*>(b.data()),
-                                        kShCoefficients, q, fb);
-                        ShCoefficients g;
-                        for (int i = 0; i < kShCoefficients; ++i) {
-                          g[size_t(i)] = float(-s * (frame.w * fa[i] + (1 - frame.w) * fb[i]));
-                        }
-                        const double escape =
-                            std::clamp(double(db.shexp(g)[0]) / kSqrt4Pi, 0.0, 1.0);
-                        const double c = mass[id];
-                        scale[size_t(n.begin)] = c > 0 ? std::min(4.0, (1 - escape) / c) : 0.0;
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, tree.nodes.size(), 256),
+      [&](const tbb::blocked_range<size_t>& range) {
+        for (size_t id = range.begin(); id != range.end(); ++id) {
+          const SampleTreeNode& n = tree.nodes[id];
+          if (!n.leaf()) continue;
+          ShCoefficients g = negativeBlendedDepth(db, frame, tree.points[size_t(n.begin)]);
+          for (float& x : g) x = float(s * x);
+          const double escape = std::clamp(double(db.shexp(g)[0]) / kSqrt4Pi, 0.0, 1.0);
+          const double c = mass[id];
+          scale[size_t(n.begin)] = c > 0 ? std::min(4.0, (1 - escape) / c) : 0.0;
+        }
+      });
   return scale;
 }
 
 }  // namespace
 
 size_t BasicVolumePrecompute::bytes() const {
-  return optical_depth_sh.size() * sizeof(ShCoefficients) + receiver_density.size() * 4 +
-         cuts.offsets.size() * 8 + cuts.nodes.size() * 4 + cuts.values.size() * 4;
+  return optical_depth_sh.size() * sizeof(ShCoefficients) + cuts.offsets.size() * 8 +
+         cuts.nodes.size() * 4 + cuts.values.size() * 4;
 }
 
 PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double extinction,
@@ -171,13 +179,15 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
   // 1 where any basic volume has density, on the lattice and on the receivers.
   std::vector<float> any(n, 0.f), near(rg.voxelCount(), 0.f);
   db.basic.resize(volumes.frames.size());
+  // Each volume's density box-filtered onto the receivers: what its cuts march through.
+  std::vector<std::vector<float>> receiver_density(volumes.frames.size());
   for (size_t f = 0; f < volumes.frames.size(); ++f) {
     for (size_t v = 0; v < n; ++v) {
       if (volumes.frames[f][v] > 0) any[v] = 1.f;
     }
-    db.basic[f].receiver_density = boxFilter(g, volumes.frames[f], rg);
+    receiver_density[f] = boxFilter(g, volumes.frames[f], rg);
     for (size_t v = 0; v < near.size(); ++v) {
-      if (db.basic[f].receiver_density[v] > 0) near[v] = 1.f;
+      if (receiver_density[f][v] > 0) near[v] = 1.f;
     }
   }
   // Receivers next to density too: trilinear reads at the cloud's edge weight them. Samples
@@ -206,7 +216,7 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
     b.optical_depth_sh =
         projectOpticalDepth(g, volumes.frames[f], extinction, options.sh_directions,
                             [&](double x) { return report(f, 0.3 * x); });
-    b.cuts = computeTransferCuts(db.tree, rg, b.receiver_density, extinction, db.receiver_mask,
+    b.cuts = computeTransferCuts(db.tree, rg, receiver_density[f], extinction, db.receiver_mask,
                                  options.cuts, [&](double x) { return report(f, 0.3 + 0.7 * x); });
     b.seconds = secondsSince(t0);
   });
@@ -315,11 +325,7 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
     });
   }
 
-  // Receivers: blended density, the merged cuts (Eq. 9) and the first-order sources.
-  std::vector<float> rdensity(nr);
-  for (size_t r = 0; r < nr; ++r) {
-    rdensity[r] = float(w * va.receiver_density[r] + (1 - w) * vb.receiver_density[r]);
-  }
+  // Receivers: the merged cuts (Eq. 9) and the first-order sources.
   std::vector<std::vector<uint32_t>> mnodes(nr);
   std::vector<std::vector<float>> mvalues(nr);
   const float* tsun = bake.find(bake_grids::kSunTransmittance)->data.data();
@@ -348,16 +354,10 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
           const double ts = std::pow(sampleTrilinear(g, tsun, x), s);
           for (int c = 0; c < 3; ++c) source[6 * r + size_t(c)] = float(inv4pi_albedo[c] * ts);
           if (sky) {
-            float fa[kShCoefficients], fb[kShCoefficients];
-            sampleTrilinear(g, reinterpret_cast<const float*>(va.optical_depth_sh.data()),
-                            kShCoefficients, x, fa);
-            sampleTrilinear(g, reinterpret_cast<const float*>(vb.optical_depth_sh.data()),
-                            kShCoefficients, x, fb);
-            ShCoefficients full, reduced;
-            for (int q = 0; q < kShCoefficients; ++q) {
-              full[size_t(q)] = float(-(w * fa[q] + (1 - w) * fb[q]));
+            const ShCoefficients full = negativeBlendedDepth(db, frame, x);
+            ShCoefficients reduced;
+            for (int q = 0; q < kShCoefficients; ++q)
               reduced[size_t(q)] = float(s * full[size_t(q)]);
-            }
             const ShCoefficients t = db.shexp(reduced);
             const ShCoefficients t_full = s < 1 ? db.shexp(full) : t;
             for (int c = 0; c < 3; ++c) {

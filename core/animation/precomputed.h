@@ -30,7 +30,6 @@ struct PrecomputeOptions {
 /// What one basic volume keeps for run time.
 struct BasicVolumePrecompute {
   std::vector<ShCoefficients> optical_depth_sh;  ///< per lattice voxel: SH of tau(x, w)
-  std::vector<float> receiver_density;           ///< box-filtered onto the receiver lattice
   TransferCuts cuts;                             ///< per receiver
   double seconds = 0;                            ///< wall time of this volume's precompute
   size_t bytes() const;

@@ -11,8 +11,9 @@ namespace cloudbake {
 namespace {
 namespace fs = std::filesystem;
 
-constexpr char kSharedMagic[8] = {'C', 'B', 'P', 'C', 'S', 'H', '0', '1'};
-constexpr char kBasicMagic[8] = {'C', 'B', 'P', 'C', 'B', 'V', '0', '1'};
+static_assert(kPrecomputedFileVersion == 2, "update the magic numbers with the version");
+constexpr char kSharedMagic[8] = {'C', 'B', 'P', 'C', 'S', 'H', '0', '2'};
+constexpr char kBasicMagic[8] = {'C', 'B', 'P', 'C', 'B', 'V', '0', '2'};
 // Far above any lattice the limits allow, so a corrupt size fails here, not in an allocation.
 constexpr uint64_t kMaxCount = uint64_t(1) << 34;
 
@@ -136,7 +137,6 @@ void writePrecomputedDatabase(const std::string& dir, const PrecomputedDatabase&
     w.put(kBasicMagic);
     w.array(db.volumes.frames[i]);
     w.array(b.optical_depth_sh);
-    w.array(b.receiver_density);
     w.array(b.cuts.offsets);
     w.array(b.cuts.nodes);
     w.array(b.cuts.values);
@@ -183,7 +183,6 @@ PrecomputedDatabase readPrecomputedDatabase(const std::string& dir) {
     r.magic(kBasicMagic);
     db.volumes.frames.push_back(r.array<float>(n));
     b.optical_depth_sh = r.array<ShCoefficients>(n);
-    b.receiver_density = r.array<float>(nr);
     b.cuts.offsets = r.array<uint64_t>(nr + 1);
     b.cuts.nodes = r.array<uint32_t>(b.cuts.offsets.back());
     b.cuts.values = r.array<float>(b.cuts.offsets.back());

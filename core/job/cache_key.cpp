@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <tuple>
 
+#include "core/animation/precomputed_io.h"
 #include "core/job/sha256.h"
 #include "core/shot/shot_parser.h"
 
@@ -151,6 +152,7 @@ ShotCacheKeys computeCacheKeys(const ShotSpec& shot) {
     pre["volume"] = keys.volume;
     pre["extinction"] = canonical["medium"]["extinction"];
     pre["seed"] = shot.bake.seed;
+    pre["file_version"] = kPrecomputedFileVersion;
     for (const char* k :
          {"light_resolution", "sample_points", "transfer_resolution", "cut_error"}) {
       pre[k] = knobs.contains(k) ? knobs[k] : Json(nullptr);
