@@ -9,6 +9,7 @@
 #include "core/math/rng.h"
 #include "core/math/vec3.h"
 #include "core/phase/phase_function.h"
+#include "tests/chi_square_util.h"
 
 namespace cloudbake::testing {
 
@@ -80,13 +81,7 @@ inline Rgb sphereIntegral(const PhaseFunction& p, const std::vector<double>& ext
   return r;
 }
 
-/// Upper critical value of chi-square with `dof` degrees of freedom at normal quantile z
-/// (Wilson-Hilferty; accurate to < 1% for dof >= 10).
-inline double chiSquareCritical(int dof, double z) {
-  const double k = dof;
-  const double a = 2.0 / (9.0 * k);
-  return k * std::pow(1.0 - a + z * std::sqrt(a), 3.0);
-}
+using testing_util::chiSquareCritical;
 
 struct ChiSquareResult {
   double chi2 = 0;
