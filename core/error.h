@@ -20,4 +20,12 @@ class Cancelled : public std::runtime_error {
   explicit Cancelled(const std::string& what = "cancelled") : std::runtime_error(what) {}
 };
 
+/// A bug or a broken invariant of our own (never the user's input): a method reading a knob it
+/// did not declare, a cache entry that verified but cannot be read. The service maps it to
+/// INTERNAL, the CLI to exit code 1.
+class InternalError : public std::runtime_error {
+ public:
+  explicit InternalError(const std::string& what) : std::runtime_error(what) {}
+};
+
 }  // namespace cloudbake

@@ -9,6 +9,7 @@
 
 #include "core/error.h"
 #include "core/job/job_errors.h"
+#include "core/methods/registry.h"
 #include "server/convert.h"
 #include "server/status_mapping.h"
 
@@ -38,7 +39,7 @@ grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest
   return guarded("GetServerInfo", [&] {
     const JobManagerOptions& o = jobs_.options();
     reply->set_version(CLOUDBAKE_VERSION);
-    for (const char* m : {"pathtrace", "single", "pointcloud"}) reply->add_methods(m);
+    for (const std::string& m : methodNames(/*runnable_only=*/true)) reply->add_methods(m);
     reply->set_worker_threads(o.worker_threads);
     reply->set_max_concurrent_jobs(o.max_concurrent_jobs);
     reply->set_queue_bound(uint32_t(o.queue_bound));

@@ -8,8 +8,10 @@
 #include <nlohmann/json.hpp>
 #include <tuple>
 
-#include "core/animation/precomputed_io.h"
 #include "core/job/sha256.h"
+#include "core/methods/common.h"
+#include "core/methods/registry.h"
+#include "core/methods/versions.h"
 #include "core/shot/shot_parser.h"
 
 namespace cloudbake {
@@ -55,29 +57,25 @@ void replaceFilesByHashes(Json& j) {
 }
 
 std::string keyOf(const char* kind, const Json& material) {
-  return sha256Hex(std::string("cloudbake/") + CLOUDBAKE_VERSION + "/" + kind + "\n" +
-                   material.dump());
+  return sha256Hex(std::string("cloudbake/") + kind + "\n" + material.dump());
+}
+
+Json directionJson(const Vec3& direction) {
+  const Vec3 d = quantiseDirection(direction);
+  return {d.x, d.y, d.z};
+}
+
+// A key whose material lacks only the sun direction.
+std::string keyAt(const char* kind, const std::string& material, const Vec3& direction) {
+  Json m = Json::parse(material);
+  m["sun_direction"] = directionJson(direction);
+  return keyOf(kind, m);
 }
 
 }  // namespace
 
-bool bakesLight(const ShotSpec& shot) {
-  return shot.bake.method == BakeSpec::Method::kSingle ||
-         shot.bake.method == BakeSpec::Method::kPointcloud;
-}
-
-bool needsSky(const ShotSpec& shot) {
-  const Sky& sky = shot.lighting.sky;
-  switch (sky.type) {
-    case Sky::Type::kConstant:
-      return maxComponent(sky.radiance) > 0;
-    case Sky::Type::kGradient:
-      return maxComponent(sky.zenith) > 0 || maxComponent(sky.horizon) > 0 ||
-             maxComponent(sky.ground) > 0;
-    case Sky::Type::kMap:
-      return sky.map_scale > 0;  // a map of zeros still bakes visibility: cheap and harmless
-  }
-  return true;
+std::string algorithmSalt(const MethodInfo& info) {
+  return info.name + "/" + std::to_string(info.version) + " " + sharedVersionSalt();
 }
 
 Vec3 quantiseDirection(const Vec3& direction) {
@@ -97,9 +95,11 @@ ShotCacheKeys computeCacheKeys(const ShotSpec& shot) {
   so.views = true;
   Json canonical = Json::parse(serializeShot(shot, so));
   replaceFilesByHashes(canonical);
+  const BakeMethod& method = methodOf(shot);
+  const std::string salt = algorithmSalt(method.info());
 
   ShotCacheKeys keys;
-  keys.volume = keyOf("volume", canonical["volume"]);
+  keys.volume = keyOf("volume", {{"volume", canonical["volume"]}, {"version", kVolumeVersion}});
 
   const Sky& sky = shot.lighting.sky;
   const bool sky_black = sky.type == Sky::Type::kConstant && sky.radiance.x == 0 &&
@@ -107,67 +107,65 @@ ShotCacheKeys computeCacheKeys(const ShotSpec& shot) {
   const Rgb& e = shot.lighting.sun.irradiance;
   keys.sun_scaled = shot.lighting.has_sun && sky_black && (e.x > 0 || e.y > 0 || e.z > 0);
 
-  Json bake;
-  bake["volume"] = keys.volume;
-  bake["medium"] = canonical["medium"];
-  bake["sky"] = canonical["lighting"]["sky"];
+  // The whole computation without the sun direction: the family of bakes that differ only in
+  // it (tolerance reuse), then the bake itself.
+  const Json bake = {{"volume", keys.volume},
+                     {"medium", canonical["medium"]},
+                     {"sky", canonical["lighting"]["sky"]},
+                     {"bake", canonical["bake"]},
+                     {"algorithm", salt}};
+  keys.bake_material = bake.dump();
   keys.family = keyOf("family", bake);
   if (shot.lighting.has_sun) {
-    const Vec3 d = quantiseDirection(shot.lighting.sun.direction);
-    bake["sun_direction"] = {d.x, d.y, d.z};
+    keys.bake = keyAt("bake", keys.bake_material, shot.lighting.sun.direction);
   } else {
-    bake["sun_direction"] = nullptr;
+    Json b = bake;
+    b["sun_direction"] = nullptr;
+    keys.bake = keyOf("bake", b);
   }
-  bake["bake"] = canonical["bake"];
-  keys.bake = keyOf("bake", bake);
 
-  Json vdb = {{"volume", keys.volume},
-              {"voxel_size", canonical["outputs"].value("vdb_voxel_size", 0.0)}};
-  keys.vdb = keyOf("vdb", vdb);
+  // The shot name and method are in bake.vdb's metadata, so they are part of its key.
+  keys.vdb = keyOf("vdb", {{"volume", keys.volume},
+                           {"voxel_size", canonical["outputs"].value("vdb_voxel_size", 0.0)},
+                           {"shot", shot.name},
+                           {"algorithm", salt}});
 
-  if (bakesLight(shot)) {
-    Json light;
+  const Json parts = method.keyMaterial(shot, canonical);
+  if (parts.contains("light")) {
+    Json light = parts["light"];
     light["volume"] = keys.volume;
-    if (shot.bake.method == BakeSpec::Method::kSingle) {
-      light["extinction"] = canonical["medium"]["extinction"];
-    } else {
-      light["medium"] = canonical["medium"];
-      light["seed"] = shot.bake.seed;
-    }
-    light["sky"] = needsSky(shot);
-    light["method"] = methodName(shot.bake.method);
-    Json knobs = Json::parse(shot.bake.options_json);
-    knobs.erase("step");
-    light["knobs"] = knobs;
+    light["algorithm"] = salt;
+    keys.light_material = light.dump();
     keys.light_family = keyOf("light-family", light);
-    const Vec3 d =
-        quantiseDirection(shot.lighting.has_sun ? shot.lighting.sun.direction : Vec3(0, 0, 1));
-    light["sun_direction"] = {d.x, d.y, d.z};
-    keys.light = keyOf("light", light);
+    keys.light = keyAt("light", keys.light_material, sunDirection(shot));
   }
-
-  if (shot.bake.method == BakeSpec::Method::kPrecomputed) {
-    const Json knobs = Json::parse(shot.bake.options_json);
-    Json pre;
+  if (parts.contains("precompute")) {
+    Json pre = parts["precompute"];
     pre["volume"] = keys.volume;
-    pre["extinction"] = canonical["medium"]["extinction"];
-    pre["seed"] = shot.bake.seed;
-    pre["file_version"] = kPrecomputedFileVersion;
-    for (const char* k :
-         {"light_resolution", "sample_points", "transfer_resolution", "cut_error"}) {
-      pre[k] = knobs.contains(k) ? knobs[k] : Json(nullptr);
-    }
+    pre["algorithm"] = salt;
     keys.precompute = keyOf("precompute", pre);
   }
 
   for (const Json& view : canonical["views"]) {
-    Json v = {{"bake", keys.bake}, {"camera", view["camera"]}, {"resolution", view["resolution"]}};
+    Json v = {{"camera", view["camera"]}, {"resolution", view["resolution"]}};
     if (!keys.sun_scaled && shot.lighting.has_sun) {
       v["sun_irradiance"] = canonical["lighting"]["sun"]["irradiance"];
     }
+    keys.view_materials.push_back(v.dump());
+    v["bake"] = keys.bake;
     keys.views.push_back(keyOf("view", v));
   }
   return keys;
+}
+
+std::string lightKeyAt(const ShotCacheKeys& keys, const Vec3& direction) {
+  return keys.light_material.empty() ? "" : keyAt("light", keys.light_material, direction);
+}
+
+std::string viewKeyAt(const ShotCacheKeys& keys, size_t view, const Vec3& direction) {
+  Json v = Json::parse(keys.view_materials.at(view));
+  v["bake"] = keyAt("bake", keys.bake_material, direction);
+  return keyOf("view", v);
 }
 
 }  // namespace cloudbake

@@ -12,13 +12,12 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
-#include "core/job/bake_methods.h"
 #include "core/job/cache_key.h"
 #include "core/job/file_util.h"
 #include "core/job/job_errors.h"
-#include "core/job/run_precomputed.h"
 #include "core/job/run_shot.h"
 #include "core/job/volume_limits.h"
+#include "core/methods/registry.h"
 #include "core/shot/shot_parser.h"
 
 namespace cloudbake {
@@ -198,13 +197,8 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
   } catch (const InputError& e) {
     throw InputError(clientPaths(e.what(), input_dir));
   }
-  if (input.samples != -1) {
-    if (input.samples < 1 || input.samples > 1000000) {
-      throw InputError("samples: must be in [1, 1000000] or unset, got " +
-                       std::to_string(input.samples));
-    }
-    p.shot.bake.samples = input.samples;
-  }
+  checkSamplesOverride(input.samples, "samples");
+  if (input.samples != -1) p.shot.bake.samples = input.samples;
   if (!(input.sun_tolerance_deg >= 0 && input.sun_tolerance_deg <= 90)) {
     throw InputError("sun_tolerance_deg: must be in [0, 90] degrees, got " +
                      std::to_string(input.sun_tolerance_deg));
@@ -248,51 +242,17 @@ JobPlan JobManager::plan(const SubmitInput& input) {
   const Prepared p = prepare(input, dir);
   JobPlan plan;
   plan.shot_name = p.shot.name;
-  plan.method = methodName(p.shot.bake.method);
-  plan.bake_key = p.keys.bake;
+  plan.method = p.shot.bake.method;
   plan.vdb = p.shot.outputs.vdb;
-  const bool precomputed = p.shot.bake.method == BakeSpec::Method::kPrecomputed;
-  const bool bake_method = bakesLight(p.shot) || precomputed;
-  if (precomputed) {
-    plan.bake_key = p.keys.precompute;
-    plan.bake_cached = cache_->lookup(p.keys.precompute).has_value();
-    plan.components = planPrecomputed(p.shot, plan.bake_cached);
-  } else if (bake_method) {
-    plan.bake_key = p.keys.light;
-    plan.bake_cached = cache_->lookup(p.keys.light).has_value();
-    plan.components = planBake(p.shot, plan.bake_cached);
-  }
-  const int frames = precomputed ? precomputedOptions(p.shot).frames : 1;
+  const MethodPlan mp = methodOf(p.shot).plan(
+      p.shot, p.keys, [&](const std::string& key) { return cache_->lookup(key).has_value(); });
+  plan.bake_key = mp.bake_key.empty() ? p.keys.bake : mp.bake_key;
+  plan.bake_cached = mp.bake_cached;
+  plan.components = mp.components;
+  plan.view_cached = mp.view_cached;
+  plan.pixel_samples = mp.pixel_samples;
   if (p.shot.outputs.exr) {
-    for (size_t i = 0; i < p.shot.views.size(); ++i) {
-      const Camera& c = p.shot.views[i];
-      const bool cached =
-          bake_method ? plan.bake_cached : cache_->lookup(p.keys.views[i]).has_value();
-      plan.views.push_back(c.name);
-      plan.view_cached.push_back(cached);
-      const double rays = double(c.width_px) * c.height_px * p.shot.bake.samples * frames;
-      if (bake_method) {
-        plan.pixel_samples += rays;
-        plan.components.push_back(
-            "view '" + c.name + "': ray march from " +
-            (precomputed ? "each frame's light, " + std::to_string(frames) + " frame(s), "
-                         : std::string("the bake, ")) +
-            std::to_string(c.width_px) + "x" + std::to_string(c.height_px) + ", " +
-            std::to_string(p.shot.bake.samples) + " ray(s) per pixel");
-      } else if (!cached) {
-        plan.pixel_samples += rays;
-        plan.components.push_back("view '" + c.name + "': path trace " +
-                                  std::to_string(c.width_px) + "x" + std::to_string(c.height_px) +
-                                  " at " + std::to_string(p.shot.bake.samples) + " spp");
-      } else {
-        plan.components.push_back("view '" + c.name + "': from the cache");
-      }
-    }
-  }
-  if (p.shot.outputs.vdb) {
-    plan.components.push_back(precomputed   ? "bake.<frame>.vdb: each frame's light lattice"
-                              : bake_method ? "bake.vdb: the baked light lattice"
-                                            : "bake.vdb: the density grid");
+    for (const Camera& c : p.shot.views) plan.views.push_back(c.name);
   }
   return plan;
 }
@@ -304,7 +264,7 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
   JobRecord& r = job->record;
   r.id = id;
   r.shot_name = job->shot.name;
-  r.method = methodName(job->shot.bake.method);
+  r.method = job->shot.bake.method;
   for (const Camera& c : job->shot.views) r.views.push_back(c.name);
   r.created = unixNow();
   r.stage = "queued";

@@ -46,54 +46,7 @@ void writePreviewPng(const std::string& path, const Image& beauty, double fixed_
   writePng(path, beauty.width, beauty.height, 3, px);
 }
 
-const char* const kLayerNames[] = {"", "sun", "sky", "single", "multiple"};
-
 }  // namespace
-
-std::string fixed(double value, int digits) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
-  return buf;
-}
-
-std::string shortNumber(double value) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", value);
-  return buf;
-}
-
-double secondsSince(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-
-void scaleRgb(Image& image, const Rgb& e) {
-  const double s[3] = {e.x, e.y, e.z};
-  for (size_t i = 0; i < image.data.size(); ++i) {
-    const int c = int(i % size_t(image.channels));
-    if (c < 3) image.data[i] = float(image.data[i] * s[c]);
-  }
-}
-
-std::vector<ExrLayer> toExrLayers(RenderLayers&& layers) {
-  return {{"", std::move(layers.beauty)},
-          {"sun", std::move(layers.sun)},
-          {"sky", std::move(layers.sky)},
-          {"single", std::move(layers.single)},
-          {"multiple", std::move(layers.multiple)}};
-}
-
-std::vector<ExrLayer> readLayers(const std::string& path) {
-  ExrContents contents = readExr(path);
-  std::vector<ExrLayer> layers;
-  for (const char* name : kLayerNames) {
-    auto it = contents.layers.find(name);
-    if (it == contents.layers.end()) {
-      throw std::runtime_error(path + ": cached view lacks layer '" + name + "'");
-    }
-    layers.push_back({name, std::move(it->second)});
-  }
-  return layers;
-}
 
 OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
   OutputFile f;

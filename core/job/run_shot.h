@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/methods/run_types.h"
 #include "core/shot/shot.h"
 
 namespace cloudbake {
@@ -13,17 +14,6 @@ namespace cloudbake {
 class BakeCache;
 class DirectionIndex;
 class VolumeCache;
-
-/// Where a run is: `stage` is "build", "render", "vdb" or "done"; `fraction` in [0, 1] of the
-/// whole run (views weigh 1 each, the VDB 1); `view` and `view_fraction` for "render";
-/// `message` a human line for logs ("view 'nadir' 32x32, 64 spp: cached").
-struct RunProgress {
-  std::string stage;
-  double fraction = 0;
-  std::string view;
-  double view_fraction = 0;
-  std::string message;
-};
 
 /// Return false to cancel: the run then throws Cancelled within about one tile of work.
 using RunProgressFn = std::function<bool(const RunProgress&)>;
@@ -38,9 +28,9 @@ struct RunOptions {
   /// > 0: the PNG previews multiply radiance by this instead of auto-exposing (so previews of
   /// different lighting compare); finite, at most 1e12.
   double png_exposure = 0;
-  RunProgressFn progress;            ///< optional
-  BakeCache* cache = nullptr;        ///< optional: reuse/commit renders and VDBs
-  VolumeCache* volumes = nullptr;    ///< optional: reuse built density fields
+  RunProgressFn progress;          ///< optional
+  BakeCache* cache = nullptr;      ///< optional: reuse/commit renders and VDBs
+  VolumeCache* volumes = nullptr;  ///< optional: reuse built density fields
   /// With a cache and a direction index: a view not cached for the shot's own sun direction may
   /// reuse a cached render whose sun direction lies within this angle (degrees, in [0, 90]);
   /// 0 (default): only the exact (quantised) direction.
@@ -51,33 +41,9 @@ struct RunOptions {
   uint64_t max_voxels = 0;
 };
 
-/// One file a run wrote: `name` relative to out_dir ("nadir.exr", "bake.vdb").
-struct OutputFile {
-  std::string name;
-  std::string path;
-  uint64_t size = 0;
-  std::string sha256;
-};
-
-/// What a run did. `views_rendered` counts path-traced views (scattering computations);
-/// `views_cached` views served from the cache (and scaled to the sun irradiance). Bake methods
-/// (single, pointcloud) compute their light once per light direction (`bakes_computed`) or
-/// reuse it (`bakes_cached`), then ray-march every view from it (`views_from_bake`).
-struct RunResult {
-  std::vector<OutputFile> files;
-  int views_rendered = 0;
-  int views_cached = 0;
-  int bakes_computed = 0;
-  int bakes_cached = 0;
-  int views_from_bake = 0;
-  /// Views served from a render of another sun direction within the tolerance, and the largest
-  /// angle (degrees) between that direction and the shot's.
-  int views_reused_direction = 0;
-  double reused_angle_deg = 0;
-  bool volume_cached = false;
-  bool vdb_cached = false;
-  double seconds = 0;
-};
+/// InputError naming `field` unless `samples` is -1 (unset) or in [1, 1e6]: the one check of
+/// a samples override, shared by the CLI, runShot and the server.
+void checkSamplesOverride(int samples, const std::string& field);
 
 /// Throws InputError when the shot's method or volume is not implemented by runShot yet
 /// (methods precomputed and auto; animated volumes).
@@ -87,8 +53,8 @@ void checkRunnable(const ShotSpec& shot, const std::string& source = "shot.json"
 /// `sun`, `sky`, `single`, `multiple` layers, with the same header attributes as `cloudbake
 /// render` — and writes out_dir/bake.vdb when outputs.vdb (the density for pathtrace; the baked
 /// light lattice for single and pointcloud). With a cache, a view (pathtrace) or a bake (single,
-/// pointcloud) whose key (computeCacheKeys) is present is not computed again. Throws InputError for bad input,
-/// Cancelled when `progress` returns false.
+/// pointcloud) whose key (computeCacheKeys) is present is not computed again. Throws InputError for
+/// bad input, Cancelled when `progress` returns false.
 RunResult runShot(const ShotSpec& shot, const RunOptions& options);
 
 }  // namespace cloudbake

@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
-#include <nlohmann/json.hpp>
 #include <sstream>
 #include <variant>
 
 #include "core/error.h"
+#include "core/methods/registry.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/mesh_io.h"
 #include "core/volume/mesh_volume.h"
@@ -63,34 +63,7 @@ void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
   if (auto* s = std::get_if<SequenceVolumeSpec>(&shot.volume); s && s->procedural) {
     procedural(*s->procedural, "/volume/sequence/procedural/resolution");
   }
-  if (shot.bake.method == BakeSpec::Method::kSingle ||
-      shot.bake.method == BakeSpec::Method::kPointcloud) {
-    // The bake lattice: light_resolution voxels along the longest side plus a margin, counted
-    // as a cube (an upper bound: the volume's bounds are not known before its files are read).
-    const auto knobs = nlohmann::json::parse(shot.bake.options_json, nullptr, false);
-    const int res = knobs.is_object() ? knobs.value("light_resolution", 128) : 128;
-    const double n = std::pow(double(res + 2), 3);
-    if (n > limit) {
-      overLimit(source, "/bake/light_resolution",
-                "a bake lattice of up to (" + std::to_string(res) + " + 2)^3", n, max_voxels);
-    }
-  }
-  if (shot.bake.method == BakeSpec::Method::kPrecomputed) {
-    // The database in memory: every basic volume's lattice, each voxel holding its density and
-    // 16 optical-depth SH coefficients, so it counts 17 times (the cuts are on the much coarser
-    // receiver lattice).
-    const auto knobs = nlohmann::json::parse(shot.bake.options_json, nullptr, false);
-    const int res = knobs.is_object() ? knobs.value("light_resolution", 64) : 64;
-    const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
-    const int volumes = seq ? seq->frames : 1;
-    const double n = 17.0 * volumes * std::pow(double(res + 2), 3);
-    if (n > limit) {
-      overLimit(source, "/bake/light_resolution",
-                "a database of " + std::to_string(volumes) + " basic volume(s) of up to (" +
-                    std::to_string(res) + " + 2)^3 voxels, 17 floats each,",
-                n, max_voxels);
-    }
-  }
+  methodOf(shot).checkLimits(shot, MethodLimits{max_voxels, 0, 0}, source);
   if (shot.outputs.vdb && shot.outputs.vdb_voxel_size > 0) {
     Vec3 extent;
     bool analytic = true;
@@ -117,33 +90,11 @@ void checkShotFrames(const ShotSpec& shot, int64_t max_frames, const std::string
                      " frames exceed this server's limit of " + std::to_string(max_frames) +
                      " (--max-frames)");
   }
-  if (shot.bake.method == BakeSpec::Method::kPrecomputed) {
-    const nlohmann::json knobs = nlohmann::json::parse(shot.bake.options_json);
-    const auto it = knobs.find("frames");
-    if (it != knobs.end() && it->is_number_integer() && it->get<int64_t>() > max_frames) {
-      throw InputError(source + ": /bake/frames: " + std::to_string(it->get<int64_t>()) +
-                       " output frames exceed this server's limit of " +
-                       std::to_string(max_frames) + " (--max-frames)");
-    }
-  }
+  methodOf(shot).checkLimits(shot, MethodLimits{0, 0, max_frames}, source);
 }
 
 void checkShotPoints(const ShotSpec& shot, int64_t max_points, const std::string& source) {
-  if (max_points <= 0) return;
-  const char* key = shot.bake.method == BakeSpec::Method::kPointcloud    ? "points"
-                    : shot.bake.method == BakeSpec::Method::kPrecomputed ? "sample_points"
-                                                                         : nullptr;
-  if (!key) return;
-  // The parser has validated the knobs; options_json is its canonical text.
-  const nlohmann::json knobs = nlohmann::json::parse(shot.bake.options_json);
-  const auto it = knobs.find(key);
-  if (it == knobs.end() || !it->is_number_integer()) return;
-  const int64_t points = it->get<int64_t>();
-  if (points > max_points) {
-    throw InputError(source + ": /bake/" + key + ": " + std::to_string(points) +
-                     " points exceed this server's limit of " + std::to_string(max_points) +
-                     " (--max-points)");
-  }
+  if (max_points > 0) methodOf(shot).checkLimits(shot, MethodLimits{0, max_points, 0}, source);
 }
 
 void checkMeshVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::string& source) {

@@ -20,16 +20,18 @@ double boxVoxels(const Vec3& extent, double h);
 
 /// Checks at submit what the shot alone tells (no file is read): a mesh's resolution^3, a
 /// procedural cloud's grid (also of a procedural sequence), and the bake.vdb grid of a box or
-/// sphere (bounds / outputs.vdb_voxel_size) against `max_voxels` (0: no limit). Throws
+/// sphere (bounds / outputs.vdb_voxel_size) and the method's lattices against `max_voxels` (0:
+/// no limit). Throws
 /// InputError naming the JSON pointer of the field, prefixed by `source`.
 void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::string& source);
 
 /// Throws InputError naming /volume/sequence/frames when a sequence has more than `max_frames`
-/// frames, or /bake/frames when method precomputed asks for more output frames (0: no limit).
+/// frames, or the method's field (/bake/frames) when it asks for more output frames (0: no
+/// limit). This and the other two checks hand the method's part to BakeMethod::checkLimits.
 void checkShotFrames(const ShotSpec& shot, int64_t max_frames, const std::string& source);
 
-/// Throws InputError naming /bake/points (pointcloud) or /bake/sample_points (precomputed) when
-/// the method's point count exceeds `max_points` (0: no limit).
+/// Throws InputError naming the method's point count (/bake/points, /bake/sample_points) when
+/// it exceeds `max_points` (0: no limit).
 void checkShotPoints(const ShotSpec& shot, int64_t max_points, const std::string& source);
 
 /// Run-time check of a mesh given by voxel_size, whose voxel count needs the mesh's bounds:

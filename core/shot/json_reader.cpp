@@ -281,12 +281,15 @@ Object::Object(const Reader& reader, const Json& v, std::string ptr,
 
 void Object::allowOnly(std::initializer_list<const char*> allowed,
                        const std::string& context) const {
+  allowOnly(std::vector<std::string>(allowed.begin(), allowed.end()), context);
+}
+
+void Object::allowOnly(const std::vector<std::string>& allowed, const std::string& context) const {
   for (auto it = value_.begin(); it != value_.end(); ++it) {
-    const bool known =
-        std::any_of(allowed.begin(), allowed.end(), [&](const char* a) { return it.key() == a; });
+    const bool known = std::find(allowed.begin(), allowed.end(), it.key()) != allowed.end();
     if (known) continue;
     std::string list;
-    for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string(a);
+    for (const std::string& a : allowed) list += (list.empty() ? "" : ", ") + a;
     reader_.fail(path(it.key()), "unknown key" + (context.empty() ? "" : " " + context) +
                                      " (allowed: " + list + ")");
   }

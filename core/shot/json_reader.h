@@ -70,6 +70,7 @@ class Object {
 
   /// Fails on the first key not in `allowed` (for objects whose keys depend on a type field).
   void allowOnly(std::initializer_list<const char*> allowed, const std::string& context = "") const;
+  void allowOnly(const std::vector<std::string>& allowed, const std::string& context = "") const;
 
   bool has(const char* key) const { return value_.contains(key); }
   const Json* find(const char* key) const;

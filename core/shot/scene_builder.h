@@ -10,14 +10,6 @@
 
 namespace cloudbake {
 
-/// A shot's renderable scene. `cameras` are in the shot's view order, named as the views.
-struct Scene {
-  Medium medium;
-  Sun sun;  ///< irradiance 0 when the shot has no sun
-  Sky sky;
-  std::vector<Camera> cameras;
-};
-
 /// Builds the density field of a single-frame volume: analytic box/sphere (exact), a VDB grid,
 /// a voxelised mesh or a Perlin cloud. Loading errors from the factories come back as
 /// InputError prefixed with `source` and the volume's JSON pointer ("shot.json: /volume/vdb:

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/math/vec3.h"
+#include "core/methods/knob.h"
 #include "core/phase/phase_factory.h"
 #include "core/transport/scene.h"
 #include "core/volume/sources.h"
@@ -70,17 +71,14 @@ struct LightingSpec {
   Sky sky;  ///< map_path is absolute after parsing
 };
 
-/// `bake`: the method and its quality knobs.
+/// `bake`: the method (a name in the method registry, core/methods/registry.h), the knobs every
+/// method has, and the method's own knobs, validated against its knob table.
 struct BakeSpec {
-  enum class Method { kPathtrace, kSingle, kPointcloud, kPrecomputed, kAuto };
-  Method method = Method::kPathtrace;
-  int samples = 64;  ///< samples per pixel (pathtrace), 1..1e6
+  std::string method = "pathtrace";
+  int samples = 64;  ///< paths (pathtrace) or rays (views from a bake) per pixel, 1..1e6
   uint64_t seed = 1;
-  std::optional<int> max_depth;  ///< scattering events per path; unset: method default
-  /// The method's own knobs (every key of `bake` other than method/samples/seed/max_depth) as
-  /// compact JSON text with sorted keys, e.g. {"passes":8,"points":65536}. Validated by the
-  /// parser against the documented knobs of `method`; interpreted by the method itself.
-  std::string options_json = "{}";
+  /// Every knob of the method's table with a fixed default, plus those the shot sets.
+  KnobValues knobs;
 };
 
 /// `outputs`: which files a render writes.
@@ -102,8 +100,10 @@ struct ShotSpec {
   OutputSpec outputs;
 };
 
-/// Shot-format names of the enums, as written in files.
-const char* methodName(BakeSpec::Method method);
-const char* volumeTypeName(const VolumeSpec& volume);
+/// Shot-format name of the volume's source ("box", "vdb", "sequence", ...).
+inline const char* volumeTypeName(const VolumeSpec& volume) {
+  static const char* const kNames[] = {"box", "sphere", "vdb", "mesh", "procedural", "sequence"};
+  return kNames[volume.index()];
+}
 
 }  // namespace cloudbake

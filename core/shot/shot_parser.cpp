@@ -11,6 +11,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "core/methods/registry.h"
 #include "core/shot/json_reader.h"
 #include "core/shot/shot_sections.h"
 
@@ -125,112 +126,68 @@ LightingSpec parseLighting(const Object& o) {
   return l;
 }
 
-struct MethodInfo {
-  BakeSpec::Method method;
-  const char* name;
-};
-constexpr MethodInfo kMethods[] = {{BakeSpec::Method::kPathtrace, "pathtrace"},
-                                   {BakeSpec::Method::kSingle, "single"},
-                                   {BakeSpec::Method::kPointcloud, "pointcloud"},
-                                   {BakeSpec::Method::kPrecomputed, "precomputed"},
-                                   {BakeSpec::Method::kAuto, "auto"}};
-
-// Checks the method's own knobs and returns them as canonical JSON text.
-std::string parseMethodKnobs(const Object& o, BakeSpec::Method method) {
+// One knob's value, checked against its table entry.
+KnobValue parseKnob(const Object& o, const Knob& k, const Json& v) {
   const Reader& r = o.reader();
-  Json knobs = Json::object();
-  auto num = [&](const char* key, double lo, double hi, bool open_lo) {
-    if (auto* v = o.find(key)) knobs[key] = r.numberIn(*v, o.path(key), lo, hi, open_lo);
-  };
-  auto integer = [&](const char* key, int64_t lo, int64_t hi) {
-    if (auto* v = o.find(key)) knobs[key] = r.integer(*v, o.path(key), lo, hi);
-  };
-  const std::string context = std::string("for method '") + methodName(method) + "'";
-  switch (method) {
-    case BakeSpec::Method::kPathtrace:
-      o.allowOnly({"method", "samples", "seed", "max_depth"}, context);
-      break;
-    case BakeSpec::Method::kSingle:
-      o.allowOnly({"method", "samples", "seed", "step", "light_resolution"}, context);
-      num("step", 0, 1e12, true);
-      integer("light_resolution", 8, 1024);
-      break;
-    case BakeSpec::Method::kPointcloud:
-      o.allowOnly({"method", "samples", "seed", "points", "passes", "radius", "rule", "tolerance",
-                   "output_mapping", "tail", "step", "light_resolution"},
-                  context);
-      if (auto* v = o.find("tail")) knobs["tail"] = r.boolean(*v, o.path("tail"));
-      integer("points", 64, int64_t(1) << 24);
-      num("step", 0, 1e12, true);
-      integer("light_resolution", 8, 1024);
-      if (auto* v = o.find("output_mapping")) {
-        knobs["output_mapping"] = r.boolean(*v, o.path("output_mapping"));
-      }
-      integer("passes", 1, 1000);
-      num("radius", 0, 1e12, true);
-      num("tolerance", 0, 1, true);
-      if (auto* v = o.find("rule")) {
-        const std::string rule = r.string(*v, o.path("rule"));
-        if (rule != "normalized" && rule != "paper") {
-          r.fail(o.path("rule"), "must be 'normalized' or 'paper', got '" + rule + "'");
+  const std::string ptr = o.path(k.key);
+  switch (k.type) {
+    case Knob::Type::kInteger:
+      return r.integer(v, ptr, int64_t(k.min), int64_t(k.max));
+    case Knob::Type::kNumber:
+      return r.numberIn(v, ptr, k.min, k.max, k.exclusive_min);
+    case Knob::Type::kBoolean:
+      return r.boolean(v, ptr);
+    case Knob::Type::kChoice: {
+      const std::string s = r.string(v, ptr);
+      if (std::find(k.choices.begin(), k.choices.end(), s) == k.choices.end()) {
+        std::string allowed;
+        for (size_t i = 0; i < k.choices.size(); ++i) {
+          allowed += (i == 0                      ? "'"
+                      : i + 1 == k.choices.size() ? " or '"
+                                                  : ", '") +
+                     k.choices[i] + "'";
         }
-        knobs["rule"] = rule;
+        r.fail(ptr, "must be " + allowed + ", got '" + s + "'");
       }
-      if (knobs.value("output_mapping", false) && knobs.value("rule", "normalized") != "paper") {
-        r.fail(o.path("output_mapping"),
-               "Eq. 2's output mapping applies to rule 'paper' only (the normalised rule keeps "
-               "radiometric units)");
-      }
-      break;
-    case BakeSpec::Method::kPrecomputed:
-      o.allowOnly({"method", "samples", "seed", "step", "light_resolution", "sample_points",
-                   "transfer_resolution", "cut_error", "iterations", "tolerance", "frames", "sigma",
-                   "dissolve", "similarity"},
-                  context);
-      num("step", 0, 1e12, true);
-      integer("light_resolution", 8, 1024);
-      integer("sample_points", 1, int64_t(1) << 20);
-      integer("transfer_resolution", 4, 512);
-      num("cut_error", 0, 1, true);
-      integer("iterations", 1, 1000);
-      num("tolerance", 0, 1, true);
-      integer("frames", 1, 1000000);
-      num("sigma", 0, 1e6, true);
-      integer("dissolve", 0, 10000);
-      if (auto* v = o.find("similarity")) knobs["similarity"] = r.boolean(*v, o.path("similarity"));
-      break;
-    case BakeSpec::Method::kAuto:
-      o.allowOnly({"method", "samples", "seed", "max_depth", "tolerance"}, context);
-      knobs["tolerance"] = r.numberIn(o.required("tolerance"), o.path("tolerance"), 0, 1, true);
-      break;
+      return s;
+    }
   }
-  return knobs.dump();
+  return {};
+}
+
+// The method's own knobs, checked against its table; the keys every method has are read by
+// parseBake.
+KnobValues parseMethodKnobs(const Object& o, const MethodInfo& info) {
+  std::vector<std::string> allowed = {"method", "samples", "seed"};
+  for (const Knob& k : info.knobs) allowed.push_back(k.key);
+  o.allowOnly(allowed, "for method '" + info.name + "'");
+  KnobValues knobs = defaultKnobValues(info.knobs);
+  for (const Knob& k : info.knobs) {
+    if (const Json* v = o.find(k.key.c_str())) {
+      knobs.set(k.key, parseKnob(o, k, *v));
+    } else if (k.required) {
+      o.required(k.key.c_str());  // fails "<ptr>: missing (required)"
+    }
+  }
+  return knobs;
 }
 
 BakeSpec parseBake(const Object& o) {
   const Reader& r = o.reader();
   BakeSpec b;
   if (auto* v = o.find("method")) {
-    const std::string name = r.string(*v, o.path("method"));
-    auto it = std::find_if(std::begin(kMethods), std::end(kMethods),
-                           [&](const MethodInfo& m) { return name == m.name; });
-    if (it == std::end(kMethods)) {
-      r.fail(o.path("method"), "unknown method '" + name +
-                                   "' (known: pathtrace, single, pointcloud, precomputed, auto)");
+    b.method = r.string(*v, o.path("method"));
+    if (!findMethod(b.method)) {
+      r.fail(o.path("method"),
+             "unknown method '" + b.method + "' (known: " + joinedMethodNames() + ")");
     }
-    b.method = it->method;
   }
-  // Paths per pixel for the path tracer; rays per pixel of each view rendered from a bake.
-  const bool from_bake = b.method == BakeSpec::Method::kSingle ||
-                         b.method == BakeSpec::Method::kPointcloud ||
-                         b.method == BakeSpec::Method::kPrecomputed;
-  b.samples = from_bake ? 1 : 64;
+  const MethodInfo& info = findMethod(b.method)->info();
+  b.samples = info.default_samples;
   if (auto* v = o.find("samples"))
     b.samples = int(r.integer(*v, o.path("samples"), 1, kMaxSamples));
   if (auto* v = o.find("seed")) b.seed = r.unsignedInteger(*v, o.path("seed"));
-  if (auto* v = o.find("max_depth"))
-    b.max_depth = int(r.integer(*v, o.path("max_depth"), 1, 1000000));
-  b.options_json = parseMethodKnobs(o, b.method);
+  b.knobs = parseMethodKnobs(o, info);
   return b;
 }
 
@@ -326,13 +283,10 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
   }
   const OutputSpec& out = shot.outputs;
   // Bake methods write their own lattice (light_resolution), whatever the volume.
-  const bool lattice = shot.bake.method == BakeSpec::Method::kSingle ||
-                       shot.bake.method == BakeSpec::Method::kPointcloud ||
-                       shot.bake.method == BakeSpec::Method::kPrecomputed;
-  if (lattice) {
+  if (methodOf(shot).info().bakes_light) {
     if (out.vdb_voxel_size > 0) {
       r.fail("/outputs/vdb_voxel_size",
-             std::string("does not apply to method '") + methodName(shot.bake.method) +
+             std::string("does not apply to method '") + shot.bake.method +
                  "' (its bake.vdb is the bake lattice; set bake.light_resolution instead)");
     }
     return;
@@ -358,34 +312,6 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
     os << "gives " << voxels << " voxels over the volume's bounds; the limit is "
        << std::int64_t(kMaxVdbVoxels) << " (use a larger voxel size)";
     r.fail("/outputs/vdb_voxel_size", os.str());
-  }
-}
-
-// Method precomputed: the walk's knobs need a database of basic volumes (a sequence), and the
-// dissolve must fit in it (seed 002: a jump to l plays l .. l + H - 1).
-void checkAnimationKnobs(const Reader& r, const ShotSpec& shot) {
-  if (shot.bake.method != BakeSpec::Method::kPrecomputed) return;
-  const Json knobs = Json::parse(shot.bake.options_json);
-  const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
-  if (!seq) {
-    for (const char* key : {"sigma", "dissolve"}) {
-      if (knobs.contains(key)) {
-        r.fail(std::string("/bake/") + key,
-               "applies to animated volumes only (a " + std::string(volumeTypeName(shot.volume)) +
-                   " volume is one basic volume: every frame is the same)");
-      }
-    }
-    return;
-  }
-  // Without the knob the dissolve is min(8, frames - 2) (core/job/run_precomputed.h).
-  if (!knobs.contains("dissolve")) return;
-  const int64_t h = knobs["dissolve"].get<int64_t>();
-  const int64_t n = seq->frames;
-  if (h > n - 2) {
-    r.fail("/bake/dissolve", std::to_string(h) +
-                                 " frames of cross-dissolve do not fit a database of " +
-                                 std::to_string(n) + " basic volumes (at most frames - 2 = " +
-                                 std::to_string(std::max<int64_t>(0, n - 2)) + ")");
   }
 }
 
@@ -439,7 +365,9 @@ ShotSpec parseShot(const std::string& json_text, const std::string& base_dir,
   shot.medium =
       parseMedium(Object(r, root.required("medium"), "/medium", {"extinction", "albedo", "phase"}));
   shot.lighting = parseLighting(Object(r, root.required("lighting"), "/lighting", {"sun", "sky"}));
-  if (auto* v = root.find("bake")) shot.bake = parseBake(Object(r, *v, "/bake"));
+  const Json no_bake = Json::object();
+  const Json* bake = root.find("bake");
+  shot.bake = parseBake(Object(r, bake ? *bake : no_bake, "/bake"));
   if (auto* v = root.find("outputs")) {
     shot.outputs = parseOutputs(Object(r, *v, "/outputs", {"exr", "vdb", "vdb_voxel_size"}));
   }
@@ -467,7 +395,8 @@ ShotSpec parseShot(const std::string& json_text, const std::string& base_dir,
     r.fail("/views", "needs at least one view when outputs.exr is true");
   }
   checkOutputsAgainstVolume(r, shot);
-  checkAnimationKnobs(r, shot);
+  // Knobs that depend on each other or on the volume: the method's own checks.
+  methodOf(shot).validate(shot, src);
   return shot;
 }
 

@@ -127,27 +127,6 @@ Json viewJson(const Camera& c) {
 
 }  // namespace
 
-const char* methodName(BakeSpec::Method method) {
-  switch (method) {
-    case BakeSpec::Method::kPathtrace:
-      return "pathtrace";
-    case BakeSpec::Method::kSingle:
-      return "single";
-    case BakeSpec::Method::kPointcloud:
-      return "pointcloud";
-    case BakeSpec::Method::kPrecomputed:
-      return "precomputed";
-    case BakeSpec::Method::kAuto:
-      return "auto";
-  }
-  return "unknown";
-}
-
-const char* volumeTypeName(const VolumeSpec& volume) {
-  static const char* const kNames[] = {"box", "sphere", "vdb", "mesh", "procedural", "sequence"};
-  return kNames[volume.index()];
-}
-
 std::string serializeShot(const ShotSpec& shot, const SerializeOptions& options) {
   Json j;
   j["version"] = shot.version;
@@ -162,11 +141,17 @@ std::string serializeShot(const ShotSpec& shot, const SerializeOptions& options)
                        {"irradiance", vec(shot.lighting.sun.irradiance)}};
   }
   j["lighting"] = lighting;
-  Json bake = Json::parse(shot.bake.options_json.empty() ? "{}" : shot.bake.options_json);
-  bake["method"] = methodName(shot.bake.method);
+  Json bake = Json::object();
+  for (const auto& [key, value] : shot.bake.knobs.explicitValues()) {
+    std::visit(
+        [&, k = key](const auto& v) {
+          if constexpr (!std::is_same_v<std::decay_t<decltype(v)>, std::monostate>) bake[k] = v;
+        },
+        value);
+  }
+  bake["method"] = shot.bake.method;
   bake["samples"] = shot.bake.samples;
   bake["seed"] = shot.bake.seed;
-  if (shot.bake.max_depth) bake["max_depth"] = *shot.bake.max_depth;
   j["bake"] = bake;
   if (options.views) {
     j["views"] = Json::array();

@@ -13,6 +13,16 @@ namespace cloudbake {
 /// The layers in file order: beauty unprefixed (R, G, B, A), then `sun`, `sky`, `single`,
 /// `multiple` (each R, G, B). Images are copied.
 std::vector<ExrLayer> renderLayersToExr(const RenderLayers& layers);
+/// The same, moving the images.
+std::vector<ExrLayer> renderLayersToExr(RenderLayers&& layers);
+
+/// Reads those layers back in file order (a cached view); InputError naming the path when one
+/// is missing.
+std::vector<ExrLayer> readRenderLayersExr(const std::string& path);
+
+/// Multiplies the RGB channels by the sun irradiance per channel (alpha untouched): a render
+/// at unit irradiance becomes one at `e`.
+void scaleRgb(Image& image, const Rgb& e);
 
 /// Writes `layers` to `path` atomically (FLOAT, ZIP; see writeExr), with `attributes` as string
 /// header attributes. Throws InputError naming the path on failure.

@@ -58,4 +58,12 @@ struct Camera {
   int height_px = 64;
 };
 
+/// A shot's renderable scene. `cameras` are in the shot's view order, named as the views.
+struct Scene {
+  Medium medium;
+  Sun sun;  ///< irradiance 0 when the shot has no sun
+  Sky sky;
+  std::vector<Camera> cameras;
+};
+
 }  // namespace cloudbake

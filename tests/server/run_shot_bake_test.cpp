@@ -140,7 +140,7 @@ TEST(RunShotBake, CancellingDuringTheBakeThrows) {
 
 TEST(RunShotBake, MethodsNotImplementedAreRefusedByName) {
   ShotSpec s = parse(shot("single"));
-  s.bake.method = BakeSpec::Method::kAuto;
+  s.bake.method = "auto";
   try {
     checkRunnable(s, "shot.json");
     ADD_FAILURE() << "no error";

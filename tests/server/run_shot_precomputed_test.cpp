@@ -14,7 +14,8 @@
 #include "core/io/exr_io.h"
 #include "core/job/bake_cache.h"
 #include "core/job/cache_key.h"
-#include "core/job/run_precomputed.h"
+#include "core/methods/precomputed.h"
+#include "core/methods/single.h"
 #include "core/job/run_shot.h"
 #include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
@@ -156,8 +157,8 @@ TEST(RunShotPrecomputed, CancelsAndRefusesBadInput) {
   }
   // Other methods refuse a sequence by name.
   ShotSpec s = parse(animated(""));
-  s.bake.method = BakeSpec::Method::kSingle;
-  s.bake.options_json = "{}";
+  s.bake.method = "single";
+  s.bake.knobs = defaultKnobValues(singleMethod().info().knobs);
   try {
     checkRunnable(s, "shot.json");
     ADD_FAILURE() << "no error";

@@ -1,6 +1,6 @@
 // `cloudbake render SHOT.json --out DIR [--threads N] [--samples N] [--quiet] [--png]`: renders
-// every view of a shot in-process with the reference path tracer (docs/shot-format.md) and
-// writes DIR/<view>.exr (beauty + sun, sky, single, multiple layers) and DIR/bake.vdb on request.
+// every view of a shot in-process with the shot's bake method (docs/shot-format.md) and writes
+// DIR/<view>.exr (beauty + sun, sky, single, multiple layers) and DIR/bake.vdb on request.
 #include <tbb/global_control.h>
 #include <unistd.h>
 
@@ -14,6 +14,7 @@
 
 #include "core/error.h"
 #include "core/job/run_shot.h"
+#include "core/methods/registry.h"
 #include "core/shot/shot_parser.h"
 #include "tools/cloudbake/commands.h"
 
@@ -138,12 +139,19 @@ std::vector<std::string> render(const RenderOptions& opt) {
 void addRenderCommand(CLI::App& app, int* exit_code) {
   auto opt = std::make_shared<RenderOptions>();
   CLI::App* cmd = app.add_subcommand(
-      "render", "Render every view of a shot with the reference path tracer (docs/shot-format.md)");
+      "render", "Render every view of a shot in-process with its bake.method (" + [] {
+        std::string names;
+        for (const std::string& n : methodNames(true)) {
+          names += (names.empty() ? "" : ", ") + n;
+        }
+        return names;
+      }() + "; docs/shot-format.md)");
   cmd->add_option("shot", opt->shot, "shot file (JSON, format v1)")->required();
   cmd->add_option("--out", opt->out, "output folder (created if missing)")->required();
   cmd->add_option("--threads", opt->threads, "worker threads (default 0 = all cores)");
   cmd->add_option("--samples", opt->samples,
-                  "samples per pixel, overriding the shot's bake.samples (1..1000000)");
+                  "paths (pathtrace) or rays (views from a bake) per pixel, overriding the "
+                  "shot's bake.samples (1..1000000)");
   cmd->add_flag("--quiet", opt->quiet, "no progress on stderr");
   cmd->add_flag("--png", opt->png,
                 "also write an auto-exposed sRGB preview DIR/<view>.png beside each EXR");

@@ -5,6 +5,8 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 
+#include "core/bake/pointcloud_bake.h"
+#include "core/transport/path_tracer.h"
 #include "tests/core/shot/shot_test_util.h"
 
 namespace cloudbake {
@@ -32,11 +34,11 @@ TEST(ShotParser, DesignExampleParsesToExpectedValues) {
   EXPECT_EQ(s.lighting.sun.irradiance, Rgb(3.14159, 3.14159, 3.14159));
   EXPECT_EQ(s.lighting.sky.type, Sky::Type::kConstant);
   EXPECT_EQ(s.lighting.sky.radiance, Rgb(0, 0, 0));
-  EXPECT_EQ(s.bake.method, BakeSpec::Method::kPathtrace);
+  EXPECT_EQ(s.bake.method, "pathtrace");
   EXPECT_EQ(s.bake.samples, 256);
   EXPECT_EQ(s.bake.seed, 1u);
-  EXPECT_FALSE(s.bake.max_depth.has_value());
-  EXPECT_EQ(s.bake.options_json, "{}");
+  EXPECT_EQ(s.bake.knobs.integer("max_depth"), PathTracerOptions{}.max_depth);
+  EXPECT_TRUE(s.bake.knobs.explicitValues().empty());
   ASSERT_EQ(s.views.size(), 1u);
   const Camera& c = s.views[0];
   EXPECT_EQ(c.name, "nadir");
@@ -67,7 +69,7 @@ TEST(ShotParser, DefaultsAndNormalisation) {
   EXPECT_NEAR(s.lighting.sun.direction.x, 0.6, 1e-15);
   EXPECT_NEAR(s.lighting.sun.direction.z, 0.8, 1e-15);
   EXPECT_EQ(s.lighting.sky.radiance, Rgb(0, 0, 0));
-  EXPECT_EQ(s.bake.method, BakeSpec::Method::kPathtrace);
+  EXPECT_EQ(s.bake.method, "pathtrace");
   EXPECT_EQ(s.bake.samples, 64);
   EXPECT_EQ(s.views[0].type, Camera::Type::kPerspective);
   EXPECT_EQ(s.views[0].fov_deg, 40.0);
@@ -101,8 +103,11 @@ TEST(ShotParser, OtherVolumesSkyFormsAndMethodKnobs) {
   EXPECT_EQ(mesh->noise.frequency, NoiseOptions().frequency);
   EXPECT_EQ(s.lighting.sky.type, Sky::Type::kMap);
   EXPECT_EQ(s.lighting.sky.map_scale, 0.5);
-  EXPECT_EQ(s.bake.method, BakeSpec::Method::kPointcloud);
-  EXPECT_EQ(s.bake.options_json, R"({"points":4096,"rule":"paper"})");
+  EXPECT_EQ(s.bake.method, "pointcloud");
+  EXPECT_EQ(s.bake.knobs.integer("points"), 4096);
+  EXPECT_EQ(s.bake.knobs.choice("rule"), "paper");
+  EXPECT_EQ(s.bake.knobs.integer("passes"), PointcloudOptions{}.passes);  // a default
+  EXPECT_FALSE(s.bake.knobs.has("radius"));                               // derived when absent
 
   j["volume"] = {{"sequence", {{"paths", {"assets/cloud.vdb", "assets/cloud.vdb"}}}}};
   j["lighting"]["sky"] = {{"zenith", {0.1, 0.2, 0.4}}, {"horizon", {0.3, 0.3, 0.3}}};
@@ -114,7 +119,7 @@ TEST(ShotParser, OtherVolumesSkyFormsAndMethodKnobs) {
   EXPECT_EQ(seq->paths.size(), 2u);
   EXPECT_EQ(s.lighting.sky.type, Sky::Type::kGradient);
   EXPECT_EQ(s.lighting.sky.ground, Rgb(0, 0, 0));
-  EXPECT_EQ(s.bake.options_json, R"({"tolerance":0.02})");
+  EXPECT_EQ(s.bake.knobs.number("tolerance"), 0.02);
 
   j["volume"] = {{"procedural", {{"type", "perlin_cloud"}, {"seed", 7}, {"resolution", 32}}}};
   s = parseShot(j.dump(), dir.path().string());
@@ -216,16 +221,22 @@ TEST(ShotParser, EveryVariantRoundTripsThroughTheCanonicalForm) {
         j["medium"]["phase"] = {{"type", "mie_approx"}, {"diameter_um", 12.5}};
       },
       [](json& j) {
-        j["bake"] = {{"method", "precomputed"}, {"sample_points", 512}, {"transfer_resolution", 16},
-                     {"cut_error", 0.002},       {"iterations", 3},       {"tolerance", 0.01},
-                     {"frames", 4},              {"light_resolution", 32}, {"step", 0.1}};
+        j["bake"] = {{"method", "precomputed"},
+                     {"sample_points", 512},
+                     {"transfer_resolution", 16},
+                     {"cut_error", 0.002},
+                     {"iterations", 3},
+                     {"tolerance", 0.01},
+                     {"frames", 4},
+                     {"light_resolution", 32},
+                     {"step", 0.1}};
       },
       [](json& j) {
         j["bake"] = {{"method", "single"}, {"step", 0.05}, {"light_resolution", 64}};
       },
       [](json& j) {
-        j["bake"] = {{"method", "pointcloud"}, {"points", 4096}, {"passes", 5},
-                     {"radius", 0.3},          {"rule", "paper"}, {"output_mapping", true},
+        j["bake"] = {{"method", "pointcloud"}, {"points", 4096},        {"passes", 5},
+                     {"radius", 0.3},          {"rule", "paper"},       {"output_mapping", true},
                      {"tolerance", 0.05},      {"light_resolution", 48}};
       },
       [](json& j) {
@@ -548,17 +559,29 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
        },
        "/bake/dissolve: 4 frames of cross-dissolve do not fit a database of 5 basic volumes"},
       {"walk knob on a static volume",
-       [](json& j) { j["bake"] = {{"method", "precomputed"}, {"sigma", 0.1}}; },
+       [](json& j) {
+         j["bake"] = {{"method", "precomputed"}, {"sigma", 0.1}};
+       },
        "/bake/sigma: applies to animated volumes only"},
-      {"sigma 0", [](json& j) { j["bake"] = {{"method", "precomputed"}, {"sigma", 0}}; },
+      {"sigma 0",
+       [](json& j) {
+         j["bake"] = {{"method", "precomputed"}, {"sigma", 0}};
+       },
        "/bake/sigma: must be"},
-      {"0 output frames", [](json& j) { j["bake"] = {{"method", "precomputed"}, {"frames", 0}}; },
+      {"0 output frames",
+       [](json& j) {
+         j["bake"] = {{"method", "precomputed"}, {"frames", 0}};
+       },
        "/bake/frames: must be an integer in [1, 1000000]"},
       {"0 sample points (K = 0)",
-       [](json& j) { j["bake"] = {{"method", "precomputed"}, {"sample_points", 0}}; },
+       [](json& j) {
+         j["bake"] = {{"method", "precomputed"}, {"sample_points", 0}};
+       },
        "/bake/sample_points: must be an integer in [1, 1048576]"},
       {"a knob of another method",
-       [](json& j) { j["bake"] = {{"method", "precomputed"}, {"points", 100}}; },
+       [](json& j) {
+         j["bake"] = {{"method", "precomputed"}, {"points", 100}};
+       },
        "/bake/points"},
       {"frames disagreeing with paths",
        [](json& j) {

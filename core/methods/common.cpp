@@ -1,0 +1,233 @@
+#include "core/methods/common.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <sstream>
+
+#include "core/bake/baked_light_vdb.h"
+#include "core/error.h"
+#include "core/format.h"
+#include "core/transport/layers_exr.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+constexpr const char* kBakeFile = "bake.vdb";
+
+double angleDeg(const Vec3& a, const Vec3& b) {
+  const double c = std::clamp(dot(a, b) / (length(a) * length(b)), -1.0, 1.0);
+  return std::acos(c) * 180.0 / M_PI;
+}
+
+// The cached bake of a sun direction within the run's tolerance, closest first; "" if none.
+std::string nearbyBake(MethodRun& run, std::string* how) {
+  const ShotSpec& shot = run.shot();
+  if (!shot.lighting.has_sun || run.lookup(run.keys().light)) return "";
+  for (const Vec3& d : run.nearbySunDirections(run.keys().light_family)) {
+    if (auto found = run.lookup(run.lightKeyAt(d))) {
+      RunResult& r = run.result();
+      ++r.views_reused_direction;
+      r.reused_angle_deg = angleDeg(d, sunDirection(shot));
+      *how =
+          "from the cached bake of a sun direction " + fixed(r.reused_angle_deg, 2) + " deg away";
+      return *found;
+    }
+  }
+  return "";
+}
+
+// The bake itself: from the cache when it holds it, else computed (and committed).
+BakedLight obtainBake(MethodRun& run, const LightBakeFn& bake, double total, std::string* entry) {
+  const ShotSpec& shot = run.shot();
+  auto compute = [&] {
+    run.report("bake", 0, "baking light (method " + shot.bake.method + ")");
+    return bake(run.scene().medium, sunDirection(shot), [&](double f, const std::string& stage) {
+      return run.pollMessage(f / total, "bake: " + stage);
+    });
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  std::string how = "baked";
+  std::optional<BakedLight> light;
+  RunResult& result = run.result();
+  if (!run.hasCache()) {
+    light = compute();
+    result.bakes_computed += 1;
+  } else {
+    *entry = nearbyBake(run, &how);
+    if (entry->empty()) {
+      bool computed = false;
+      *entry = run.cached(
+          run.keys().light,
+          [&](const std::string& staging) {
+            light = compute();
+            writeBakedLight((fs::path(staging) / kBakeFile).string(), *light);
+          },
+          &computed);
+      if (!computed) how = "from cache";
+      if (computed && shot.lighting.has_sun) run.addSunDirection(run.keys().light_family);
+      (computed ? result.bakes_computed : result.bakes_cached) += 1;
+    } else {
+      result.bakes_cached += 1;
+    }
+    if (!light) {
+      try {
+        light = readBakedLight((fs::path(*entry) / kBakeFile).string());
+      } catch (const InputError& e) {
+        // The cache verified the entry's checksum: an unreadable bake is our fault, not input.
+        throw InternalError(std::string("cached bake unreadable: ") + e.what());
+      }
+    }
+  }
+  const BakeGrid& g = light->grid;
+  run.report("bake", 1 / total,
+             "light " + how + " in " + fixed(secondsSince(t0), 2) + " s (" + std::to_string(g.nx) +
+                 "x" + std::to_string(g.ny) + "x" + std::to_string(g.nz) + " lattice)");
+  return std::move(*light);
+}
+
+}  // namespace
+
+Vec3 sunDirection(const ShotSpec& shot) {
+  return shot.lighting.has_sun ? shot.lighting.sun.direction : Vec3(0, 0, 1);
+}
+
+bool needsSky(const ShotSpec& shot) {
+  const Sky& sky = shot.lighting.sky;
+  switch (sky.type) {
+    case Sky::Type::kConstant:
+      return maxComponent(sky.radiance) > 0;
+    case Sky::Type::kGradient:
+      return maxComponent(sky.zenith) > 0 || maxComponent(sky.horizon) > 0 ||
+             maxComponent(sky.ground) > 0;
+    case Sky::Type::kMap:
+      return sky.map_scale > 0;  // a map of zeros still bakes visibility: cheap and harmless
+  }
+  return true;
+}
+
+Knob stepKnob() {
+  return Knob::number("step", 0, 1e12, std::nullopt, "world units",
+                      "ray-march step of the view renders (not part of the bake's cache key)")
+      .derivedDefault("half a lattice voxel")
+      .viewOnly();
+}
+
+Knob lightResolutionKnob(int64_t default_resolution) {
+  return Knob::integer("light_resolution", 8, 1024, default_resolution,
+                       "bake lattice voxels along the longest side of the volume");
+}
+
+BakeRenderOptions bakeRenderOptions(const ShotSpec& shot, int threads) {
+  BakeRenderOptions o;
+  o.step = shot.bake.knobs.optionalNumber("step").value_or(0.0);
+  o.samples_per_pixel = shot.bake.samples;
+  o.seed = shot.bake.seed;
+  o.threads = threads;
+  return o;
+}
+
+Json bakeKnobMaterial(const BakeMethod& method, const ShotSpec& shot) {
+  // Resolved values, defaults included: a changed default changes the key.
+  const std::map<std::string, KnobValue> values = shot.bake.knobs.resolved();
+  Json knobs = Json::object();
+  for (const Knob& k : method.info().knobs) {
+    const auto it = values.find(k.key);
+    if (k.view_only || it == values.end()) continue;
+    std::visit(
+        [&, key = k.key](const auto& v) {
+          using T = std::decay_t<decltype(v)>;
+          if constexpr (!std::is_same_v<T, std::monostate>) knobs[key] = v;
+        },
+        it->second);
+  }
+  return knobs;
+}
+
+void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const std::string& what,
+                        const MethodLimits& limits, const std::string& source) {
+  if (limits.max_voxels == 0) return;
+  // Counted as a cube with a margin: an upper bound, since the volume's bounds are not known
+  // before its files are read.
+  const double n = lattices_times_floats * std::pow(double(resolution + 2), 3);
+  if (n > double(limits.max_voxels)) {
+    std::ostringstream os;
+    os.precision(15);
+    os << source << ": /bake/light_resolution: " << what << " of up to (" << resolution
+       << " + 2)^3 gives " << n << " voxels, over this server's limit of " << limits.max_voxels
+       << " (--max-voxels)";
+    throw InputError(os.str());
+  }
+}
+
+std::vector<std::string> lightBakePlanLines(const ShotSpec& shot, int64_t resolution) {
+  return {std::string("volume: ") + volumeTypeName(shot.volume) + ", resampled to a " +
+              std::to_string(resolution) + "-voxel lattice (longest side)",
+          shot.lighting.has_sun ? "sun transmittance: one ray march per lattice voxel"
+                                : "sun transmittance: computed, but the shot has no sun",
+          needsSky(shot) ? "sky visibility: 26 lattice-direction sweeps"
+                         : "sky visibility: skipped (black sky)"};
+}
+
+MethodPlan lightBakePlan(const ShotSpec& shot, const ShotCacheKeys& keys,
+                         const std::function<bool(const std::string&)>& lookup,
+                         std::vector<std::string> bake_lines) {
+  MethodPlan plan;
+  plan.bake_key = keys.light;
+  plan.bake_cached = lookup(keys.light);
+  if (plan.bake_cached) {
+    plan.components = {"light: already baked for this sun direction (no scattering computed)"};
+  } else {
+    plan.components = std::move(bake_lines);
+  }
+  if (!shot.outputs.exr) return plan;
+  for (const Camera& c : shot.views) {
+    plan.view_cached.push_back(plan.bake_cached);
+    plan.pixel_samples += double(c.width_px) * c.height_px * shot.bake.samples;
+    plan.components.push_back("view '" + c.name + "': ray march from the bake, " +
+                              std::to_string(c.width_px) + "x" + std::to_string(c.height_px) +
+                              ", " + std::to_string(shot.bake.samples) + " ray(s) per pixel");
+  }
+  return plan;
+}
+
+void runLightBake(MethodRun& run, const LightBakeFn& bake) {
+  const ShotSpec& shot = run.shot();
+  const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
+  // Progress units: the bake, each view and the VDB weigh one each.
+  const double total = 1 + n_views + (shot.outputs.vdb ? 1 : 0);
+  std::string entry;
+  const BakedLight light = obtainBake(run, bake, total, &entry);
+
+  const Scene& lights = run.lights();
+  const BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
+  for (int i = 0; i < n_views; ++i) {
+    const Camera& camera = lights.cameras[size_t(i)];
+    const std::string label = "view '" + camera.name + "' " + std::to_string(camera.width_px) +
+                              "x" + std::to_string(camera.height_px) + " from the bake";
+    run.report("render", (1 + i) / total, label, camera.name);
+    const auto t0 = std::chrono::steady_clock::now();
+    RenderLayers layers =
+        renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
+                       [&](double f) { return run.poll((1 + i + f) / total, f); });
+    run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)),
+                  {{"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
+                   {"cloudbake:seed", std::to_string(ro.seed)}});
+    ++run.result().views_from_bake;
+    run.poll((2 + i) / total, 1);
+    run.report("render", (2 + i) / total,
+               label + ": rendered in " + fixed(secondsSince(t0), 2) + " s", camera.name);
+  }
+  if (shot.outputs.vdb) {
+    run.report("vdb", (1 + n_views) / total, "writing bake.vdb (the baked light)");
+    if (!entry.empty()) {
+      run.copyOutput(kBakeFile, (fs::path(entry) / kBakeFile).string());
+    } else {
+      run.writeOutput(kBakeFile, [&](const std::string& path) { writeBakedLight(path, light); });
+    }
+  }
+}
+
+}  // namespace cloudbake

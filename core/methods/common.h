@@ -1,0 +1,57 @@
+// Pieces several methods share: the shot's light direction and sky, the knobs of methods that
+// render views from a lattice, the run of a method that bakes light once per light direction and
+// renders every view from it, and the lattice's voxel limit.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/bake/bake_progress.h"
+#include "core/bake/baked_light.h"
+#include "core/bake/render_from_bake.h"
+#include "core/methods/method.h"
+
+namespace cloudbake {
+
+/// The direction towards the sun, unit length; (0, 0, 1) when the shot has no sun (the sky's
+/// bakes still need a lattice orientation). The one place that default lives.
+Vec3 sunDirection(const ShotSpec& shot);
+
+/// True when the shot's sky is not black (a bake then needs its sky terms).
+bool needsSky(const ShotSpec& shot);
+
+/// The knobs of every method that renders views from a lattice.
+Knob stepKnob();
+Knob lightResolutionKnob(int64_t default_resolution);
+
+/// How views of a lattice method are rendered: `step`, bake.samples rays per pixel, bake.seed.
+BakeRenderOptions bakeRenderOptions(const ShotSpec& shot, int threads);
+
+/// Knobs of the shot that change the bake (view-only knobs left out), as key material.
+nlohmann::json bakeKnobMaterial(const BakeMethod& method, const ShotSpec& shot);
+
+/// InputError unless (resolution + 2)^3 * floats_per_voxel * lattices fits max_voxels.
+void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const std::string& what,
+                        const MethodLimits& limits, const std::string& source);
+
+/// The dry-run lines every light-baking method starts with (lattice, sun, sky).
+std::vector<std::string> lightBakePlanLines(const ShotSpec& shot, int64_t resolution);
+
+/// A dry-run plan for a method whose views are ray-marched from one bake: the method's own
+/// component lines first, then one line per view.
+MethodPlan lightBakePlan(const ShotSpec& shot, const ShotCacheKeys& keys,
+                         const std::function<bool(const std::string&)>& lookup,
+                         std::vector<std::string> bake_lines);
+
+/// Bakes the shot's light (the medium's density, extinction, albedo and phase) for its sun
+/// direction; returns the lattice. `progress(fraction, stage)` returns false to cancel.
+using LightBakeFn = std::function<BakedLight(const Medium& medium, const Vec3& sun_direction,
+                                             const BakeProgressFn& progress)>;
+
+/// The run of a light-baking method: the bake from the cache (or a cached bake of a sun
+/// direction within the tolerance) or computed by `bake`, every view ray-marched from it, and
+/// bake.vdb when asked.
+void runLightBake(MethodRun& run, const LightBakeFn& bake);
+
+}  // namespace cloudbake

@@ -1,0 +1,190 @@
+#include "core/methods/pathtrace.h"
+
+#include <filesystem>
+
+#include "core/error.h"
+#include "core/format.h"
+#include "core/io/vdb_io.h"
+#include "core/methods/common.h"
+#include "core/transport/layers_exr.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+
+constexpr const char* kViewFile = "view.exr";
+constexpr const char* kVdbFile = "bake.vdb";
+
+// A view from the cache (a render of the shot's own sun direction, or of one within the
+// tolerance), else traced now and committed. Returns the layers at the shot's irradiance.
+std::vector<ExrLayer> cachedView(MethodRun& run, int i,
+                                 const std::function<RenderLayers(const Sun&)>& render,
+                                 bool* from_cache) {
+  const ShotSpec& shot = run.shot();
+  const ShotCacheKeys& keys = run.keys();
+  RunResult& result = run.result();
+  std::vector<ExrLayer> layers;
+  bool computed = false;
+  if (shot.lighting.has_sun && !run.lookup(keys.views[size_t(i)])) {
+    for (const Vec3& d : run.nearbySunDirections(keys.family)) {
+      auto found = run.lookup(run.viewKeyAt(i, d));
+      if (!found) continue;
+      try {  // the entry may vanish meanwhile (eviction): then the view is traced as usual
+        layers = readRenderLayersExr((fs::path(*found) / kViewFile).string());
+      } catch (const std::exception&) {
+        continue;
+      }
+      ++result.views_reused_direction;
+      const double c = std::clamp(dot(d, sunDirection(shot)), -1.0, 1.0);
+      result.reused_angle_deg = std::max(result.reused_angle_deg, std::acos(c) * 180.0 / M_PI);
+      break;
+    }
+  }
+  if (layers.empty()) {
+    const std::string entry = run.cached(
+        keys.views[size_t(i)],
+        [&](const std::string& staging) {
+          Sun sun = run.scene().sun;
+          if (keys.sun_scaled) sun.irradiance = Rgb(1.0);
+          writeExr((fs::path(staging) / kViewFile).string(), renderLayersToExr(render(sun)),
+                   {{"cloudbake:units",
+                     keys.sun_scaled ? "radiance per unit sun irradiance" : "radiance"}});
+        },
+        &computed);
+    layers = readRenderLayersExr((fs::path(entry) / kViewFile).string());
+    if (computed && shot.lighting.has_sun) run.addSunDirection(keys.family);
+  }
+  if (keys.sun_scaled) {
+    for (ExrLayer& layer : layers) scaleRgb(layer.image, shot.lighting.sun.irradiance);
+  }
+  *from_cache = !computed;
+  (computed ? result.views_rendered : result.views_cached) += 1;
+  return layers;
+}
+
+// DIR/bake.vdb: the density grid (analytic volumes voxelised at outputs.vdb_voxel_size).
+void writeDensityVdb(MethodRun& run) {
+  const ShotSpec& shot = run.shot();
+  auto write = [&](const std::string& path) {
+    const Scene& s = run.scene();
+    VdbWriteOptions vdb;
+    vdb.voxel_size = shot.outputs.vdb_voxel_size;
+    vdb.file_metadata = {{"cloudbake:shot", shot.name},
+                         {"cloudbake:method", shot.bake.method},
+                         {"cloudbake:volume", s.medium.density->describe()}};
+    writeVdb(path, *s.medium.density, vdb);
+  };
+  if (!run.hasCache()) {
+    run.writeOutput(kVdbFile, write);
+    return;
+  }
+  bool computed = false;
+  const std::string entry = run.cached(
+      run.keys().vdb,
+      [&](const std::string& staging) { write((fs::path(staging) / kVdbFile).string()); },
+      &computed);
+  run.result().vdb_cached = !computed;
+  run.copyOutput(kVdbFile, (fs::path(entry) / kVdbFile).string());
+}
+
+class PathtraceMethod final : public BakeMethod {
+ public:
+  PathtraceMethod() {
+    info_.name = "pathtrace";
+    info_.summary =
+        "the unbiased reference: volumetric path tracing with delta tracking and next-event "
+        "estimation (Novak et al. 2018)";
+    info_.citation =
+        "Novak, Georgiev, Hanika and Jarosz 2018, \"Monte Carlo methods for volumetric light "
+        "transport simulation\" (Eurographics STAR)";
+    info_.version = 1;
+    info_.default_samples = 64;
+    info_.knobs = {Knob::integer("max_depth", 1, 1000000, PathTracerOptions{}.max_depth,
+                                 "scattering events per path")};
+  }
+  const MethodInfo& info() const override { return info_; }
+
+  MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,
+                  const std::function<bool(const std::string&)>& lookup) const override {
+    MethodPlan plan;
+    if (shot.outputs.exr) {
+      for (size_t i = 0; i < shot.views.size(); ++i) {
+        const Camera& c = shot.views[i];
+        const bool cached = lookup(keys.views[i]);
+        plan.view_cached.push_back(cached);
+        if (cached) {
+          plan.components.push_back("view '" + c.name + "': from the cache");
+          continue;
+        }
+        plan.pixel_samples += double(c.width_px) * c.height_px * shot.bake.samples;
+        plan.components.push_back("view '" + c.name + "': path trace " +
+                                  std::to_string(c.width_px) + "x" + std::to_string(c.height_px) +
+                                  " at " + std::to_string(shot.bake.samples) + " spp");
+      }
+    }
+    if (shot.outputs.vdb) plan.components.push_back("bake.vdb: the density grid");
+    return plan;
+  }
+
+  void run(MethodRun& run) const override {
+    const ShotSpec& shot = run.shot();
+    const PathTracerOptions pt = pathTracerOptions(shot, run.threads());
+    const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
+    const double total = std::max(1, n_views + (shot.outputs.vdb ? 1 : 0));
+    for (int i = 0; i < n_views; ++i) {
+      const Camera& camera = shot.views[size_t(i)];
+      const std::string label = "view '" + camera.name + "' " + std::to_string(camera.width_px) +
+                                "x" + std::to_string(camera.height_px) + ", " +
+                                std::to_string(pt.samples_per_pixel) + " spp";
+      run.report("render", i / total, label, camera.name);
+      const auto t0 = std::chrono::steady_clock::now();
+      auto render = [&](const Sun& sun) {
+        const Scene& s = run.scene();
+        return renderPathTraced(s.medium, sun, s.sky, s.cameras[size_t(i)], pt,
+                                [&](double f) { return run.poll((i + f) / total, f); });
+      };
+      bool from_cache = false;
+      const std::vector<ExrLayer> layers = run.hasCache()
+                                               ? cachedView(run, i, render, &from_cache)
+                                               : renderLayersToExr(render(run.scene().sun));
+      if (!run.hasCache()) ++run.result().views_rendered;
+      run.writeView(camera.name, camera, layers,
+                    {{"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
+                     {"cloudbake:seed", std::to_string(pt.seed)}});
+      const RunResult& r = run.result();
+      const std::string how = !from_cache ? ": rendered in "
+                              : r.views_reused_direction > 0
+                                  ? ": from the cached bake of a sun direction " +
+                                        fixed(r.reused_angle_deg, 2) + " deg away, in "
+                                  : ": from cache in ";
+      run.poll((i + 1) / total, 1);
+      run.report("render", (i + 1) / total, label + how + fixed(secondsSince(t0), 2) + " s",
+                 camera.name);
+    }
+    if (shot.outputs.vdb) {
+      run.report("vdb", n_views / total, "writing bake.vdb");
+      writeDensityVdb(run);
+    }
+  }
+
+ private:
+  MethodInfo info_;
+};
+
+}  // namespace
+
+const BakeMethod& pathtraceMethod() {
+  static const PathtraceMethod kMethod;
+  return kMethod;
+}
+
+PathTracerOptions pathTracerOptions(const ShotSpec& shot, int threads) {
+  PathTracerOptions pt;
+  pt.samples_per_pixel = shot.bake.samples;
+  pt.seed = shot.bake.seed;
+  pt.max_depth = int(shot.bake.knobs.integer("max_depth"));
+  pt.threads = threads;
+  return pt;
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,374 @@
+#include "core/methods/precomputed.h"
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "core/animation/basic_volumes.h"
+#include "core/animation/precomputed_io.h"
+#include "core/bake/bake_lattice.h"
+#include "core/bake/baked_light_vdb.h"
+#include "core/bake/render_from_bake.h"
+#include "core/bake/sky_sh_scatter.h"
+#include "core/error.h"
+#include "core/format.h"
+#include "core/methods/common.h"
+#include "core/transport/layers_exr.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+std::vector<Knob> precomputedKnobs() {
+  const PrecomputedShotOptions d;
+  return {
+      stepKnob(),
+      lightResolutionKnob(d.light_resolution),
+      Knob::integer("sample_points", 1, int64_t(1) << 20, d.precompute.sample_points,
+                    "K: sample points of the multiple-scattering transfer, shared by every "
+                    "basic volume"),
+      Knob::integer("transfer_resolution", 4, 512, d.precompute.transfer_resolution,
+                    "receiver voxels (where multiple scattering is computed) along the longest "
+                    "side"),
+      Knob::number("cut_error", 0, 1, d.precompute.cuts.cut_error, "",
+                   "a cut is refined until each node's clustering error is below this fraction "
+                   "of the receiver's total"),
+      Knob::integer("iterations", 1, 1000, d.frame.max_orders,
+                    "multiple-scattering orders at most (Eq. 8)"),
+      Knob::number("tolerance", 0, 1, d.frame.tolerance, "",
+                   "stop when an order changes the result by less than this (relative)"),
+      Knob::integer("frames", 1, 1000000, std::nullopt,
+                    "output frames of endless animation: `DIR/<view>.<ffff>.exr` and "
+                    "`DIR/bake.<ffff>.vdb`")
+          .derivedDefault("the sequence's frame count (1 for a static volume)"),
+      Knob::number("sigma", 0, 1e6, d.walk.sigma, "",
+                   "`sequence` volumes only: the walk's temperature, relative to the mean "
+                   "distance between basic volumes (small: natural successors; large: any jump)"),
+      Knob::integer("dissolve", 0, 10000, std::nullopt,
+                    "`sequence` volumes only: H, frames of cross-dissolve per jump; at most the "
+                    "sequence's frames - 2")
+          .derivedDefault("min(8, frames - 2)"),
+      Knob::boolean("similarity", d.frame.similarity,
+                    "multiple scattering on the similarity-reduced medium with the forward-"
+                    "scattered beam and the P1 view model; false: plain isotropic multiple "
+                    "scattering as Iwasaki et al. wrote it"),
+  };
+}
+
+// The database's precompute: from the cache when it holds it, else built and committed.
+PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions& o) {
+  const ShotSpec& shot = run.shot();
+  auto build = [&]() {
+    const auto t0 = std::chrono::steady_clock::now();
+    run.report("bake", 0, "building " + std::to_string(o.basic_volumes) + " basic volume(s)");
+    BasicVolumeDatabase vols;
+    if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
+      vols = buildBasicVolumes(*seq, o.light_resolution, run.source(), [&](double f) {
+        return run.pollMessage(0.1 * f, "building basic volumes");
+      });
+    } else {
+      BakedLight lattice = makeBakeLattice(*run.scene().medium.density, o.light_resolution);
+      vols.grid = lattice.grid;
+      vols.frames.push_back(std::move(lattice.density));
+    }
+    PrecomputedDatabase db = precomputeBasicVolumes(
+        std::move(vols), run.lights().medium.extinction, o.precompute,
+        [&](double f) { return run.pollMessage(0.1 + 0.4 * f, "precomputing basic volumes"); });
+    size_t bytes = 0;
+    for (const BasicVolumePrecompute& b : db.basic) bytes += b.bytes();
+    run.report("bake", 0.5,
+               "precomputed " + std::to_string(db.basic.size()) + " basic volume(s) in " +
+                   fixed(secondsSince(t0), 2) + " s (" + std::to_string(db.tree.points.size()) +
+                   " sample points; " + fixed(double(bytes) / db.basic.size() / (1 << 20), 1) +
+                   " MiB per basic volume)");
+    return db;
+  };
+  RunResult& result = run.result();
+  if (!run.hasCache()) {
+    result.bakes_computed += 1;
+    return build();
+  }
+  PrecomputedDatabase db;
+  bool computed = false;
+  const std::string entry = run.cached(
+      run.keys().precompute,
+      [&](const std::string& staging) {
+        db = build();
+        writePrecomputedDatabase(staging, db);
+      },
+      &computed);
+  (computed ? result.bakes_computed : result.bakes_cached) += 1;
+  if (computed) return db;
+  try {
+    db = readPrecomputedDatabase(entry);
+  } catch (const InputError& e) {
+    // The cache verified the entry's checksums: unreadable data is our fault, not input.
+    throw InternalError(std::string("cached precompute unreadable: ") + e.what());
+  }
+  run.report(
+      "bake", 0.5,
+      "precompute of " + std::to_string(db.basic.size()) + " basic volume(s) from the cache");
+  return db;
+}
+
+// The walk over the database (a single basic volume repeats itself), and animation.json.
+std::vector<BlendFrame> walkDatabase(MethodRun& run, const PrecomputedDatabase& db,
+                                     const PrecomputedShotOptions& o) {
+  const int n = int(db.basic.size());
+  std::vector<BlendFrame> walk;
+  if (n == 1) {
+    walk.assign(size_t(o.frames), BlendFrame{0, 0, 1.0});
+  } else {
+    const std::vector<double> p =
+        transitionProbabilities(frameDistances(db.volumes.frames), n, o.walk);
+    walk = endlessWalk(p, n, o.frames, o.walk);
+  }
+  Json animation = {{"basic_volumes", n}, {"frames", Json::array()}};
+  for (const BlendFrame& f : walk) {
+    animation["frames"].push_back({{"a", f.a}, {"b", f.b}, {"w", f.w}});
+  }
+  run.writeOutput("animation.json", [&](const std::string& path) {
+    std::ofstream out(path);
+    out << animation.dump(1) << "\n";
+    out.close();  // flushed before its size and checksum are recorded
+    if (!out) throw InternalError(path + ": write failed");
+  });
+  return walk;
+}
+
+// Progress: the precompute weighs as much as all frames together.
+struct FrameProgress {
+  double units;
+  int per_frame;
+  double at(int frame, double unit) const { return 0.5 + 0.5 * (frame * per_frame + unit) / units; }
+};
+
+void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, int f,
+                 const FrameProgress& progress) {
+  const ShotSpec& shot = run.shot();
+  const Scene& lights = run.lights();
+  const BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
+  const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
+  for (int i = 0; i < n_views; ++i) {
+    const Camera& camera = lights.cameras[size_t(i)];
+    const auto t_view = std::chrono::steady_clock::now();
+    run.report("render", progress.at(f, 1 + i),
+               "frame " + std::to_string(f) + ", view '" + camera.name + "'", camera.name);
+    RenderLayers layers =
+        renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
+                       [&](double fr) { return run.poll(progress.at(f, 1 + i + fr), fr); });
+    run.writeView(frameStem(camera.name, f), camera, renderLayersToExr(std::move(layers)),
+                  {{"cloudbake:frame", std::to_string(f)},
+                   {"cloudbake:blend",
+                    std::to_string(bf.a) + " " + std::to_string(bf.b) + " " + std::to_string(bf.w)},
+                   {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
+                   {"cloudbake:seed", std::to_string(ro.seed)}});
+    ++run.result().views_from_bake;
+    run.report("render", progress.at(f, 2 + i),
+               "frame " + std::to_string(f) + ", view '" + camera.name + "' " +
+                   std::to_string(camera.width_px) + "x" + std::to_string(camera.height_px) +
+                   " rendered in " + fixed(secondsSince(t_view), 2) + " s",
+               camera.name);
+  }
+  if (shot.outputs.vdb) {
+    run.writeOutput(frameStem("bake", f) + ".vdb",
+                    [&](const std::string& path) { writeBakedLight(path, light); });
+  }
+}
+
+class PrecomputedMethod final : public BakeMethod {
+ public:
+  PrecomputedMethod() {
+    info_.name = "precomputed";
+    info_.summary =
+        "endless cloud animation from a database of basic volumes, each precomputed once "
+        "independent of the light (Iwasaki, Nishino and Dobashi 2011)";
+    info_.citation =
+        "Iwasaki, Nishino and Dobashi 2011, \"Real-time rendering of endless cloud animation\" "
+        "(Pacific Graphics, Computer Graphics Forum 30(7))";
+    info_.version = 1;
+    info_.default_samples = 1;
+    info_.bakes_light = true;
+    info_.animates = true;
+    info_.knobs = precomputedKnobs();
+  }
+  const MethodInfo& info() const override { return info_; }
+
+  void validate(const ShotSpec& shot, const std::string& source) const override;
+  nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override;
+  MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,
+                  const std::function<bool(const std::string&)>& lookup) const override;
+  void checkLimits(const ShotSpec& shot, const MethodLimits& limits,
+                   const std::string& source) const override;
+  void run(MethodRun& run) const override;
+
+ private:
+  MethodInfo info_;
+};
+
+// The walk's knobs need a database of basic volumes (a sequence), and the dissolve must fit in
+// it (Iwasaki et al.: a jump to l plays l .. l + H - 1).
+void PrecomputedMethod::validate(const ShotSpec& shot, const std::string& source) const {
+  const KnobValues& k = shot.bake.knobs;
+  const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
+  if (!seq) {
+    for (const char* key : {"sigma", "dissolve"}) {
+      if (!k.has(key)) continue;
+      throw InputError(source + ": /bake/" + key + ": applies to animated volumes only (a " +
+                       volumeTypeName(shot.volume) +
+                       " volume is one basic volume: every frame is the same)");
+    }
+    return;
+  }
+  const auto h = k.optionalInteger("dissolve");
+  const int64_t n = seq->frames;
+  if (h && *h > n - 2) {
+    throw InputError(source + ": /bake/dissolve: " + std::to_string(*h) +
+                     " frames of cross-dissolve do not fit a database of " + std::to_string(n) +
+                     " basic volumes (at most frames - 2 = " +
+                     std::to_string(std::max<int64_t>(0, n - 2)) + ")");
+  }
+}
+
+Json PrecomputedMethod::keyMaterial(const ShotSpec& shot, const Json& canonical) const {
+  // Not in it: sun, sky, albedo, phase, views, frames and the walk's knobs, so every lighting
+  // and every animation of the same database reuses the precompute.
+  const KnobValues& k = shot.bake.knobs;
+  return {{"precompute",
+           {{"extinction", canonical["medium"]["extinction"]},
+            {"seed", shot.bake.seed},
+            {"file_version", kPrecomputedFileVersion},
+            {"light_resolution", k.integer("light_resolution")},
+            {"sample_points", k.integer("sample_points")},
+            {"transfer_resolution", k.integer("transfer_resolution")},
+            {"cut_error", k.number("cut_error")}}}};
+}
+
+MethodPlan PrecomputedMethod::plan(const ShotSpec& shot, const ShotCacheKeys& keys,
+                                   const std::function<bool(const std::string&)>& lookup) const {
+  const PrecomputedShotOptions o = precomputedOptions(shot);
+  MethodPlan plan;
+  plan.bake_key = keys.precompute;
+  plan.bake_cached = lookup(keys.precompute);
+  if (plan.bake_cached) {
+    plan.components.push_back("precompute: already in the cache for this database (no precompute)");
+  } else {
+    plan.components.push_back("basic volumes: " + std::to_string(o.basic_volumes) + " (" +
+                              volumeTypeName(shot.volume) + "), each resampled to a " +
+                              std::to_string(o.light_resolution) + "-voxel lattice (longest side)");
+    plan.components.push_back(
+        "precompute per basic volume: optical-depth SH (64 direction sweeps), " +
+        std::to_string(o.precompute.sample_points) + " sample points, cuts on a " +
+        std::to_string(o.precompute.transfer_resolution) + "-voxel receiver lattice (cut error " +
+        shortNumber(o.precompute.cuts.cut_error) + ")");
+  }
+  plan.components.push_back("frames: " + std::to_string(o.frames) +
+                            " of endless animation (sigma " + shortNumber(o.walk.sigma) +
+                            ", cross-dissolve over " + std::to_string(o.walk.dissolve_frames) +
+                            " frames), each lit by a sun sweep, SHEXP sky and up to " +
+                            std::to_string(o.frame.max_orders) + " multiple-scattering orders");
+  if (shot.outputs.exr) {
+    for (const Camera& c : shot.views) {
+      plan.view_cached.push_back(plan.bake_cached);
+      plan.pixel_samples += double(c.width_px) * c.height_px * shot.bake.samples * o.frames;
+      plan.components.push_back("view '" + c.name + "': ray march from each frame's light, " +
+                                std::to_string(o.frames) + " frame(s), " +
+                                std::to_string(c.width_px) + "x" + std::to_string(c.height_px) +
+                                ", " + std::to_string(shot.bake.samples) + " ray(s) per pixel");
+    }
+  }
+  if (shot.outputs.vdb) plan.components.push_back("bake.<frame>.vdb: each frame's light lattice");
+  return plan;
+}
+
+void PrecomputedMethod::checkLimits(const ShotSpec& shot, const MethodLimits& limits,
+                                    const std::string& source) const {
+  const PrecomputedShotOptions o = precomputedOptions(shot);
+  // The database in memory: every basic volume's lattice, each voxel holding its density and
+  // 16 optical-depth SH coefficients, so it counts 17 times (the cuts are on the much coarser
+  // receiver lattice).
+  checkLatticeVoxels(
+      o.light_resolution, 17.0 * o.basic_volumes,
+      "a database of " + std::to_string(o.basic_volumes) + " basic volume(s), 17 floats per voxel,",
+      limits, source);
+  if (limits.max_points > 0 && o.precompute.sample_points > limits.max_points) {
+    throw InputError(source +
+                     ": /bake/sample_points: " + std::to_string(o.precompute.sample_points) +
+                     " points exceed this server's limit of " + std::to_string(limits.max_points) +
+                     " (--max-points)");
+  }
+  if (limits.max_frames > 0 && o.frames > limits.max_frames) {
+    throw InputError(source + ": /bake/frames: " + std::to_string(o.frames) +
+                     " output frames exceed this server's limit of " +
+                     std::to_string(limits.max_frames) + " (--max-frames)");
+  }
+}
+
+void PrecomputedMethod::run(MethodRun& run) const {
+  const ShotSpec& shot = run.shot();
+  const PrecomputedShotOptions o = precomputedOptions(shot);
+  const PrecomputedDatabase db = obtainDatabase(run, o);
+  const std::vector<BlendFrame> walk = walkDatabase(run, db, o);
+
+  const Scene& lights = run.lights();
+  const std::array<ShCoefficients, 3> sky_sh =
+      needsSky(shot) ? projectSkyRadiance(SkyLight(lights.sky)) : std::array<ShCoefficients, 3>{};
+  FrameLightOptions frame_options = o.frame;
+  frame_options.mean_cosine = lights.medium.phase->meanCosine();
+  const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
+  const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
+  const FrameProgress progress{double(o.frames) * per_frame, per_frame};
+  for (int f = 0; f < o.frames; ++f) {
+    const BlendFrame& bf = walk[size_t(f)];
+    const auto t0 = std::chrono::steady_clock::now();
+    FrameLightStats stats;
+    const BakedLight light = lightAnimationFrame(db, bf, sunDirection(shot), lights.medium.albedo,
+                                                 sky_sh, frame_options, &stats);
+    run.report("render", progress.at(f, 0),
+               "frame " + std::to_string(f) + " (basic volumes " + std::to_string(bf.a) + ", " +
+                   std::to_string(bf.b) + ", w " + fixed(bf.w, 3) + "): lit in " +
+                   fixed(stats.seconds, 2) + " s, " + std::to_string(stats.orders) + " orders");
+    renderFrame(run, light, bf, f, progress);
+    run.report("render", progress.at(f + 1, 0),
+               "frame " + std::to_string(f) + " done in " + fixed(secondsSince(t0), 2) + " s");
+  }
+}
+
+}  // namespace
+
+const BakeMethod& precomputedMethod() {
+  static const PrecomputedMethod kMethod;
+  return kMethod;
+}
+
+PrecomputedShotOptions precomputedOptions(const ShotSpec& shot) {
+  const KnobValues& k = shot.bake.knobs;
+  PrecomputedShotOptions o;
+  o.light_resolution = int(k.integer("light_resolution"));
+  o.precompute.sample_points = int(k.integer("sample_points"));
+  o.precompute.transfer_resolution = int(k.integer("transfer_resolution"));
+  o.precompute.cuts.cut_error = k.number("cut_error");
+  o.precompute.seed = shot.bake.seed;
+  o.frame.max_orders = int(k.integer("iterations"));
+  o.frame.tolerance = k.number("tolerance");
+  o.frame.similarity = k.boolean("similarity");
+  const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
+  o.basic_volumes = seq ? seq->frames : 1;
+  o.walk.sigma = k.number("sigma");
+  o.walk.dissolve_frames =
+      int(k.optionalInteger("dissolve")
+              .value_or(std::max(0, std::min(o.walk.dissolve_frames, o.basic_volumes - 2))));
+  o.walk.seed = shot.bake.seed;
+  o.frames = int(k.optionalInteger("frames").value_or(o.basic_volumes));
+  return o;
+}
+
+std::string frameStem(const std::string& stem, int frame) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, ".%04d", frame);
+  return stem + buf;
+}
+
+}  // namespace cloudbake

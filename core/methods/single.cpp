@@ -1,0 +1,72 @@
+#include "core/methods/single.h"
+
+#include "core/methods/common.h"
+
+namespace cloudbake {
+namespace {
+
+class SingleMethod final : public BakeMethod {
+ public:
+  SingleMethod() {
+    info_.name = "single";
+    info_.summary =
+        "single scattering from a transmittance-to-sun lattice and sky visibility; no multiple "
+        "scattering (after the 'Volumetric Clouds' ray marcher, 2009-2010)";
+    info_.citation = "'Volumetric Clouds', a voxel ray-marching cloud renderer (2009-2010)";
+    info_.version = 1;
+    info_.default_samples = 1;
+    info_.bakes_light = true;
+    info_.knobs = {stepKnob(), lightResolutionKnob(SingleBakeOptions{}.light_resolution)};
+  }
+  const MethodInfo& info() const override { return info_; }
+
+  nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {
+    // Albedo and phase are applied when a view is rendered, so only extinction is baked.
+    return {{"light",
+             {{"extinction", canonical["medium"]["extinction"]},
+              {"sky", needsSky(shot)},
+              {"knobs", bakeKnobMaterial(*this, shot)}}}};
+  }
+
+  MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,
+                  const std::function<bool(const std::string&)>& lookup) const override {
+    const SingleBakeOptions o = singleBakeOptions(shot);
+    std::vector<std::string> lines = lightBakePlanLines(shot, o.light_resolution);
+    lines.push_back("multiple scattering: not modelled by method single");
+    return lightBakePlan(shot, keys, lookup, std::move(lines));
+  }
+
+  void checkLimits(const ShotSpec& shot, const MethodLimits& limits,
+                   const std::string& source) const override {
+    checkLatticeVoxels(singleBakeOptions(shot).light_resolution, 1, "a bake lattice", limits,
+                       source);
+  }
+
+  void run(MethodRun& run) const override {
+    const SingleBakeOptions o = singleBakeOptions(run.shot());
+    runLightBake(run, [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {
+      return bakeSingle(medium, sun, o, progress);
+    });
+  }
+
+ private:
+  MethodInfo info_;
+};
+
+}  // namespace
+
+const BakeMethod& singleMethod() {
+  static const SingleMethod kMethod;
+  return kMethod;
+}
+
+SingleBakeOptions singleBakeOptions(const ShotSpec& shot) {
+  const KnobValues& k = shot.bake.knobs;
+  SingleBakeOptions o;
+  o.light_resolution = int(k.integer("light_resolution"));
+  o.step = k.optionalNumber("step").value_or(0.0);
+  o.sky = needsSky(shot);
+  return o;
+}
+
+}  // namespace cloudbake

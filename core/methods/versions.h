@@ -1,0 +1,28 @@
+// Algorithm versions of the pieces every method's output depends on. Each is part of the cache
+// key of everything computed with it, beside the method's own version (MethodInfo::version), so
+// a server with an old --cache-dir never serves results of older code. Bump the number when the
+// piece's output changes (not for a pure speed-up); the golden tests (tests/core/methods) fail
+// with the name of the version to bump.
+#pragma once
+
+#include <string>
+
+namespace cloudbake {
+
+/// core/volume, core/shot/scene_builder: loading, voxelising and resampling the density.
+constexpr int kVolumeVersion = 1;
+/// core/phase: phase functions, the Lorenz-Mie solution and its tables.
+constexpr int kPhaseVersion = 1;
+/// core/transport: tracking, sky, camera and the path tracer's estimators.
+constexpr int kTransportVersion = 1;
+/// core/bake/render_from_bake: views ray-marched from a baked-light lattice.
+constexpr int kRenderFromBakeVersion = 1;
+
+/// "volume/1 phase/1 transport/1 render_from_bake/1": the shared part of every method's salt.
+inline std::string sharedVersionSalt() {
+  return "volume/" + std::to_string(kVolumeVersion) + " phase/" + std::to_string(kPhaseVersion) +
+         " transport/" + std::to_string(kTransportVersion) + " render_from_bake/" +
+         std::to_string(kRenderFromBakeVersion);
+}
+
+}  // namespace cloudbake
