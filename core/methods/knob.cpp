@@ -155,14 +155,14 @@ std::string knobValueText(const KnobValue& value) {
 namespace {
 
 // Powers of two read better as 2^n in docs ("integer 64..2^24").
-std::string boundText(double v) {
+std::string boundText(double v, bool integer) {
   const int64_t i = int64_t(v);
-  if (i >= 1024 && (i & (i - 1)) == 0) {
+  if (integer && i >= 1024 && (i & (i - 1)) == 0) {
     int n = 0;
     while ((int64_t(1) << n) < i) ++n;
     return "2^" + std::to_string(n);
   }
-  return knobValueText(KnobValue(v));
+  return integer ? std::to_string(i) : knobValueText(KnobValue(v));
 }
 
 }  // namespace
@@ -170,10 +170,10 @@ std::string boundText(double v) {
 std::string knobTypeDoc(const Knob& k) {
   switch (k.type) {
     case Knob::Type::kInteger:
-      return "integer " + boundText(k.min) + ".." + boundText(k.max);
+      return "integer " + boundText(k.min, true) + ".." + boundText(k.max, true);
     case Knob::Type::kNumber:
-      return std::string("number ") + (k.exclusive_min ? "(" : "[") + boundText(k.min) + ", " +
-             boundText(k.max) + "]";
+      return std::string("number ") + (k.exclusive_min ? "(" : "[") + boundText(k.min, false) +
+             ", " + boundText(k.max, false) + "]";
     case Knob::Type::kBoolean:
       return "boolean";
     case Knob::Type::kChoice: {

@@ -1,0 +1,140 @@
+// Golden outputs: one tiny scene per method whose output statistics are pinned together with the
+// method's algorithm version. A change of a method's output without a version bump fails here
+// (a server with an old cache would serve old physics otherwise); a version bump without new
+// golden values fails too, so the two always move together. Re-pin with
+//   CLOUDBAKE_GOLDEN_PRINT=1 build/tests/core/methods/test_methods --gtest_filter='Golden*'
+// and paste the printed table below.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/io/exr_io.h"
+#include "core/job/file_util.h"
+#include "core/job/run_shot.h"
+#include "core/methods/registry.h"
+#include "core/methods/versions.h"
+#include "core/shot/shot_parser.h"
+#include "core/transport/layers_exr.h"
+
+namespace cloudbake {
+namespace {
+namespace fs = std::filesystem;
+
+// A sphere of HG 0.6 droplets lit by a low sun and a blue sky, seen from the side: every layer
+// of every method is non-zero.
+std::string goldenShot(const std::string& method, const std::string& knobs) {
+  return R"({"version": 1, "name": "golden",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": 3, "albedo": 0.95, "phase": {"type": "hg", "g": 0.6}},
+    "lighting": {"sun": {"direction": [0.6, -0.3, 0.74], "irradiance": [1, 0.9, 0.8]},
+                 "sky": {"radiance": [0.05, 0.08, 0.12]}},
+    "bake": {"method": ")" +
+         method + "\"" + knobs + R"(},
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [16, 16]}]})";
+}
+
+struct Golden {
+  std::string method;
+  std::string knobs;  // JSON text after "method"
+  int version;        // the method's version these values were pinned for
+  std::map<std::string, double> mean;  // per layer: mean of R, G, B over the image
+  double pixel;                        // beauty R at the centre pixel
+};
+
+// The pinned values (see the file comment for how to re-pin).
+const std::vector<Golden>& goldens() {
+  static const std::vector<Golden> kGoldens = {
+      // clang-format off
+      {"pathtrace", R"(, "samples": 8)", 1, {{"", 0.0971769475}, {"sun", 0.0207383485}, {"sky", 0.032859498}, {"single", 0.0105093584}, {"multiple", 0.0430884881}}, 0.0622248575},
+      {"single", R"(, "light_resolution": 16)", 1, {{"", 0.0591909592}, {"sun", 0.0039750965}, {"sky", 0.0144031829}, {"single", 0.0183782794}, {"multiple", 0}}, 0.0186665133},
+      {"pointcloud", R"(, "light_resolution": 16, "points": 1024, "passes": 4)", 1, {{"", 0.102484727}, {"sun", 0.0236484939}, {"sky", 0.0380235529}, {"single", 0.0183782794}, {"multiple", 0.0432937674}}, 0.103030957},
+      {"precomputed", R"(, "light_resolution": 12, "sample_points": 128, "transfer_resolution": 6)", 1, {{"", 0.0887632712}, {"sun", 0.0185708487}, {"sky", 0.0307302171}, {"single", 0.0150460941}, {"multiple", 0.0342549718}}, 0.0777927935},
+      // clang-format on
+  };
+  return kGoldens;
+}
+
+struct Measured {
+  std::map<std::string, double> mean;
+  double pixel = 0;
+};
+
+Measured measure(const Golden& g) {
+  const fs::path dir = fs::temp_directory_path() / ("cloudbake-golden-" + uniqueSuffix());
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  opt.threads = 2;
+  const RunResult r = runShot(parseShot(goldenShot(g.method, g.knobs), ""), opt);
+  std::string exr;
+  for (const OutputFile& f : r.files) {
+    if (f.name.size() > 4 && f.name.substr(f.name.size() - 4) == ".exr") exr = f.path;
+  }
+  Measured m;
+  for (const ExrLayer& layer : readRenderLayersExr(exr)) {
+    const Image& im = layer.image;
+    double sum = 0;
+    for (int64_t p = 0; p < int64_t(im.width) * im.height; ++p) {
+      for (int c = 0; c < 3; ++c) sum += im.data[size_t(p * im.channels + c)];
+    }
+    m.mean[layer.name] = sum / (3.0 * im.width * im.height);
+    if (layer.name.empty()) {
+      m.pixel = im.data[size_t((im.height / 2 * im.width + im.width / 2) * im.channels)];
+    }
+  }
+  fs::remove_all(dir);
+  return m;
+}
+
+std::string versionFile(const std::string& method) {
+  return "core/methods/" + method + ".cpp (MethodInfo::version), or a shared version in "
+         "core/methods/versions.h (now " + sharedVersionSalt() + ")";
+}
+
+TEST(Golden, EveryRunnableMethodHasGoldenValues) {
+  for (const std::string& name : methodNames(/*runnable_only=*/true)) {
+    bool found = false;
+    for (const Golden& g : goldens()) found = found || g.method == name;
+    EXPECT_TRUE(found) << "method '" << name << "' has no golden scene in " << __FILE__;
+  }
+}
+
+TEST(Golden, OutputsMatchThePinnedValuesOfTheirVersion) {
+  const bool print = std::getenv("CLOUDBAKE_GOLDEN_PRINT") != nullptr;
+  for (const Golden& g : goldens()) {
+    SCOPED_TRACE(g.method);
+    const int version = findMethod(g.method)->info().version;
+    const Measured m = measure(g);
+    if (print) {
+      std::printf("      {\"%s\", R\"(%s)\", %d, {", g.method.c_str(), g.knobs.c_str(), version);
+      for (const char* l : {"", "sun", "sky", "single", "multiple"}) {
+        std::printf("{\"%s\", %.9g}%s", l, m.mean.at(l), std::string(l) == "multiple" ? "" : ", ");
+      }
+      std::printf("}, %.9g},\n", m.pixel);
+      continue;
+    }
+    ASSERT_EQ(version, g.version)
+        << "method '" << g.method << "' is now version " << version << " but its golden values "
+        << "were pinned for version " << g.version << ": re-pin them (see " << __FILE__ << ")";
+    // Deterministic code: only floating-point reassociation may move the numbers.
+    auto close = [](double a, double b) { return std::abs(a - b) <= 1e-4 * std::abs(b) + 1e-7; };
+    for (const auto& [layer, pinned] : g.mean) {
+      EXPECT_TRUE(close(m.mean.at(layer), pinned))
+          << "method '" << g.method << "' layer '" << layer << "' mean " << m.mean.at(layer)
+          << ", pinned " << pinned << ". Its output changed: bump its algorithm version in "
+          << versionFile(g.method) << ", then re-pin (see " << __FILE__ << ")";
+    }
+    EXPECT_TRUE(close(m.pixel, g.pixel))
+        << "method '" << g.method << "' centre pixel " << m.pixel << ", pinned " << g.pixel
+        << ". Its output changed: bump its algorithm version in " << versionFile(g.method);
+  }
+}
+
+}  // namespace
+}  // namespace cloudbake
