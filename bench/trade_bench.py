@@ -28,6 +28,8 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "client", "python"))
+from cloudbake_shot_paths import path_slots  # noqa: E402  (the keys of a shot that name files)
 
 
 def methods(quick):
@@ -48,13 +50,13 @@ def methods(quick):
 
 
 def absolutise(shot, folder):
-    """Relative asset paths resolve against the scene file's folder (as the parser does)."""
-    for kind in ("vdb", "mesh"):
-        spec = shot["volume"].get(kind)
-        if spec and not os.path.isabs(spec["path"]):
-            spec["path"] = os.path.normpath(os.path.join(folder, spec["path"]))
-            if not os.path.exists(spec["path"]):
-                return spec["path"]
+    """Relative asset paths resolve against the scene file's folder (as the parser does);
+    returns the first that does not exist, or None."""
+    for container, key in path_slots(shot):
+        if not os.path.isabs(container[key]):
+            container[key] = os.path.normpath(os.path.join(folder, container[key]))
+            if not os.path.exists(container[key]):
+                return container[key]
     return None
 
 

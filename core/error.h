@@ -1,4 +1,6 @@
-// Error types thrown by core/ (never exit/abort in library code).
+// Error types thrown by core/ (never exit/abort in library code). Each stands for one kind of
+// failure that the programs report in one way (common/exit_codes.h: exit codes of cloudbake and
+// cloudctl; server/status_mapping.cpp: gRPC statuses).
 #pragma once
 
 #include <stdexcept>
@@ -14,6 +16,13 @@ class InputError : public std::runtime_error {
   explicit InputError(const std::string& what) : std::runtime_error(what) {}
 };
 
+/// A file named by the shot (or the shot file itself) does not exist. An InputError, so callers
+/// that only care about "bad input" need not distinguish; the CLI maps it to exit code 3.
+class MissingFileError : public InputError {
+ public:
+  explicit MissingFileError(const std::string& what) : InputError(what) {}
+};
+
 /// Work stopped because the caller asked (cooperative cancellation from a progress callback).
 class Cancelled : public std::runtime_error {
  public:
@@ -26,6 +35,26 @@ class Cancelled : public std::runtime_error {
 class InternalError : public std::runtime_error {
  public:
   explicit InternalError(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// A job id or an asset hash that does not exist (gRPC NOT_FOUND, exit code 3).
+class NotFoundError : public std::runtime_error {
+ public:
+  explicit NotFoundError(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// The queue or another bounded resource is full; retry later (gRPC RESOURCE_EXHAUSTED, exit
+/// code 4).
+class ResourceExhaustedError : public std::runtime_error {
+ public:
+  explicit ResourceExhaustedError(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// The request is valid but the job is not in a state that allows it, e.g. fetching the result
+/// of a job that has not succeeded (gRPC FAILED_PRECONDITION, exit code 5).
+class FailedPreconditionError : public std::runtime_error {
+ public:
+  explicit FailedPreconditionError(const std::string& what) : std::runtime_error(what) {}
 };
 
 }  // namespace cloudbake

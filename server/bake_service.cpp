@@ -8,7 +8,6 @@
 #include <vector>
 
 #include "core/error.h"
-#include "core/job/job_errors.h"
 #include "core/methods/registry.h"
 #include "server/convert.h"
 #include "server/status_mapping.h"

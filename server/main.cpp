@@ -13,9 +13,8 @@
 #include <string_view>
 #include <thread>
 
-#include "core/error.h"
+#include "common/exit_codes.h"
 #include "server/bake_service.h"
-#include "tools/cloudbake/commands.h"
 
 namespace {
 
@@ -63,19 +62,22 @@ std::string defaultStateDir() {
   return std::string(home && *home ? home : "/tmp") + "/.local/state/cloudbake";
 }
 
-}  // namespace
+struct ServerFlags {
+  ServerFlags() { jobs.state_dir = defaultStateDir(); }
 
-int main(int argc, char** argv) {
-  CLI::App app{"cloudbake-server: cloud-lighting bake service (gRPC)"};
   std::string listen = "127.0.0.1:50051";
   std::string log_level = "info";
   bool log_json = false;
-  cloudbake::JobManagerOptions o;
-  o.state_dir = defaultStateDir();
-  uint64_t max_image_pixels = uint64_t(o.limits.max_image_pixels);
-  uint64_t max_samples = uint64_t(o.limits.max_samples);
-  unsigned max_views = unsigned(o.limits.max_views);
-  app.add_option("--listen", listen, "HOST:PORT to listen on (port 0: any free port)")
+  cloudbake::JobManagerOptions jobs;
+  // Flag types that CLI11 range-checks; applyLimitFlags copies them into jobs.limits.
+  uint64_t max_image_pixels = uint64_t(jobs.limits.max_image_pixels);
+  uint64_t max_samples = uint64_t(jobs.limits.max_samples);
+  unsigned max_views = unsigned(jobs.limits.max_views);
+};
+
+void addServiceOptions(CLI::App& app, ServerFlags* f) {
+  cloudbake::JobManagerOptions& o = f->jobs;
+  app.add_option("--listen", f->listen, "HOST:PORT to listen on (port 0: any free port)")
       ->envname("CLOUDBAKE_LISTEN")
       ->capture_default_str();
   app.add_option("--cache-dir", o.state_dir,
@@ -104,75 +106,74 @@ int main(int argc, char** argv) {
       ->envname("CLOUDBAKE_MAX_UPLOAD_BYTES")
       ->transform(CLI::AsSizeValue(false))
       ->capture_default_str();
-  app.add_option("--max-image-pixels", max_image_pixels, "largest view (width x height)")
+}
+
+void addLimitOptions(CLI::App& app, ServerFlags* f) {
+  cloudbake::JobLimits& limits = f->jobs.limits;
+  app.add_option("--max-image-pixels", f->max_image_pixels, "largest view (width x height)")
       ->envname("CLOUDBAKE_MAX_IMAGE_PIXELS")
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 26))
       ->capture_default_str();
-  app.add_option("--max-views", max_views, "most views per shot")
+  app.add_option("--max-views", f->max_views, "most views per shot")
       ->envname("CLOUDBAKE_MAX_VIEWS")
       ->check(CLI::Range(1u, 256u))
       ->capture_default_str();
-  app.add_option("--max-samples", max_samples, "most samples per pixel")
+  app.add_option("--max-samples", f->max_samples, "most samples per pixel")
       ->envname("CLOUDBAKE_MAX_SAMPLES")
       ->check(CLI::Range(uint64_t(1), uint64_t(1000000)))
       ->capture_default_str();
-  app.add_option("--max-voxels", o.limits.max_voxels,
+  app.add_option("--max-voxels", limits.max_voxels,
                  "most voxels of a shot's volume (mesh resolution^3 or box, procedural grid, VDB "
                  "active voxels, bake.vdb grid of a box or sphere; 0: no limit)")
       ->envname("CLOUDBAKE_MAX_VOXELS")
       ->check(CLI::Range(uint64_t(0), uint64_t(1) << 40))
       ->capture_default_str();
-  app.add_option("--max-frames", o.limits.max_frames,
+  app.add_option("--max-frames", limits.max_frames,
                  "most frames of an animated volume (volume.sequence; 0: no limit)")
       ->envname("CLOUDBAKE_MAX_FRAMES")
       ->check(CLI::Range(int64_t(0), int64_t(100000)))
       ->capture_default_str();
-  app.add_option("--max-points", o.limits.max_points,
+  app.add_option("--max-points", limits.max_points,
                  "most points of a point-based bake (bake.points of pointcloud, bake.sample_points "
                  "of precomputed; 0: no limit)")
       ->envname("CLOUDBAKE_MAX_POINTS")
       ->check(CLI::Range(int64_t(0), int64_t(1) << 32))
       ->capture_default_str();
-  app.add_option("--log-level", log_level, "trace|debug|info|warn|error")
+}
+
+void addLogOptions(CLI::App& app, ServerFlags* f) {
+  app.add_option("--log-level", f->log_level, "trace|debug|info|warn|error")
       ->envname("CLOUDBAKE_LOG_LEVEL")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
       ->capture_default_str();
-  app.add_flag("--log-json", log_json, "log one JSON object per line")
+  app.add_flag("--log-json", f->log_json, "log one JSON object per line")
       ->envname("CLOUDBAKE_LOG_JSON");
-  app.set_version_flag("--version", std::string("cloudbake-server ") + CLOUDBAKE_VERSION);
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    const int code = app.exit(e);
-    return code == 0 ? 0 : cloudbake::tool::kBadInput;
-  }
-  o.limits.max_image_pixels = int64_t(max_image_pixels);
-  o.limits.max_samples = int64_t(max_samples);
-  o.limits.max_views = int(max_views);
+}
 
+void applyLimitFlags(ServerFlags* f) {
+  f->jobs.limits.max_image_pixels = int64_t(f->max_image_pixels);
+  f->jobs.limits.max_samples = int64_t(f->max_samples);
+  f->jobs.limits.max_views = int(f->max_views);
+}
+
+void setUpLogging(const ServerFlags& f) {
   // Logs go to stderr; stdout stays free for tools that wrap the server.
   spdlog::set_default_logger(spdlog::stderr_color_mt("cloudbake-server"));
-  spdlog::set_level(spdlog::level::from_str(log_level));
-  if (log_json) {
+  spdlog::set_level(spdlog::level::from_str(f.log_level));
+  if (f.log_json) {
     auto formatter = std::make_unique<spdlog::pattern_formatter>(spdlog::pattern_time_type::utc);
     formatter->add_flag<JsonMessageFlag>('*').set_pattern(
         R"({"time":"%Y-%m-%dT%H:%M:%S.%fZ","level":"%l","thread":%t,"message":"%*"})");
     spdlog::set_formatter(std::move(formatter));
   }
+}
 
-  std::unique_ptr<cloudbake::JobManager> jobs;
-  try {
-    jobs = std::make_unique<cloudbake::JobManager>(o);
-  } catch (const std::exception& e) {
-    spdlog::error("cannot open state folder {}: {}", o.state_dir, e.what());
-    return cloudbake::tool::kFailure;
-  }
-
+/// Null, or *bound_port 0, when `listen` cannot be bound.
+std::unique_ptr<grpc::Server> startServer(const std::string& listen, grpc::Service* service,
+                                          int* bound_port) {
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  cloudbake::server::BakeServiceImpl service(*jobs);
   grpc::ServerBuilder builder;
-  int bound_port = 0;
   // Without this gRPC sets SO_REUSEPORT and a second server on the same port starts silently,
   // sharing connections with the first.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
@@ -181,18 +182,33 @@ int main(int argc, char** argv) {
   // tens of MiB, docs/api.md "Large files"), and 4 MiB still fills a 100 ms link at 40 MB/s.
   builder.AddChannelArgument(GRPC_ARG_HTTP2_BDP_PROBE, 0);
   builder.AddChannelArgument(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 4 << 20);
-  builder.AddListeningPort(listen, grpc::InsecureServerCredentials(), &bound_port);
-  builder.RegisterService(&service);
-  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
+  builder.AddListeningPort(listen, grpc::InsecureServerCredentials(), bound_port);
+  builder.RegisterService(service);
+  return builder.BuildAndStart();
+}
+
+/// Opens the state folder, serves until SIGINT/SIGTERM; returns the exit code.
+int serve(const ServerFlags& f) {
+  const cloudbake::JobManagerOptions& o = f.jobs;
+  std::unique_ptr<cloudbake::JobManager> jobs;
+  try {
+    jobs = std::make_unique<cloudbake::JobManager>(o);
+  } catch (const std::exception& e) {
+    spdlog::error("cannot open state folder {}: {}", o.state_dir, e.what());
+    return cloudbake::kFailure;
+  }
+  cloudbake::server::BakeServiceImpl service(*jobs);
+  int bound_port = 0;
+  std::unique_ptr<grpc::Server> server = startServer(f.listen, &service, &bound_port);
   if (!server || bound_port == 0) {
-    spdlog::error("cannot listen on {}", listen);
-    return cloudbake::tool::kUnavailable;
+    spdlog::error("cannot listen on {}", f.listen);
+    return cloudbake::kUnavailable;
   }
   g_server = server.get();
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   // Report the bound port (useful with port 0, which lets the OS pick one).
-  const std::string host = listen.substr(0, listen.rfind(':'));
+  const std::string host = f.listen.substr(0, f.listen.rfind(':'));
   spdlog::info(
       "cloudbake-server {} listening on {}:{} (state {}, {} runner(s), queue bound {}, max "
       "voxels {}, max frames {})",
@@ -202,5 +218,24 @@ int main(int argc, char** argv) {
   // Streams (WatchJob) end when the job manager stops: stop it before the server is destroyed.
   jobs.reset();
   spdlog::info("cloudbake-server stopped");
-  return 0;
+  return cloudbake::kOk;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"cloudbake-server: cloud-lighting bake service (gRPC)"};
+  ServerFlags flags;
+  addServiceOptions(app, &flags);
+  addLimitOptions(app, &flags);
+  addLogOptions(app, &flags);
+  app.set_version_flag("--version", std::string("cloudbake-server ") + CLOUDBAKE_VERSION);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? cloudbake::kOk : cloudbake::kBadInput;
+  }
+  applyLimitFlags(&flags);
+  setUpLogging(flags);
+  return serve(flags);
 }

@@ -2,9 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
-#include "core/error.h"
-#include "core/job/job_errors.h"
-#include "core/shot/shot_parser.h"
+#include "common/exit_codes.h"
+#include "common/grpc_status.h"
 
 namespace cloudbake::server {
 namespace {
@@ -15,34 +14,48 @@ std::string clip(const std::string& message) {
   return message.size() <= kMax ? message : message.substr(0, kMax) + "...";
 }
 
+// The names clients see, for log lines an operator can grep next to client reports.
+const char* codeName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::INVALID_ARGUMENT:
+      return "INVALID_ARGUMENT";
+    case grpc::StatusCode::NOT_FOUND:
+      return "NOT_FOUND";
+    case grpc::StatusCode::UNAVAILABLE:
+      return "UNAVAILABLE";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION:
+      return "FAILED_PRECONDITION";
+    default:
+      return "ERROR";
+  }
+}
+
 }  // namespace
 
 grpc::Status statusFromException(std::exception_ptr error, const char* rpc) {
-  try {
-    std::rethrow_exception(error);
-  } catch (const MissingFileError& e) {
-    spdlog::info("{}: NOT_FOUND: {}", rpc, e.what());
-    return {grpc::StatusCode::NOT_FOUND, clip(e.what())};
-  } catch (const InputError& e) {
-    spdlog::info("{}: INVALID_ARGUMENT: {}", rpc, e.what());
-    return {grpc::StatusCode::INVALID_ARGUMENT, clip(e.what())};
-  } catch (const NotFoundError& e) {
-    spdlog::info("{}: NOT_FOUND: {}", rpc, e.what());
-    return {grpc::StatusCode::NOT_FOUND, clip(e.what())};
-  } catch (const ResourceExhaustedError& e) {
-    spdlog::warn("{}: RESOURCE_EXHAUSTED: {}", rpc, e.what());
-    return {grpc::StatusCode::RESOURCE_EXHAUSTED, clip(e.what())};
-  } catch (const FailedPreconditionError& e) {
-    spdlog::info("{}: FAILED_PRECONDITION: {}", rpc, e.what());
-    return {grpc::StatusCode::FAILED_PRECONDITION, clip(e.what())};
-  } catch (const Cancelled& e) {
-    return {grpc::StatusCode::CANCELLED, clip(e.what())};
-  } catch (const std::exception& e) {
-    spdlog::error("{}: internal error: {}", rpc, e.what());
-  } catch (...) {
-    spdlog::error("{}: internal error: unknown exception", rpc);
+  const ClassifiedError e = classifyException(error);
+  const grpc::StatusCode code = statusCodeFor(e.kind);
+  switch (e.kind) {
+    case ErrorKind::kCancelled:
+      break;  // the client asked for it
+    case ErrorKind::kResourceExhausted:
+      // A warning: the server is too small for its load.
+      spdlog::warn("{}: {}: {}", rpc, codeName(code), e.message);
+      break;
+    case ErrorKind::kBadInput:
+    case ErrorKind::kNotFound:
+    case ErrorKind::kUnavailable:
+    case ErrorKind::kFailedPrecondition:
+      spdlog::info("{}: {}: {}", rpc, codeName(code), e.message);
+      break;
+    case ErrorKind::kInternal:
+      // The details may name server-side paths and state: they stay in the log.
+      spdlog::error("{}: internal error: {}", rpc, e.message);
+      return {grpc::StatusCode::INTERNAL, "internal server error (details in the server log)"};
   }
-  return {grpc::StatusCode::INTERNAL, "internal server error (details in the server log)"};
+  return {code, clip(e.message)};
 }
 
 }  // namespace cloudbake::server

@@ -8,11 +8,12 @@
 
 namespace cloudbake::server {
 
-/// Maps the exception being handled to a status: InputError -> INVALID_ARGUMENT (its message,
+/// Maps the exception being handled to a status through the classification the exit codes share
+/// (common/exit_codes.h, common/grpc_status.h): InputError -> INVALID_ARGUMENT (its message,
 /// which names the field), MissingFileError/NotFoundError -> NOT_FOUND,
 /// ResourceExhaustedError -> RESOURCE_EXHAUSTED, FailedPreconditionError ->
-/// FAILED_PRECONDITION, Cancelled -> CANCELLED; anything else -> INTERNAL with a generic message,
-/// the details going to the log only. `rpc` names the call in the log.
+/// FAILED_PRECONDITION, Cancelled -> CANCELLED; InternalError and anything else -> INTERNAL with
+/// a generic message, the details going to the log only. `rpc` names the call in the log.
 grpc::Status statusFromException(std::exception_ptr error, const char* rpc);
 
 /// Runs `handler` (returning grpc::Status) and maps any exception it throws.

@@ -19,16 +19,17 @@
 #include <thread>
 #include <vector>
 
+#include "client/shot_paths.h"
 #include "cloudbake/v1/bake_service.grpc.pb.h"
-#include "core/error.h"
+#include "common/exit_codes.h"
+#include "common/grpc_status.h"
 #include "core/job/sha256.h"
-#include "tools/cloudbake/commands.h"
 
 namespace {
 namespace fs = std::filesystem;
 namespace v1 = cloudbake::v1;
 using Json = nlohmann::json;
-using cloudbake::tool::ExitCode;
+using cloudbake::ExitCode;
 
 constexpr size_t kUploadChunk = 1 << 20;
 
@@ -37,28 +38,6 @@ struct CliError {
   int code;
   std::string message;
 };
-
-int exitCodeFor(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::OK:
-      return ExitCode::kOk;
-    case grpc::StatusCode::INVALID_ARGUMENT:
-    case grpc::StatusCode::OUT_OF_RANGE:
-      return ExitCode::kBadInput;
-    case grpc::StatusCode::NOT_FOUND:
-      return ExitCode::kNotFound;
-    case grpc::StatusCode::UNAVAILABLE:
-    case grpc::StatusCode::DEADLINE_EXCEEDED:
-    case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return ExitCode::kUnavailable;  // retry later
-    case grpc::StatusCode::CANCELLED:
-      return ExitCode::kCancelled;
-    case grpc::StatusCode::FAILED_PRECONDITION:
-      return ExitCode::kJobFailed;
-    default:
-      return ExitCode::kFailure;
-  }
-}
 
 const char* statusName(grpc::StatusCode code) {
   switch (code) {
@@ -85,7 +64,7 @@ const char* statusName(grpc::StatusCode code) {
 
 void check(const grpc::Status& s, const std::string& what) {
   if (!s.ok()) {
-    throw CliError{exitCodeFor(s.error_code()),
+    throw CliError{cloudbake::exitCodeFor(cloudbake::errorKindFor(s.error_code())),
                    what + ": " + statusName(s.error_code()) + ": " + s.error_message()};
   }
 }
@@ -299,31 +278,6 @@ class Progress {
 
 // ---- uploads -----------------------------------------------------------------------------
 
-// Files a shot names (shot format v1): only these keys hold paths.
-void collectPaths(Json& shot, std::vector<Json*>* out) {
-  auto add = [&](Json& v) {
-    if (v.is_string()) out->push_back(&v);
-  };
-  if (!shot.is_object()) return;
-  if (shot.contains("volume") && shot["volume"].is_object()) {
-    Json& vol = shot["volume"];
-    for (const char* kind : {"vdb", "mesh"}) {
-      if (vol.contains(kind) && vol[kind].is_object() && vol[kind].contains("path")) {
-        add(vol[kind]["path"]);
-      }
-    }
-    if (vol.contains("sequence") && vol["sequence"].is_object() &&
-        vol["sequence"].contains("paths") && vol["sequence"]["paths"].is_array()) {
-      for (Json& p : vol["sequence"]["paths"]) add(p);
-    }
-  }
-  if (shot.contains("lighting") && shot["lighting"].is_object() &&
-      shot["lighting"].contains("sky") && shot["lighting"]["sky"].is_object() &&
-      shot["lighting"]["sky"].contains("map")) {
-    add(shot["lighting"]["sky"]["map"]);
-  }
-}
-
 std::string upload(Client& c, const std::string& path, bool quiet) {
   const std::string sha = cloudbake::sha256File(path);
   const uint64_t size = fs::file_size(path);
@@ -492,7 +446,7 @@ int finishJob(Client& c, const v1::Job& job, const std::string& out_dir) {
   return ExitCode::kOk;
 }
 
-// ---- commands ----------------------------------------------------------------------------
+// ---- submit ------------------------------------------------------------------------------
 
 struct SubmitArgs {
   std::string shot;
@@ -503,62 +457,56 @@ struct SubmitArgs {
   bool allow_outside = false;
 };
 
-int cmdSubmit(Client& c, const SubmitArgs& a) {
-  if (a.wait && a.detach)
-    throw CliError{ExitCode::kBadInput, "--wait and --detach exclude each other"};
-  if (!fs::exists(a.shot)) throw CliError{ExitCode::kNotFound, a.shot + ": file not found"};
-  if (!fs::is_regular_file(a.shot)) throw CliError{ExitCode::kBadInput, a.shot + ": not a file"};
-  std::string text;
+/// The shot file's text; CliError (exit 3 or 2) when it is missing or cannot be read.
+std::string readShotFile(const std::string& path) {
+  if (!fs::exists(path)) throw CliError{ExitCode::kNotFound, path + ": file not found"};
+  if (!fs::is_regular_file(path)) throw CliError{ExitCode::kBadInput, path + ": not a file"};
   try {
-    text = [&] {
-      std::ifstream in(a.shot, std::ios::binary);
-      return std::string(std::istreambuf_iterator<char>(in), {});
-    }();
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
   } catch (const std::exception& e) {
-    throw CliError{ExitCode::kBadInput, a.shot + ": cannot read: " + e.what()};
+    throw CliError{ExitCode::kBadInput, path + ": cannot read: " + e.what()};
   }
-  c.connect();
-  v1::SubmitJobRequest req;
-  req.set_shot_json(text);
-  req.set_dry_run(a.dry_run);
-  if (a.samples != -1) req.set_samples(a.samples);
-  req.set_sun_tolerance_deg(a.sun_tolerance_deg);
+}
+
+/// Uploads the files `req`'s shot names and lists them in `req`. A file outside the shot's
+/// folder goes (with --allow-outside only) under a name inside it, which the shot text then uses.
+void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
   // The server validates the shot; here we only find the files to send. Text that is not JSON
   // goes as it is, for the server's parser to report where it breaks.
-  Json shot = Json::parse(text, nullptr, false);
-  if (!shot.is_discarded()) {
-    std::vector<Json*> paths;
-    collectPaths(shot, &paths);
-    const fs::path base = fs::absolute(a.shot).parent_path();
-    bool rewritten = false;
-    for (Json* node : paths) {
-      const std::string p = node->get<std::string>();
-      fs::path rel = fs::path(p).lexically_normal();
-      const bool outside = rel.is_absolute() || (!rel.empty() && *rel.begin() == "..");
-      // Absolute or escaping paths are not sent unless asked for: the server rejects them,
-      // naming the field.
-      if (p.empty() || (outside && !a.allow_outside)) continue;
-      const fs::path local = outside && rel.is_absolute() ? rel : base / rel;
-      if (!fs::exists(local)) {
-        throw CliError{ExitCode::kNotFound,
-                       a.shot + ": '" + p + "' (" + local.string() + "): file not found"};
-      }
-      if (!fs::is_regular_file(local)) {
-        throw CliError{ExitCode::kBadInput, a.shot + ": '" + p + "': not a regular file"};
-      }
-      const std::string sha = upload(c, local.string(), a.quiet);
-      if (outside) {
-        // Sent under a name inside the shot's folder, which the shot text now uses.
-        rel = fs::path("outside") / sha.substr(0, 16) / local.filename();
-        *node = rel.string();
-        rewritten = true;
-      }
-      v1::AssetRef* ref = req.add_assets();
-      ref->set_path(rel.string());
-      ref->set_sha256(sha);
+  Json shot = Json::parse(req->shot_json(), nullptr, false);
+  if (shot.is_discarded()) return;
+  const fs::path base = fs::absolute(a.shot).parent_path();
+  bool rewritten = false;
+  for (Json* node : cloudbake::client::shotPathNodes(shot)) {
+    const std::string p = node->get<std::string>();
+    fs::path rel = fs::path(p).lexically_normal();
+    const bool outside = rel.is_absolute() || (!rel.empty() && *rel.begin() == "..");
+    // Absolute or escaping paths are not sent unless asked for: the server rejects them,
+    // naming the field.
+    if (p.empty() || (outside && !a.allow_outside)) continue;
+    const fs::path local = outside && rel.is_absolute() ? rel : base / rel;
+    if (!fs::exists(local)) {
+      throw CliError{ExitCode::kNotFound,
+                     a.shot + ": '" + p + "' (" + local.string() + "): file not found"};
     }
-    if (rewritten) req.set_shot_json(shot.dump(2));
+    if (!fs::is_regular_file(local)) {
+      throw CliError{ExitCode::kBadInput, a.shot + ": '" + p + "': not a regular file"};
+    }
+    const std::string sha = upload(c, local.string(), a.quiet);
+    if (outside) {
+      rel = fs::path("outside") / sha.substr(0, 16) / local.filename();
+      *node = rel.string();
+      rewritten = true;
+    }
+    v1::AssetRef* ref = req->add_assets();
+    ref->set_path(rel.string());
+    ref->set_sha256(sha);
   }
+  if (rewritten) req->set_shot_json(shot.dump(2));
+}
+
+v1::SubmitJobResponse sendSubmit(Client& c, const SubmitArgs& a, const v1::SubmitJobRequest& req) {
   grpc::ClientContext ctx;
   c.shortCall(&ctx);
   v1::SubmitJobResponse reply;
@@ -570,29 +518,47 @@ int cmdSubmit(Client& c, const SubmitArgs& a) {
     }
     throw;
   }
+  return reply;
+}
+
+void printPlan(const Client& c, const v1::JobPlan& p) {
+  if (c.json) {
+    Json views = Json::array();
+    for (const auto& v : p.views()) views.push_back({{"name", v.name()}, {"cached", v.cached()}});
+    std::cout << Json{{"shot_name", p.shot_name()},
+                      {"method", p.method()},
+                      {"views", views},
+                      {"vdb", p.vdb()},
+                      {"pixel_samples", p.pixel_samples()},
+                      {"bake_key", p.bake_key()},
+                      {"bake_cached", p.bake_cached()},
+                      {"components", Json(std::vector<std::string>(p.components().begin(),
+                                                                   p.components().end()))}}
+                     .dump()
+              << "\n";
+    return;
+  }
+  std::cout << "shot '" << p.shot_name() << "', method " << p.method() << "\n";
+  for (const auto& line : p.components()) std::cout << "  " << line << "\n";
+  std::cout << "  estimated cost: " << p.pixel_samples()
+            << (p.method() == "pathtrace" ? " paths\n" : " view rays\n");
+  std::cout << "  bake key: " << p.bake_key() << "\n";
+}
+
+int cmdSubmit(Client& c, const SubmitArgs& a) {
+  if (a.wait && a.detach)
+    throw CliError{ExitCode::kBadInput, "--wait and --detach exclude each other"};
+  const std::string text = readShotFile(a.shot);
+  c.connect();
+  v1::SubmitJobRequest req;
+  req.set_shot_json(text);
+  req.set_dry_run(a.dry_run);
+  if (a.samples != -1) req.set_samples(a.samples);
+  req.set_sun_tolerance_deg(a.sun_tolerance_deg);
+  addAssets(c, a, &req);
+  const v1::SubmitJobResponse reply = sendSubmit(c, a, req);
   if (a.dry_run) {
-    const v1::JobPlan& p = reply.plan();
-    if (c.json) {
-      Json views = Json::array();
-      for (const auto& v : p.views()) views.push_back({{"name", v.name()}, {"cached", v.cached()}});
-      std::cout << Json{{"shot_name", p.shot_name()},
-                        {"method", p.method()},
-                        {"views", views},
-                        {"vdb", p.vdb()},
-                        {"pixel_samples", p.pixel_samples()},
-                        {"bake_key", p.bake_key()},
-                        {"bake_cached", p.bake_cached()},
-                        {"components", Json(std::vector<std::string>(p.components().begin(),
-                                                                     p.components().end()))}}
-                       .dump()
-                << "\n";
-    } else {
-      std::cout << "shot '" << p.shot_name() << "', method " << p.method() << "\n";
-      for (const auto& c : p.components()) std::cout << "  " << c << "\n";
-      std::cout << "  estimated cost: " << p.pixel_samples()
-                << (p.method() == "pathtrace" ? " paths\n" : " view rays\n");
-      std::cout << "  bake key: " << p.bake_key() << "\n";
-    }
+    printPlan(c, reply.plan());
     return ExitCode::kOk;
   }
   const v1::Job& job = reply.job();
@@ -606,6 +572,91 @@ int cmdSubmit(Client& c, const SubmitArgs& a) {
   if (!c.json && !a.quiet) std::fprintf(stderr, "job %s submitted\n", job.id().c_str());
   return finishJob(c, watch(c, job.id(), a.quiet), a.out);
 }
+
+// ---- health and info ---------------------------------------------------------------------
+
+int cmdHealth(Client& c) {
+  c.connect();
+  const uint64_t st = healthCheck(c);
+  const bool serving = st == 1;
+  if (c.json) {
+    std::cout << Json{{"server", c.server}, {"serving", serving}, {"status", servingStatusName(st)}}
+                     .dump()
+              << "\n";
+  } else {
+    std::cout << c.server << ": " << servingStatusName(st) << "\n";
+  }
+  if (!serving) {
+    throw CliError{ExitCode::kUnavailable,
+                   c.server + ": health: " + servingStatusName(st) + " (not SERVING)"};
+  }
+  return ExitCode::kOk;
+}
+
+void printInfoJson(const Client& c, const v1::ServerInfo& reply) {
+  const v1::ServerStats& s = reply.stats();
+  Json j = {{"server", c.server}, {"serving", true}, {"version", reply.version()}};
+  j["methods"] = std::vector<std::string>(reply.methods().begin(), reply.methods().end());
+  j["worker_threads"] = reply.worker_threads();
+  j["limits"] = {{"max_concurrent_jobs", reply.max_concurrent_jobs()},
+                 {"queue_bound", reply.queue_bound()},
+                 {"max_upload_bytes", reply.max_upload_bytes()},
+                 {"max_image_pixels", reply.max_image_pixels()},
+                 {"max_views", reply.max_views()},
+                 {"max_samples", reply.max_samples()},
+                 {"max_voxels", reply.max_voxels()},
+                 {"max_frames", reply.max_frames()},
+                 {"max_points", reply.max_points()}};
+  j["stats"] = {{"scatter_computations", s.scatter_computations()},
+                {"views_from_cache", s.views_from_cache()},
+                {"bakes_from_cache", s.bakes_from_cache()},
+                {"volume_builds", s.volume_builds()},
+                {"jobs_submitted", s.jobs_submitted()},
+                {"jobs_queued", s.jobs_queued()},
+                {"jobs_running", s.jobs_running()},
+                {"cache_hits", s.cache_hits()},
+                {"cache_misses", s.cache_misses()},
+                {"cache_shared", s.cache_shared()},
+                {"cache_corrupt_dropped", s.cache_corrupt_dropped()},
+                {"cache_evicted", s.cache_evicted()},
+                {"cache_entries", s.cache_entries()},
+                {"cache_bytes", s.cache_bytes()}};
+  std::cout << j.dump() << "\n";
+}
+
+void printInfoText(const v1::ServerInfo& reply) {
+  const v1::ServerStats& s = reply.stats();
+  std::cout << "version: " << reply.version() << "\nworker threads: " << reply.worker_threads()
+            << "\nmethods:";
+  for (const auto& m : reply.methods()) std::cout << " " << m;
+  std::cout << "\njobs: " << s.jobs_submitted() << " submitted, " << s.jobs_queued() << " queued, "
+            << s.jobs_running() << " running\nscattering computations: " << s.scatter_computations()
+            << " (views from cache: " << s.views_from_cache()
+            << ", bakes from cache: " << s.bakes_from_cache() << ")\ncache: " << s.cache_entries()
+            << " entries, " << s.cache_bytes() << " bytes, " << s.cache_hits() << " hits, "
+            << s.cache_misses() << " misses\n"
+            << "limits: " << reply.max_concurrent_jobs() << " concurrent job(s), queue "
+            << reply.queue_bound() << ", upload " << reply.max_upload_bytes() << " bytes, image "
+            << reply.max_image_pixels() << " pixels, " << reply.max_views() << " views, "
+            << reply.max_samples() << " spp, " << reply.max_voxels() << " voxels, "
+            << reply.max_frames() << " frames, " << reply.max_points()
+            << " points (0: unlimited)\n";
+}
+
+int cmdInfo(Client& c) {
+  c.connect();
+  grpc::ClientContext ctx;
+  c.shortCall(&ctx);
+  v1::ServerInfo reply;
+  check(c.stub->GetServerInfo(&ctx, {}, &reply), c.server);
+  if (c.json)
+    printInfoJson(c, reply);
+  else
+    printInfoText(reply);
+  return ExitCode::kOk;
+}
+
+// ---- job commands ------------------------------------------------------------------------
 
 void printJob(const Client& c, const v1::Job& j) {
   if (c.json) {
@@ -629,68 +680,189 @@ void printJob(const Client& c, const v1::Job& j) {
   }
 }
 
+/// Arguments of the commands that name a job (status, watch, list, cancel, fetch, render).
+struct JobArgs {
+  std::string job_id, out_dir, name, views_file, state_filter;
+  unsigned limit = 0;
+  std::vector<double> sun;
+  bool quiet = false;
+};
+
+int cmdWatch(Client& c, const std::string& id) {
+  const v1::Job job = watch(c, id, false);
+  if (c.json)
+    std::cout << jobJson(job).dump() << "\n";
+  else
+    std::cout << job.id() << " " << stateName(job.state()) << "\n";
+  return jobExitCode(job);
+}
+
+int cmdList(Client& c, const JobArgs& a) {
+  grpc::ClientContext ctx;
+  c.shortCall(&ctx);
+  v1::ListJobsRequest req;
+  if (!a.state_filter.empty()) {
+    v1::JobState s = v1::JOB_STATE_UNSPECIFIED;
+    v1::JobState_Parse(a.state_filter, &s);
+    req.set_state(s);
+  }
+  req.set_limit(a.limit);
+  v1::ListJobsResponse reply;
+  check(c.stub->ListJobs(&ctx, req, &reply), "list");
+  Json jobs = Json::array();
+  for (const auto& j : reply.jobs()) {
+    if (c.json)
+      jobs.push_back(jobJson(j));
+    else {
+      std::printf("%s  %-9s %3d%%  %s\n", j.id().c_str(), stateName(j.state()),
+                  int(std::round(j.fraction() * 100)), j.shot_name().c_str());
+    }
+  }
+  if (c.json) std::cout << jobs.dump() << "\n";
+  return ExitCode::kOk;
+}
+
+int cmdCancel(Client& c, const std::string& id) {
+  grpc::ClientContext ctx;
+  c.shortCall(&ctx);
+  v1::CancelJobRequest req;
+  req.set_job_id(id);
+  v1::Job job;
+  check(c.stub->CancelJob(&ctx, req, &job), "cancel " + id);
+  if (c.json)
+    std::cout << jobJson(job).dump() << "\n";
+  else {
+    std::cout << job.id() << " "
+              << (job.state() == v1::RUNNING ? "cancelling" : stateName(job.state())) << "\n";
+  }
+  return ExitCode::kOk;
+}
+
+int cmdRender(Client& c, const JobArgs& a) {
+  v1::RenderViewRequest req;
+  req.set_job_id(a.job_id);
+  if (!a.views_file.empty()) {
+    std::ifstream in(a.views_file, std::ios::binary);
+    if (!in) throw CliError{ExitCode::kNotFound, a.views_file + ": file not found"};
+    req.set_views_json(std::string(std::istreambuf_iterator<char>(in), {}));
+  }
+  for (double v : a.sun) req.add_sun_irradiance(v);
+  grpc::ClientContext ctx;
+  c.shortCall(&ctx);
+  v1::SubmitJobResponse reply;
+  check(c.stub->RenderView(&ctx, req, &reply), "render " + a.job_id);
+  if (!c.json) std::fprintf(stderr, "job %s submitted\n", reply.job().id().c_str());
+  return finishJob(c, watch(c, reply.job().id(), a.quiet), a.out_dir);
+}
+
+// ---- command line ------------------------------------------------------------------------
+
+struct Commands {
+  CLI::App *health, *info, *submit, *status, *watch, *list, *cancel, *fetch, *render;
+};
+
+/// Options of every command; `deadline_s` 0: no deadline.
+void addGlobalOptions(CLI::App& app, Client* c, double* deadline_s) {
+  const char* env_server = std::getenv("CLOUDBAKE_SERVER");
+  c->server = env_server && *env_server ? env_server : "127.0.0.1:50051";
+  app.add_option("--server", c->server, "HOST:PORT of cloudbake-server (env CLOUDBAKE_SERVER)");
+  app.add_option("--timeout", c->timeout_s, "deadline in seconds for connecting and short calls")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--deadline", *deadline_s,
+                 "seconds the whole command may take (uploads, submit, watch, fetch); on expiry "
+                 "exit 4 and the job goes on (default: none)")
+      ->check(CLI::PositiveNumber);
+  app.add_flag("--json", c->json, "machine-readable output on stdout (logs stay on stderr)");
+  app.set_version_flag("--version", std::string("cloudctl ") + CLOUDBAKE_VERSION);
+  app.require_subcommand(1);
+  app.fallthrough();  // --json, --server, --timeout also after the command
+}
+
+CLI::App* addSubmitCommand(CLI::App& app, SubmitArgs* sa) {
+  auto* submit = app.add_subcommand("submit", "submit a shot; by default wait and download");
+  submit->add_option("shot", sa->shot, "shot file (JSON, format v1)")->required();
+  submit->add_option(
+      "--out", sa->out,
+      "download the outputs here (DIR/<view>.exr, DIR/bake.vdb; frame sequences for precomputed)");
+  submit->add_flag("--wait", sa->wait, "wait for the job, showing progress (default)");
+  submit->add_flag("--detach", sa->detach, "print the job id and return at once");
+  submit->add_flag("--dry-run", sa->dry_run, "print the server's plan; bake nothing");
+  submit->add_flag("--quiet", sa->quiet, "no progress on stderr");
+  submit->add_option("--samples", sa->samples, "override bake.samples (1..1000000)");
+  submit->add_flag("--allow-outside", sa->allow_outside,
+                   "also upload files the shot names outside its folder (absolute or ../ paths)");
+  submit->add_option("--sun-tolerance", sa->sun_tolerance_deg,
+                     "reuse a cached bake whose sun direction is within DEG degrees (default 0)");
+  return submit;
+}
+
+Commands addCommands(CLI::App& app, SubmitArgs* sa, JobArgs* ja) {
+  Commands cmd;
+  cmd.health = app.add_subcommand("health", "check that the server is serving");
+  cmd.info = app.add_subcommand("info", "the server's version, methods, limits and counters");
+  cmd.submit = addSubmitCommand(app, sa);
+  cmd.status = app.add_subcommand("status", "show a job");
+  cmd.status->add_option("job", ja->job_id, "job id")->required();
+  cmd.watch = app.add_subcommand("watch", "follow a job's progress until it ends");
+  cmd.watch->add_option("job", ja->job_id, "job id")->required();
+  cmd.list = app.add_subcommand("list", "list jobs, newest first");
+  cmd.list->add_option("--state", ja->state_filter, "QUEUED|RUNNING|SUCCEEDED|FAILED|CANCELLED")
+      ->check(CLI::IsMember({"QUEUED", "RUNNING", "SUCCEEDED", "FAILED", "CANCELLED"}));
+  cmd.list->add_option("--limit", ja->limit, "at most this many (0: all)");
+  cmd.cancel = app.add_subcommand("cancel", "cancel a queued or running job");
+  cmd.cancel->add_option("job", ja->job_id, "job id")->required();
+  cmd.fetch = app.add_subcommand("fetch", "download a succeeded job's outputs");
+  cmd.fetch->add_option("job", ja->job_id, "job id")->required();
+  cmd.fetch->add_option("--out", ja->out_dir, "folder (default: current)");
+  cmd.fetch->add_option("--name", ja->name, "only this output (e.g. nadir.exr)");
+  cmd.render = app.add_subcommand("render", "render new views of a job's shot from the cache");
+  cmd.render->add_option("job", ja->job_id, "job id")->required();
+  cmd.render->add_option("--views", ja->views_file, "JSON file with an array of shot-format views");
+  cmd.render->add_option("--sun", ja->sun, "new sun irradiance R G B")->expected(3);
+  cmd.render->add_option("--out", ja->out_dir, "download the new views here");
+  cmd.render->add_flag("--quiet", ja->quiet, "no progress on stderr");
+  return cmd;
+}
+
+int runCommand(const Commands& cmd, Client& c, const SubmitArgs& sa, const JobArgs& ja) {
+  // These connect themselves: submit only once the shot file has been read.
+  if (cmd.health->parsed()) return cmdHealth(c);
+  if (cmd.info->parsed()) return cmdInfo(c);
+  if (cmd.submit->parsed()) return cmdSubmit(c, sa);
+  c.connect();
+  if (cmd.status->parsed()) {
+    printJob(c, getJob(c, ja.job_id));
+    return ExitCode::kOk;
+  }
+  if (cmd.watch->parsed()) return cmdWatch(c, ja.job_id);
+  if (cmd.list->parsed()) return cmdList(c, ja);
+  if (cmd.cancel->parsed()) return cmdCancel(c, ja.job_id);
+  if (cmd.fetch->parsed()) {
+    return fetchAll(c, getJob(c, ja.job_id), ja.out_dir.empty() ? "." : ja.out_dir, ja.name);
+  }
+  if (cmd.render->parsed()) return cmdRender(c, ja);
+  return ExitCode::kOk;
+}
+
+// Failures other than CliError. Ours (sha256File's InputError) read like a CliError; anything
+// else is cloudctl's own error.
+int reportError(std::exception_ptr error) {
+  const cloudbake::ClassifiedError e = cloudbake::classifyException(error);
+  std::cerr << "cloudctl: " << (e.kind == cloudbake::ErrorKind::kInternal ? "error: " : "")
+            << e.message << "\n";
+  return cloudbake::exitCodeFor(e.kind);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"cloudctl: client of cloudbake-server"};
   Client c;
-  const char* env_server = std::getenv("CLOUDBAKE_SERVER");
-  c.server = env_server && *env_server ? env_server : "127.0.0.1:50051";
-  app.add_option("--server", c.server, "HOST:PORT of cloudbake-server (env CLOUDBAKE_SERVER)");
-  app.add_option("--timeout", c.timeout_s, "deadline in seconds for connecting and short calls")
-      ->check(CLI::PositiveNumber);
   double deadline_s = 0;
-  app.add_option("--deadline", deadline_s,
-                 "seconds the whole command may take (uploads, submit, watch, fetch); on expiry "
-                 "exit 4 and the job goes on (default: none)")
-      ->check(CLI::PositiveNumber);
-  app.add_flag("--json", c.json, "machine-readable output on stdout (logs stay on stderr)");
-  app.set_version_flag("--version", std::string("cloudctl ") + CLOUDBAKE_VERSION);
-  app.require_subcommand(1);
-  app.fallthrough();  // --json, --server, --timeout also after the command
-
-  auto* health = app.add_subcommand("health", "check that the server is serving");
-  auto* info = app.add_subcommand("info", "the server's version, methods, limits and counters");
-
+  addGlobalOptions(app, &c, &deadline_s);
   SubmitArgs sa;
-  auto* submit = app.add_subcommand("submit", "submit a shot; by default wait and download");
-  submit->add_option("shot", sa.shot, "shot file (JSON, format v1)")->required();
-  submit->add_option("--out", sa.out, "download the outputs here (DIR/<view>.exr, DIR/bake.vdb; frame sequences for precomputed)");
-  submit->add_flag("--wait", sa.wait, "wait for the job, showing progress (default)");
-  submit->add_flag("--detach", sa.detach, "print the job id and return at once");
-  submit->add_flag("--dry-run", sa.dry_run, "print the server's plan; bake nothing");
-  submit->add_flag("--quiet", sa.quiet, "no progress on stderr");
-  submit->add_option("--samples", sa.samples, "override bake.samples (1..1000000)");
-  submit->add_flag("--allow-outside", sa.allow_outside,
-                   "also upload files the shot names outside its folder (absolute or ../ paths)");
-  submit->add_option("--sun-tolerance", sa.sun_tolerance_deg,
-                     "reuse a cached bake whose sun direction is within DEG degrees (default 0)");
-
-  std::string job_id, out_dir, name, views_file, state_filter;
-  unsigned limit = 0;
-  std::vector<double> sun;
-  bool quiet = false;
-  auto* status = app.add_subcommand("status", "show a job");
-  status->add_option("job", job_id, "job id")->required();
-  auto* watchc = app.add_subcommand("watch", "follow a job's progress until it ends");
-  watchc->add_option("job", job_id, "job id")->required();
-  auto* list = app.add_subcommand("list", "list jobs, newest first");
-  list->add_option("--state", state_filter, "QUEUED|RUNNING|SUCCEEDED|FAILED|CANCELLED")
-      ->check(CLI::IsMember({"QUEUED", "RUNNING", "SUCCEEDED", "FAILED", "CANCELLED"}));
-  list->add_option("--limit", limit, "at most this many (0: all)");
-  auto* cancel = app.add_subcommand("cancel", "cancel a queued or running job");
-  cancel->add_option("job", job_id, "job id")->required();
-  auto* fetch = app.add_subcommand("fetch", "download a succeeded job's outputs");
-  fetch->add_option("job", job_id, "job id")->required();
-  fetch->add_option("--out", out_dir, "folder (default: current)");
-  fetch->add_option("--name", name, "only this output (e.g. nadir.exr)");
-  auto* render = app.add_subcommand("render", "render new views of a job's shot from the cache");
-  render->add_option("job", job_id, "job id")->required();
-  render->add_option("--views", views_file, "JSON file with an array of shot-format views");
-  render->add_option("--sun", sun, "new sun irradiance R G B")->expected(3);
-  render->add_option("--out", out_dir, "download the new views here");
-  render->add_flag("--quiet", quiet, "no progress on stderr");
-
+  JobArgs ja;
+  const Commands cmd = addCommands(app, &sa, &ja);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -701,162 +873,12 @@ int main(int argc, char** argv) {
     c.command_deadline = std::chrono::system_clock::now() +
                          std::chrono::microseconds(static_cast<long>(deadline_s * 1e6));
   }
-
   try {
-    if (health->parsed()) {
-      c.connect();
-      const uint64_t st = healthCheck(c);
-      const bool serving = st == 1;
-      if (c.json) {
-        std::cout << Json{{"server", c.server},
-                          {"serving", serving},
-                          {"status", servingStatusName(st)}}
-                         .dump()
-                  << "\n";
-      } else {
-        std::cout << c.server << ": " << servingStatusName(st) << "\n";
-      }
-      if (!serving) {
-        throw CliError{ExitCode::kUnavailable,
-                       c.server + ": health: " + servingStatusName(st) + " (not SERVING)"};
-      }
-      return ExitCode::kOk;
-    }
-    if (info->parsed()) {
-      c.connect();
-      grpc::ClientContext ctx;
-      c.shortCall(&ctx);
-      v1::ServerInfo reply;
-      check(c.stub->GetServerInfo(&ctx, {}, &reply), c.server);
-      const v1::ServerStats& s = reply.stats();
-      if (c.json) {
-        Json j = {{"server", c.server}, {"serving", true}, {"version", reply.version()}};
-        j["methods"] = std::vector<std::string>(reply.methods().begin(), reply.methods().end());
-        j["worker_threads"] = reply.worker_threads();
-        j["limits"] = {{"max_concurrent_jobs", reply.max_concurrent_jobs()},
-                       {"queue_bound", reply.queue_bound()},
-                       {"max_upload_bytes", reply.max_upload_bytes()},
-                       {"max_image_pixels", reply.max_image_pixels()},
-                       {"max_views", reply.max_views()},
-                       {"max_samples", reply.max_samples()},
-                       {"max_voxels", reply.max_voxels()},
-                       {"max_frames", reply.max_frames()},
-                       {"max_points", reply.max_points()}};
-        j["stats"] = {{"scatter_computations", s.scatter_computations()},
-                      {"views_from_cache", s.views_from_cache()},
-                      {"bakes_from_cache", s.bakes_from_cache()},
-                      {"volume_builds", s.volume_builds()},
-                      {"jobs_submitted", s.jobs_submitted()},
-                      {"jobs_queued", s.jobs_queued()},
-                      {"jobs_running", s.jobs_running()},
-                      {"cache_hits", s.cache_hits()},
-                      {"cache_misses", s.cache_misses()},
-                      {"cache_shared", s.cache_shared()},
-                      {"cache_corrupt_dropped", s.cache_corrupt_dropped()},
-                      {"cache_evicted", s.cache_evicted()},
-                      {"cache_entries", s.cache_entries()},
-                      {"cache_bytes", s.cache_bytes()}};
-        std::cout << j.dump() << "\n";
-      } else {
-        std::cout << "version: " << reply.version()
-                  << "\nworker threads: " << reply.worker_threads() << "\nmethods:";
-        for (const auto& m : reply.methods()) std::cout << " " << m;
-        std::cout << "\njobs: " << s.jobs_submitted() << " submitted, " << s.jobs_queued()
-                  << " queued, " << s.jobs_running()
-                  << " running\nscattering computations: " << s.scatter_computations()
-                  << " (views from cache: " << s.views_from_cache()
-                  << ", bakes from cache: " << s.bakes_from_cache()
-                  << ")\ncache: " << s.cache_entries() << " entries, " << s.cache_bytes()
-                  << " bytes, " << s.cache_hits() << " hits, " << s.cache_misses() << " misses\n"
-                  << "limits: " << reply.max_concurrent_jobs() << " concurrent job(s), queue "
-                  << reply.queue_bound() << ", upload " << reply.max_upload_bytes()
-                  << " bytes, image " << reply.max_image_pixels() << " pixels, "
-                  << reply.max_views() << " views, " << reply.max_samples() << " spp, "
-                  << reply.max_voxels() << " voxels, " << reply.max_frames() << " frames, "
-                  << reply.max_points() << " points (0: unlimited)\n";
-      }
-      return ExitCode::kOk;
-    }
-    if (submit->parsed()) return cmdSubmit(c, sa);
-    c.connect();
-    if (status->parsed()) {
-      printJob(c, getJob(c, job_id));
-      return ExitCode::kOk;
-    }
-    if (watchc->parsed()) {
-      const v1::Job job = watch(c, job_id, false);
-      if (c.json)
-        std::cout << jobJson(job).dump() << "\n";
-      else
-        std::cout << job.id() << " " << stateName(job.state()) << "\n";
-      return jobExitCode(job);
-    }
-    if (list->parsed()) {
-      grpc::ClientContext ctx;
-      c.shortCall(&ctx);
-      v1::ListJobsRequest req;
-      if (!state_filter.empty()) {
-        v1::JobState s = v1::JOB_STATE_UNSPECIFIED;
-        v1::JobState_Parse(state_filter, &s);
-        req.set_state(s);
-      }
-      req.set_limit(limit);
-      v1::ListJobsResponse reply;
-      check(c.stub->ListJobs(&ctx, req, &reply), "list");
-      Json jobs = Json::array();
-      for (const auto& j : reply.jobs()) {
-        if (c.json)
-          jobs.push_back(jobJson(j));
-        else {
-          std::printf("%s  %-9s %3d%%  %s\n", j.id().c_str(), stateName(j.state()),
-                      int(std::round(j.fraction() * 100)), j.shot_name().c_str());
-        }
-      }
-      if (c.json) std::cout << jobs.dump() << "\n";
-      return ExitCode::kOk;
-    }
-    if (cancel->parsed()) {
-      grpc::ClientContext ctx;
-      c.shortCall(&ctx);
-      v1::CancelJobRequest req;
-      req.set_job_id(job_id);
-      v1::Job job;
-      check(c.stub->CancelJob(&ctx, req, &job), "cancel " + job_id);
-      if (c.json)
-        std::cout << jobJson(job).dump() << "\n";
-      else {
-        std::cout << job.id() << " "
-                  << (job.state() == v1::RUNNING ? "cancelling" : stateName(job.state())) << "\n";
-      }
-      return ExitCode::kOk;
-    }
-    if (fetch->parsed())
-      return fetchAll(c, getJob(c, job_id), out_dir.empty() ? "." : out_dir, name);
-    if (render->parsed()) {
-      v1::RenderViewRequest req;
-      req.set_job_id(job_id);
-      if (!views_file.empty()) {
-        std::ifstream in(views_file, std::ios::binary);
-        if (!in) throw CliError{ExitCode::kNotFound, views_file + ": file not found"};
-        req.set_views_json(std::string(std::istreambuf_iterator<char>(in), {}));
-      }
-      for (double v : sun) req.add_sun_irradiance(v);
-      grpc::ClientContext ctx;
-      c.shortCall(&ctx);
-      v1::SubmitJobResponse reply;
-      check(c.stub->RenderView(&ctx, req, &reply), "render " + job_id);
-      if (!c.json) std::fprintf(stderr, "job %s submitted\n", reply.job().id().c_str());
-      return finishJob(c, watch(c, reply.job().id(), quiet), out_dir);
-    }
+    return runCommand(cmd, c, sa, ja);
   } catch (const CliError& e) {
     std::cerr << "cloudctl: " << e.message << "\n";
     return e.code;
-  } catch (const cloudbake::InputError& e) {
-    std::cerr << "cloudctl: " << e.what() << "\n";
-    return ExitCode::kBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "cloudctl: error: " << e.what() << "\n";
-    return ExitCode::kFailure;
+  } catch (...) {
+    return reportError(std::current_exception());
   }
-  return ExitCode::kOk;
 }

@@ -17,6 +17,7 @@ import grpc
 
 from cloudbake.v1 import bake_service_pb2 as pb
 from cloudbake.v1 import bake_service_pb2_grpc as pb_grpc
+from cloudbake_shot_paths import referenced_paths
 
 CHUNK = 1 << 20  # upload message size (the server accepts at most 1 MiB per message)
 
@@ -35,22 +36,6 @@ def sha256_file(path):
         for block in iter(lambda: f.read(CHUNK), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def referenced_paths(shot):
-    """Paths a shot (format v1, parsed JSON) names: the only keys that hold files."""
-    out = []
-    volume = shot.get("volume", {}) if isinstance(shot, dict) else {}
-    for kind in ("vdb", "mesh"):
-        if isinstance(volume.get(kind), dict) and isinstance(volume[kind].get("path"), str):
-            out.append(volume[kind]["path"])
-    seq = volume.get("sequence")
-    if isinstance(seq, dict) and isinstance(seq.get("paths"), list):
-        out += [p for p in seq["paths"] if isinstance(p, str)]
-    sky = shot.get("lighting", {}).get("sky", {}) if isinstance(shot, dict) else {}
-    if isinstance(sky, dict) and isinstance(sky.get("map"), str):
-        out.append(sky["map"])
-    return out
 
 
 class BakeClient:

@@ -14,7 +14,6 @@
 #include "core/error.h"
 #include "core/job/cache_key.h"
 #include "core/job/file_util.h"
-#include "core/job/job_errors.h"
 #include "core/job/run_shot.h"
 #include "core/job/volume_limits.h"
 #include "core/methods/registry.h"
@@ -65,6 +64,33 @@ std::string clientPaths(std::string message, const std::string& input_dir) {
     }
   }
   return message;
+}
+
+// Submit checks the bound before the costly preparation and enqueue again under the lock: both
+// refuse with the same words.
+ResourceExhaustedError queueFull(size_t waiting, size_t bound) {
+  return ResourceExhaustedError("the job queue is full (" + std::to_string(waiting) +
+                                " jobs waiting, bound " + std::to_string(bound) + "); retry later");
+}
+
+// A job's submission, kept in its folder: it is requeued from it after a restart and RenderView
+// jobs start from it. readSubmission throws when the file is missing or malformed.
+void writeSubmission(const std::string& job_dir, const SubmitInput& input) {
+  const Json submitted = {{"shot_json", input.shot_json},
+                          {"assets", input.assets},
+                          {"samples", input.samples},
+                          {"sun_tolerance_deg", input.sun_tolerance_deg}};
+  writeFileAtomic((fs::path(job_dir) / kSubmittedFile).string(), submitted.dump());
+}
+
+SubmitInput readSubmission(const std::string& job_dir) {
+  const Json s = Json::parse(readWholeFile((fs::path(job_dir) / kSubmittedFile).string()));
+  SubmitInput input;
+  input.shot_json = s.at("shot_json").get<std::string>();
+  input.assets = s.at("assets").get<std::vector<std::pair<std::string, std::string>>>();
+  input.samples = s.at("samples").get<int>();
+  input.sun_tolerance_deg = s.value("sun_tolerance_deg", 0.0);
+  return input;
 }
 
 }  // namespace
@@ -123,13 +149,7 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
       store_->save(job->record);
     } else if (record.state == JobState::kQueued) {
       try {
-        const Json s = Json::parse(
-            readWholeFile((fs::path(store_->jobDir(record.id)) / kSubmittedFile).string()));
-        SubmitInput input;
-        input.shot_json = s.at("shot_json").get<std::string>();
-        input.assets = s.at("assets").get<std::vector<std::pair<std::string, std::string>>>();
-        input.samples = s.at("samples").get<int>();
-        input.sun_tolerance_deg = s.value("sun_tolerance_deg", 0.0);
+        const SubmitInput input = readSubmission(store_->jobDir(record.id));
         job->shot = prepare(input, store_->jobDir(record.id)).shot;
         job->sun_tolerance_deg = input.sun_tolerance_deg;
         queue_.push_back(job);
@@ -268,17 +288,11 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
   for (const Camera& c : job->shot.views) r.views.push_back(c.name);
   r.created = unixNow();
   r.stage = "queued";
-  const Json submitted = {{"shot_json", prepared.input.shot_json},
-                          {"assets", prepared.input.assets},
-                          {"samples", prepared.input.samples},
-                          {"sun_tolerance_deg", prepared.input.sun_tolerance_deg}};
-  writeFileAtomic((fs::path(dir) / kSubmittedFile).string(), submitted.dump());
+  writeSubmission(dir, prepared.input);
   std::lock_guard<std::mutex> lock(mutex_);
   if (stopping_) throw ResourceExhaustedError("the server is shutting down; retry on restart");
   if (queue_.size() >= options_.queue_bound) {
-    throw ResourceExhaustedError("the job queue is full (" + std::to_string(queue_.size()) +
-                                 " jobs waiting, bound " + std::to_string(options_.queue_bound) +
-                                 "); retry later");
+    throw queueFull(queue_.size(), options_.queue_bound);
   }
   saveLocked(*job);  // durable before the client hears of it
   pushEventLocked(*job, "queued", 0, "queued at position " + std::to_string(queue_.size() + 1));
@@ -294,9 +308,7 @@ JobRecord JobManager::submit(const SubmitInput& input) {
     // Fail fast before linking assets and hashing volumes; enqueue checks again.
     std::lock_guard<std::mutex> lock(mutex_);
     if (queue_.size() >= options_.queue_bound) {
-      throw ResourceExhaustedError("the job queue is full (" + std::to_string(queue_.size()) +
-                                   " jobs waiting, bound " + std::to_string(options_.queue_bound) +
-                                   "); retry later");
+      throw queueFull(queue_.size(), options_.queue_bound);
     }
   }
   const std::string id = newJobId();
@@ -315,12 +327,7 @@ JobRecord JobManager::render(const std::string& job_id, const std::string& views
   const std::shared_ptr<Job> old = find(job_id);
   SubmitInput input;
   try {
-    const Json s =
-        Json::parse(readWholeFile((fs::path(store_->jobDir(job_id)) / kSubmittedFile).string()));
-    input.shot_json = s.at("shot_json").get<std::string>();
-    input.assets = s.at("assets").get<std::vector<std::pair<std::string, std::string>>>();
-    input.samples = s.at("samples").get<int>();
-    input.sun_tolerance_deg = s.value("sun_tolerance_deg", 0.0);
+    input = readSubmission(store_->jobDir(job_id));
   } catch (const std::exception& e) {
     spdlog::error("job {}: cannot read its submission: {}", job_id, e.what());
     throw FailedPreconditionError("job " + job_id + " has no stored submission to render from");

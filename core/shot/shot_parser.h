@@ -9,13 +9,6 @@
 
 namespace cloudbake {
 
-/// A file named by the shot (or the shot file itself) does not exist. An InputError, so callers
-/// that only care about "bad input" need not distinguish; the CLI maps it to exit code 3.
-class MissingFileError : public InputError {
- public:
-  explicit MissingFileError(const std::string& what) : InputError(what) {}
-};
-
 struct ParseOptions {
   /// When non-empty, every file a shot names (vdb, mesh, sky map, sequence frames) must lie
   /// inside one of these folders after resolving symlinks and "..". Empty: any path.

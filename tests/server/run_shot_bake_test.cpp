@@ -86,8 +86,8 @@ TEST(RunShotBake, PointcloudSecondViewAndSunColourBakeNothing) {
   const RunResult c = runShot(parse(shot("pointcloud", pointcloudKnobs(), "[2, 1, 0.5]")), opt);
   // The view-only knobs (march step, rays per pixel) reuse the bake too.
   opt.out_dir = (dir / "d").string();
-  const RunResult d = runShot(
-      parse(shot("pointcloud", pointcloudKnobs(R"(, "step": 0.05, "samples": 2)"))), opt);
+  const RunResult d =
+      runShot(parse(shot("pointcloud", pointcloudKnobs(R"(, "step": 0.05, "samples": 2)"))), opt);
   for (const RunResult* r : {&b, &c, &d}) {
     EXPECT_EQ(r->bakes_computed, 0);
     EXPECT_EQ(r->bakes_cached, 1);
@@ -106,9 +106,9 @@ TEST(RunShotBake, PointcloudSecondViewAndSunColourBakeNothing) {
 
   // Knobs of the bake itself are a new bake.
   opt.out_dir = (dir / "e").string();
-  EXPECT_EQ(runShot(parse(shot("pointcloud", R"(, "points": 4096, "passes": 3)")), opt)
-                .bakes_computed,
-            1);
+  EXPECT_EQ(
+      runShot(parse(shot("pointcloud", R"(, "points": 4096, "passes": 3)")), opt).bakes_computed,
+      1);
   fs::remove_all(dir);
 }
 
@@ -118,8 +118,8 @@ TEST(RunShotBake, ASkyIsBakedOnlyWhenItShines) {
   RunOptions opt;
   opt.cache = &cache;
   opt.out_dir = (dir / "a").string();
-  const RunResult a = runShot(parse(shot("single", "", "[1, 1, 1]", "front", "[0.2, 0.3, 0.5]")),
-                              opt);
+  const RunResult a =
+      runShot(parse(shot("single", "", "[1, 1, 1]", "front", "[0.2, 0.3, 0.5]")), opt);
   EXPECT_NE(readBakedLight(a.files[1].path).find("sky_visibility"), nullptr);
   EXPECT_GT(sumOf(readExr(a.files[0].path).layers.at("sky"), 2), 0);
   // Another sky colour reuses it.
@@ -156,8 +156,7 @@ TEST(RunShotBake, TheBakeLatticeCountsAgainstTheServersVoxelLimit) {
     checkShotVoxels(s, 26 * 26 * 26 - 1, "shot.json");
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("/bake/light_resolution"), std::string::npos)
-        << e.what();
+    EXPECT_NE(std::string(e.what()).find("/bake/light_resolution"), std::string::npos) << e.what();
   }
 }
 

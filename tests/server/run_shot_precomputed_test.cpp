@@ -14,10 +14,10 @@
 #include "core/io/exr_io.h"
 #include "core/job/bake_cache.h"
 #include "core/job/cache_key.h"
-#include "core/methods/precomputed.h"
-#include "core/methods/single.h"
 #include "core/job/run_shot.h"
 #include "core/job/volume_limits.h"
+#include "core/methods/precomputed.h"
+#include "core/methods/single.h"
 #include "core/shot/shot_parser.h"
 #include "tests/server/job_test_util.h"
 

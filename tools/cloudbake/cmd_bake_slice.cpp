@@ -21,8 +21,11 @@ namespace {
 
 // Dark blue through teal to pale yellow: monotonic in lightness, readable in print.
 Rgb colourMap(double t) {
-  static const Rgb stops[] = {{0.05, 0.05, 0.25}, {0.1, 0.35, 0.55}, {0.2, 0.65, 0.55},
-                              {0.75, 0.85, 0.35}, {1.0, 0.98, 0.75}};
+  static const Rgb stops[] = {{0.05, 0.05, 0.25},
+                              {0.1, 0.35, 0.55},
+                              {0.2, 0.65, 0.55},
+                              {0.75, 0.85, 0.35},
+                              {1.0, 0.98, 0.75}};
   t = std::clamp(t, 0.0, 1.0) * 4;
   const int i = std::min(3, int(t));
   const double f = t - i;
@@ -45,20 +48,20 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--grid", opt->grid, "grid name: density, sun_transmittance, mie_ratio, Co, ...")
       ->required();
   cmd->add_option("--axis", opt->axis, "slice normal: x, y or z (default y)");
-  cmd->add_option("--at", opt->at, "world coordinate of the slice along the axis (default: the "
-                                   "middle of the lattice)");
+  cmd->add_option("--at", opt->at,
+                  "world coordinate of the slice along the axis (default: the "
+                  "middle of the lattice)");
   cmd->add_option("--png", opt->png, "output PNG")->required();
-  cmd->add_option("--range", opt->range, "LO,HI mapped to the ends of the colour map (default: "
-                                         "the slice's own range)");
+  cmd->add_option("--range", opt->range,
+                  "LO,HI mapped to the ends of the colour map (default: "
+                  "the slice's own range)");
   cmd->callback([opt, exit_code] {
     if (opt->axis != "x" && opt->axis != "y" && opt->axis != "z") {
       throw InputError("--axis: must be x, y or z, got '" + opt->axis + "'");
     }
     std::error_code ec;
     if (!std::filesystem::is_regular_file(opt->bake, ec)) {
-      std::cerr << "cloudbake: error: " << opt->bake << ": bake file not found\n";
-      *exit_code = kNotFound;
-      return;
+      throw MissingFileError(opt->bake + ": bake file not found");
     }
     const BakedLight bake = readBakedLight(opt->bake);
     const std::vector<float>* data = &bake.density;
@@ -75,7 +78,7 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code) {
       components = c->components;
     }
     const BakeGrid& g = bake.grid;
-    const int a = opt->axis[0] - 'x';  // slice normal
+    const int a = opt->axis[0] - 'x';                  // slice normal
     const int u = a == 0 ? 1 : 0, v = a == 2 ? 1 : 2;  // image right and up
     const int n[3] = {g.nx, g.ny, g.nz};
     int slice = n[a] / 2;
@@ -118,7 +121,7 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code) {
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         const size_t voxel = at(x / scale, n[v] - 1 - y / scale);  // up is +v
-        Rgb c(0.12);  // outside the cloud
+        Rgb c(0.12);                                               // outside the cloud
         if (bake.density[voxel] > 0) {
           c = colourMap(hi > lo ? (value(voxel) - lo) / (hi - lo) : 0.5);
         }

@@ -75,8 +75,8 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
       if (it == test.layers.end()) continue;
       const std::string label = name.empty() ? "beauty" : name;
       const LayerStats s = compareLayer(it->second, image, opt->test + " layer '" + label + "'");
-      out[label] = {{"mean", s.mean_test}, {"reference_mean", s.mean_ref},
-                    {"rel_rmse", s.rel_rmse}};
+      out[label] = {
+          {"mean", s.mean_test}, {"reference_mean", s.mean_ref}, {"rel_rmse", s.rel_rmse}};
       if (!opt->json) {
         std::printf("%-10s %14.6g %14.6g %10.4f\n", label.c_str(), s.mean_test, s.mean_ref,
                     s.rel_rmse);

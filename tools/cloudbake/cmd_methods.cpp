@@ -89,8 +89,8 @@ void printMethods(const MethodsOptions& o) {
   } else {
     for (const BakeMethod* m : bakeMethods()) {
       const MethodInfo& i = m->info();
-      std::cout << i.name << " (v" << i.version << (i.runnable ? "" : ", not runnable") << "): "
-                << i.summary << "\n";
+      std::cout << i.name << " (v" << i.version << (i.runnable ? "" : ", not runnable")
+                << "): " << i.summary << "\n";
     }
   }
 }
@@ -102,7 +102,8 @@ void addMethodsCommand(CLI::App& app, int* exit_code) {
   CLI::App* cmd = app.add_subcommand("methods", "The bake methods of this build and their knobs");
   auto* json = cmd->add_flag("--json", opt->json, "as JSON");
   auto* md = cmd->add_flag("--markdown", opt->markdown, "the knob tables of docs/shot-format.md");
-  auto* schema = cmd->add_flag("--schema", opt->schema, "the `bake` schema of docs/shot.schema.json");
+  auto* schema =
+      cmd->add_flag("--schema", opt->schema, "the `bake` schema of docs/shot.schema.json");
   auto* update = cmd->add_option("--update-docs", opt->update_docs,
                                  "rewrite the generated parts of REPO/docs from the registry");
   json->excludes(md)->excludes(schema)->excludes(update);

@@ -158,26 +158,11 @@ void addRenderCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--png-exposure", opt->png_exposure,
                   "fixed exposure of the PNG previews (radiance multiplier; default: auto), so "
                   "previews of different lighting compare");
+  // Failures go to main(), which maps them like every other program (common/exit_codes.h).
   cmd->callback([opt, exit_code] {
-    // Exit codes are decided here rather than in main() because a missing file (3) is an
-    // InputError (2) to everything else.
-    try {
-      for (const std::string& path : render(*opt)) std::cout << path << "\n";
-      std::cout.flush();
-      *exit_code = kOk;
-    } catch (const MissingFileError& e) {
-      std::cerr << "cloudbake: error: " << e.what() << "\n";
-      *exit_code = kNotFound;
-    } catch (const InputError& e) {
-      std::cerr << "cloudbake: error: " << e.what() << "\n";
-      *exit_code = kBadInput;
-    } catch (const Cancelled& e) {
-      std::cerr << "cloudbake: cancelled: " << e.what() << "\n";
-      *exit_code = kCancelled;
-    } catch (const std::exception& e) {
-      std::cerr << "cloudbake: internal error: " << e.what() << "\n";
-      *exit_code = kFailure;
-    }
+    for (const std::string& path : render(*opt)) std::cout << path << "\n";
+    std::cout.flush();
+    *exit_code = kOk;
   });
 }
 

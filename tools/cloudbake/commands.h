@@ -4,18 +4,10 @@
 
 #include <CLI/CLI.hpp>
 
-namespace cloudbake::tool {
+// Exit codes (kOk, kBadInput, ...) shared with cloudctl and the server.
+#include "common/exit_codes.h"
 
-/// Exit codes shared by cloudbake and cloudctl (documented in docs/cli.md).
-enum ExitCode : int {
-  kOk = 0,
-  kFailure = 1,     ///< internal error
-  kBadInput = 2,    ///< invalid shot, asset or argument
-  kNotFound = 3,    ///< a file or job does not exist
-  kUnavailable = 4, ///< server unreachable
-  kJobFailed = 5,
-  kCancelled = 6,
-};
+namespace cloudbake::tool {
 
 /// `cloudbake mie`: Lorenz-Mie efficiencies of one sphere (cmd_mie.cpp).
 void addMieCommand(CLI::App& app, int* exit_code);
@@ -25,6 +17,8 @@ void addPhaseCommand(CLI::App& app, int* exit_code);
 void addCompareCommand(CLI::App& app, int* exit_code);
 /// `cloudbake bake-slice`: a colour-mapped slice of a bake's grid (cmd_bake_slice.cpp).
 void addBakeSliceCommand(CLI::App& app, int* exit_code);
+/// `cloudbake methods`: the registry's methods, knobs and generated docs (cmd_methods.cpp).
+void addMethodsCommand(CLI::App& app, int* exit_code);
 /// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
 void addRenderCommand(CLI::App& app, int* exit_code);
 

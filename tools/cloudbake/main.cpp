@@ -1,12 +1,31 @@
 // Entry point of the `cloudbake` tool: parses the command line and dispatches to a subcommand.
 #include <CLI/CLI.hpp>
+#include <exception>
 #include <iostream>
 
-#include "core/error.h"
+#include "common/exit_codes.h"
 #include "tools/cloudbake/commands.h"
+
+namespace {
+
+// Every failure that reaches main is reported here: the exit code every program shares, and a
+// word telling the user whether to fix their input ("error") or report a bug ("internal error").
+int reportError(std::exception_ptr error) {
+  using cloudbake::ErrorKind;
+  const cloudbake::ClassifiedError e = cloudbake::classifyException(error);
+  const char* label = e.kind == ErrorKind::kInternal    ? "internal error"
+                      : e.kind == ErrorKind::kCancelled ? "cancelled"
+                                                        : "error";
+  std::cerr << "cloudbake: " << label << ": " << e.message << "\n";
+  return cloudbake::exitCodeFor(e.kind);
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace cloudbake::tool;
+  using cloudbake::kBadInput;
+  using cloudbake::kOk;
   CLI::App app{"cloudbake: bake light scattering through clouds (in-process tool)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("cloudbake ") + CLOUDBAKE_VERSION);
@@ -16,17 +35,14 @@ int main(int argc, char** argv) {
   addRenderCommand(app, &exit_code);
   addCompareCommand(app, &exit_code);
   addBakeSliceCommand(app, &exit_code);
+  addMethodsCommand(app, &exit_code);
 
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kOk : kBadInput;
-  } catch (const cloudbake::InputError& e) {
-    std::cerr << "cloudbake: error: " << e.what() << "\n";
-    return kBadInput;
-  } catch (const std::exception& e) {
-    std::cerr << "cloudbake: internal error: " << e.what() << "\n";
-    return kFailure;
+  } catch (...) {
+    return reportError(std::current_exception());
   }
   return exit_code;
 }
