@@ -5,6 +5,9 @@
 #include <chrono>
 #include <cstdio>
 #include <string>
+#include <type_traits>
+
+#include "core/math/vec3.h"
 
 namespace cloudbake {
 
@@ -24,6 +27,23 @@ inline std::string shortNumber(double value) {
 
 inline double secondsSince(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+/// Numbers in messages and metadata as an iostream prints them by default, so text reads as it
+/// always has: integers in full, floating point in %g form with `significant` digits (6 by
+/// default, the same as shortNumber()).
+template <class T, std::enable_if_t<std::is_integral_v<T>, int> = 0>
+std::string str(T value) {
+  return std::to_string(value);
+}
+inline std::string str(double value, int significant = 6) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*g", significant, value);
+  return buf;
+}
+/// "[x, y, z]".
+inline std::string str(const Vec3& v) {
+  return "[" + str(v.x) + ", " + str(v.y) + ", " + str(v.z) + "]";
 }
 
 }  // namespace cloudbake

@@ -1,13 +1,11 @@
 #include "core/animation/optical_depth_sh.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <string>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 
 namespace cloudbake {
 
@@ -47,24 +45,22 @@ std::vector<float> sweepOpticalDepth(const BakeGrid& g, const std::vector<float>
     const int ia = up > 0 ? dims[a] - 1 - s : s;
     const int iu = ia + up;
     const bool inside = iu >= 0 && iu < dims[a];
-    tbb::parallel_for(tbb::blocked_range<int>(0, dims[b]), [&](const tbb::blocked_range<int>& r) {
-      for (int ib = r.begin(); ib != r.end(); ++ib) {
-        const size_t row = size_t(ia) * sa + size_t(ib) * sb;
-        for (int ic = 0; ic < dims[c]; ++ic) {
-          const size_t v = row + size_t(ic) * sc;
-          double t = 0, rho_up = 0;
-          if (inside) {
-            // Corners (ib + ob + db, ic + oc + dc), db, dc in {0, 1}; outside the lattice is 0.
-            for (int q = 0; q < 4; ++q) {
-              const int jb = ib + ob + (q >> 1), jc = ic + oc + (q & 1);
-              if (jb < 0 || jc < 0 || jb >= dims[b] || jc >= dims[c]) continue;
-              const size_t u = size_t(iu) * sa + size_t(jb) * sb + size_t(jc) * sc;
-              t += wq[q] * tau[u];
-              rho_up += wq[q] * density[u];
-            }
+    parallelFor(0, dims[b], [&](int ib) {
+      const size_t row = size_t(ia) * sa + size_t(ib) * sb;
+      for (int ic = 0; ic < dims[c]; ++ic) {
+        const size_t v = row + size_t(ic) * sc;
+        double t = 0, rho_up = 0;
+        if (inside) {
+          // Corners (ib + ob + db, ic + oc + dc), db, dc in {0, 1}; outside the lattice is 0.
+          for (int q = 0; q < 4; ++q) {
+            const int jb = ib + ob + (q >> 1), jc = ic + oc + (q & 1);
+            if (jb < 0 || jc < 0 || jb >= dims[b] || jc >= dims[c]) continue;
+            const size_t u = size_t(iu) * sa + size_t(jb) * sb + size_t(jc) * sc;
+            t += wq[q] * tau[u];
+            rho_up += wq[q] * density[u];
           }
-          tau[v] = float(t + seg * (double(density[v]) + rho_up));
         }
+        tau[v] = float(t + seg * (double(density[v]) + rho_up));
       }
     });
   }
@@ -93,15 +89,14 @@ std::vector<ShCoefficients> projectOpticalDepth(const BakeGrid& grid,
   for (int d = 0; d < directions; ++d) {
     const std::vector<float> tau = sweepOpticalDepth(grid, density, extinction, dirs[size_t(d)]);
     const auto y = shBasis(dirs[size_t(d)]);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        for (size_t v = r.begin(); v != r.end(); ++v) {
-                          const double t = tau[v] * weight;
-                          if (t == 0) continue;
-                          for (int i = 0; i < kShCoefficients; ++i)
-                            acc[v * kShCoefficients + size_t(i)] += t * y[size_t(i)];
-                        }
-                      });
+    parallelFor(0, int64_t(n),
+                [&](size_t v) {
+                  const double t = tau[v] * weight;
+                  if (t == 0) return;
+                  for (int i = 0; i < kShCoefficients; ++i)
+                    acc[v * kShCoefficients + size_t(i)] += t * y[size_t(i)];
+                },
+                {kCheapIterationGrain});
     if (progress && !progress(double(d + 1) / directions)) throw Cancelled();
   }
   for (size_t v = 0; v < n; ++v)

@@ -5,8 +5,8 @@
 #include <functional>
 #include <vector>
 
-#include "core/math/spherical_harmonics.h"
 #include "core/bake/bake_grid.h"
+#include "core/math/spherical_harmonics.h"
 
 namespace cloudbake {
 

@@ -1,14 +1,12 @@
 #include "core/animation/sample_transfer.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <limits>
 #include <numeric>
 #include <queue>
 #include <string>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 #include "core/math/rng.h"
 
 namespace cloudbake {
@@ -150,80 +148,77 @@ TransferCuts computeTransferCuts(const SampleTree& tree, const BakeGrid& receive
       return error < o.error || (error == o.error && node > o.node);
     }
   };
-  // Chunks of receivers in parallel; progress and cancellation between chunks, on this thread.
-  const size_t chunk = std::max<size_t>(256, n / 50);
-  for (size_t start = 0; start < n; start += chunk) {
-    const size_t stop = std::min(n, start + chunk);
-    tbb::parallel_for(
-        tbb::blocked_range<size_t>(start, stop, 16), [&](const tbb::blocked_range<size_t>& range) {
-          for (size_t r = range.begin(); r != range.end(); ++r) {
-            if (!receiver_mask[r]) continue;
-            const int i = int(r % size_t(receivers.nx));
-            const int j = int((r / size_t(receivers.nx)) % size_t(receivers.ny));
-            const int k = int(r / (size_t(receivers.nx) * size_t(receivers.ny)));
-            const Vec3 x = receivers.center(i, j, k);
-            // The transfer to a node's representative point: its sample for a leaf, else its
-            // centroid.
-            auto transfer = [&](int id) {
-              const SampleTreeNode& nd = tree.nodes[size_t(id)];
-              const Vec3 p = nd.leaf() ? tree.points[size_t(nd.begin)] : nd.centroid;
-              return representativeGeometry(tree, id, x) *
-                     std::exp(-opticalDepth(receivers, density.data(), extinction, x, p));
-            };
-            // A node's entry from its children's representative transfers.
-            auto entry = [&](int id, double own) {
-              const SampleTreeNode& nd = tree.nodes[size_t(id)];
-              if (nd.leaf()) return Entry{0.0, id, own};
-              const double vl = transfer(nd.left), vr = transfer(nd.right);
-              const double nl = tree.nodes[size_t(nd.left)].count(),
-                           nr = tree.nodes[size_t(nd.right)].count();
-              Entry e{std::sqrt(nl * nr) * std::abs(vl - vr), id, (nl * vl + nr * vr) / (nl + nr)};
-              if (length(x - nd.centroid) < nd.radius + a)
-                e.error = std::numeric_limits<double>::infinity();
-              return e;
-            };
-            std::priority_queue<Entry> open;
-            std::vector<Entry> closed;
-            double total = 0;  // sum over the cut of count * mean
-            auto push = [&](const Entry& e) {
-              total += tree.nodes[size_t(e.node)].count() * e.value;
-              if (tree.nodes[size_t(e.node)].leaf()) {
-                closed.push_back(e);
-              } else {
-                open.push(e);
-              }
-            };
-            push(entry(0, tree.nodes[0].leaf() ? transfer(0) : 0.0));
-            while (!open.empty() && int(open.size() + closed.size()) < options.max_cut) {
-              const Entry top = open.top();
-              if (top.error <= options.cut_error * total) break;
-              open.pop();
-              const SampleTreeNode& nd = tree.nodes[size_t(top.node)];
-              total -= nd.count() * top.value;
-              // The children's own transfers were computed for top's estimate; recomputing them is
-              // cheaper than keeping them per open node.
-              push(entry(nd.left, tree.nodes[size_t(nd.left)].leaf() ? transfer(nd.left) : 0.0));
-              push(entry(nd.right, tree.nodes[size_t(nd.right)].leaf() ? transfer(nd.right) : 0.0));
-            }
-            while (!open.empty()) {
-              closed.push_back(open.top());
-              open.pop();
-            }
-            std::sort(closed.begin(), closed.end(), [&](const Entry& p, const Entry& q) {
-              return tree.nodes[size_t(p.node)].begin < tree.nodes[size_t(q.node)].begin;
-            });
-            auto& nodes = node_lists[r];
-            auto& values = value_lists[r];
-            nodes.reserve(closed.size());
-            values.reserve(closed.size());
-            for (const Entry& e : closed) {
-              nodes.push_back(uint32_t(e.node));
-              values.push_back(float(e.value));
-            }
+  // Receivers in parallel; progress is the cancellation poll.
+  ParallelOptions per_receiver;
+  if (progress) per_receiver.cancelled = [&](double f) { return !progress(f); };
+  parallelFor(
+      0, int64_t(n),
+      [&](size_t r) {
+        if (!receiver_mask[r]) return;
+        const int i = int(r % size_t(receivers.nx));
+        const int j = int((r / size_t(receivers.nx)) % size_t(receivers.ny));
+        const int k = int(r / (size_t(receivers.nx) * size_t(receivers.ny)));
+        const Vec3 x = receivers.center(i, j, k);
+        // The transfer to a node's representative point: its sample for a leaf, else its
+        // centroid.
+        auto transfer = [&](int id) {
+          const SampleTreeNode& nd = tree.nodes[size_t(id)];
+          const Vec3 p = nd.leaf() ? tree.points[size_t(nd.begin)] : nd.centroid;
+          return representativeGeometry(tree, id, x) *
+                 std::exp(-opticalDepth(receivers, density.data(), extinction, x, p));
+        };
+        // A node's entry from its children's representative transfers.
+        auto entry = [&](int id, double own) {
+          const SampleTreeNode& nd = tree.nodes[size_t(id)];
+          if (nd.leaf()) return Entry{0.0, id, own};
+          const double vl = transfer(nd.left), vr = transfer(nd.right);
+          const double nl = tree.nodes[size_t(nd.left)].count(),
+                       nr = tree.nodes[size_t(nd.right)].count();
+          Entry e{std::sqrt(nl * nr) * std::abs(vl - vr), id, (nl * vl + nr * vr) / (nl + nr)};
+          if (length(x - nd.centroid) < nd.radius + a)
+            e.error = std::numeric_limits<double>::infinity();
+          return e;
+        };
+        std::priority_queue<Entry> open;
+        std::vector<Entry> closed;
+        double total = 0;  // sum over the cut of count * mean
+        auto push = [&](const Entry& e) {
+          total += tree.nodes[size_t(e.node)].count() * e.value;
+          if (tree.nodes[size_t(e.node)].leaf()) {
+            closed.push_back(e);
+          } else {
+            open.push(e);
           }
+        };
+        push(entry(0, tree.nodes[0].leaf() ? transfer(0) : 0.0));
+        while (!open.empty() && int(open.size() + closed.size()) < options.max_cut) {
+          const Entry top = open.top();
+          if (top.error <= options.cut_error * total) break;
+          open.pop();
+          const SampleTreeNode& nd = tree.nodes[size_t(top.node)];
+          total -= nd.count() * top.value;
+          // The children's own transfers were computed for top's estimate; recomputing them is
+          // cheaper than keeping them per open node.
+          push(entry(nd.left, tree.nodes[size_t(nd.left)].leaf() ? transfer(nd.left) : 0.0));
+          push(entry(nd.right, tree.nodes[size_t(nd.right)].leaf() ? transfer(nd.right) : 0.0));
+        }
+        while (!open.empty()) {
+          closed.push_back(open.top());
+          open.pop();
+        }
+        std::sort(closed.begin(), closed.end(), [&](const Entry& p, const Entry& q) {
+          return tree.nodes[size_t(p.node)].begin < tree.nodes[size_t(q.node)].begin;
         });
-    if (progress && !progress(double(stop) / double(n))) throw Cancelled();
-  }
+        auto& nodes = node_lists[r];
+        auto& values = value_lists[r];
+        nodes.reserve(closed.size());
+        values.reserve(closed.size());
+        for (const Entry& e : closed) {
+          nodes.push_back(uint32_t(e.node));
+          values.push_back(float(e.value));
+        }
+      },
+      per_receiver);
   TransferCuts cuts;
   cuts.offsets.resize(n + 1, 0);
   for (size_t r = 0; r < n; ++r) cuts.offsets[r + 1] = cuts.offsets[r] + node_lists[r].size();

@@ -6,11 +6,10 @@
 
 #include "core/animation/optical_depth_sh.h"
 #include "core/error.h"
+#include "core/math/spherical_harmonics.h"
 
 namespace cloudbake {
 namespace {
-
-const double kSqrt4Pi = std::sqrt(4 * kPi);
 
 double hatNorm(const ShCoefficients& g) {
   double s = 0;

@@ -1,13 +1,11 @@
 #include "core/animation/video_texture.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <string>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 #include "core/math/rng.h"
 
 namespace cloudbake {
@@ -50,27 +48,29 @@ std::vector<double> frameDistances(const BasicVolumes& frames) {
     }
     for (float v : frames[size_t(k)]) {
       if (!std::isfinite(v)) {
-        throw InputError("basic volumes: volume " + std::to_string(k) + " has a non-finite density");
+        throw InputError("basic volumes: volume " + std::to_string(k) +
+                         " has a non-finite density");
       }
     }
   }
   std::vector<double> d(size_t(n) * size_t(n), 0.0);
-  tbb::parallel_for(tbb::blocked_range<int>(0, n), [&](const tbb::blocked_range<int>& r) {
-    for (int k = r.begin(); k != r.end(); ++k) {
-      for (int l = k + 1; l < n; ++l) {
-        d[size_t(k) * size_t(n) + size_t(l)] = squaredDifference(frames[size_t(k)], frames[size_t(l)]);
-      }
+  parallelFor(0, n, [&](int k) {
+    for (int l = k + 1; l < n; ++l) {
+      d[size_t(k) * size_t(n) + size_t(l)] =
+          squaredDifference(frames[size_t(k)], frames[size_t(l)]);
     }
   });
   for (int k = 0; k < n; ++k)
-    for (int l = 0; l < k; ++l) d[size_t(k) * size_t(n) + size_t(l)] = d[size_t(l) * size_t(n) + size_t(k)];
+    for (int l = 0; l < k; ++l)
+      d[size_t(k) * size_t(n) + size_t(l)] = d[size_t(l) * size_t(n) + size_t(k)];
   return d;
 }
 
 std::vector<double> transitionProbabilities(const std::vector<double>& distances, int n,
                                             const VideoTextureOptions& options) {
   if (n < 2 || distances.size() != size_t(n) * size_t(n)) {
-    throw InputError("basic volumes: a distance matrix of " + std::to_string(n) + "^2 entries needs at least 2 volumes");
+    throw InputError("basic volumes: a distance matrix of " + std::to_string(n) +
+                     "^2 entries needs at least 2 volumes");
   }
   checkOptions(n, options);
   const int h = options.dissolve_frames;

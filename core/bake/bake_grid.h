@@ -13,8 +13,8 @@ namespace cloudbake {
 /// in-memory form of a bake; a .vdb file stores the same voxels sparsely on an OpenVDB transform
 /// with this voxel size whose index (0, 0, 0) is `origin` (core/bake/baked_light_vdb.h).
 struct BakeGrid {
-  Vec3 origin;             ///< world position of the centre of voxel (0, 0, 0)
-  double voxel_size = 1;   ///< world units, > 0
+  Vec3 origin;            ///< world position of the centre of voxel (0, 0, 0)
+  double voxel_size = 1;  ///< world units, > 0
   int nx = 0, ny = 0, nz = 0;
 
   size_t voxelCount() const { return size_t(nx) * size_t(ny) * size_t(nz); }

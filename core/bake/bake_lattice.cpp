@@ -1,13 +1,11 @@
 #include "core/bake/bake_lattice.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <string>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 
 namespace cloudbake {
 
@@ -59,9 +57,9 @@ BakedLight makeBakeLatticeOver(const DensityField& field, const Bounds3& b, int 
   const int ss = std::clamp(int(std::ceil(2.0 * h / std::max(feature, 1e-300))), 2, 4);
   const double inv = 1.0 / (double(ss) * ss * ss);
   const MajorantGrid& maj = field.majorants();
-  tbb::parallel_for(tbb::blocked_range<int>(0, g.nz), [&](const tbb::blocked_range<int>& r) {
+  parallelFor(0, g.nz, [&](int64_t k0, int64_t k1) {
     std::unique_ptr<DensityField::Lookup> lookup = field.lookup();
-    for (int k = r.begin(); k != r.end(); ++k) {
+    for (int k = int(k0); k < k1; ++k) {
       for (int j = 0; j < g.ny; ++j) {
         for (int i = 0; i < g.nx; ++i) {
           const Vec3 c = g.center(i, j, k);

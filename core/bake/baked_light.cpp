@@ -1,32 +1,28 @@
 #include "core/bake/baked_light.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <cmath>
 #include <sstream>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 
 namespace cloudbake {
 
 std::vector<uint8_t> densitySupport(const BakeGrid& g, const std::vector<float>& density) {
   std::vector<uint8_t> support(g.voxelCount(), 0);
   // A gather (each voxel looks at its neighbours), so threads never write the same byte.
-  tbb::parallel_for(tbb::blocked_range<int>(0, g.nz), [&](const tbb::blocked_range<int>& r) {
-    for (int k = r.begin(); k != r.end(); ++k) {
-      for (int j = 0; j < g.ny; ++j) {
-        for (int i = 0; i < g.nx; ++i) {
-          bool any = false;
-          for (int dk = -1; dk <= 1 && !any; ++dk)
-            for (int dj = -1; dj <= 1 && !any; ++dj)
-              for (int di = -1; di <= 1 && !any; ++di) {
-                const int a = i + di, b = j + dj, c = k + dk;
-                if (a < 0 || b < 0 || c < 0 || a >= g.nx || b >= g.ny || c >= g.nz) continue;
-                any = density[g.index(a, b, c)] > 0;
-              }
-          support[g.index(i, j, k)] = any ? 1 : 0;
-        }
+  parallelFor(0, g.nz, [&](int k) {
+    for (int j = 0; j < g.ny; ++j) {
+      for (int i = 0; i < g.nx; ++i) {
+        bool any = false;
+        for (int dk = -1; dk <= 1 && !any; ++dk)
+          for (int dj = -1; dj <= 1 && !any; ++dj)
+            for (int di = -1; di <= 1 && !any; ++di) {
+              const int a = i + di, b = j + dj, c = k + dk;
+              if (a < 0 || b < 0 || c < 0 || a >= g.nx || b >= g.ny || c >= g.nz) continue;
+              any = density[g.index(a, b, c)] > 0;
+            }
+        support[g.index(i, j, k)] = any ? 1 : 0;
       }
     }
   });

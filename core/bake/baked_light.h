@@ -63,7 +63,7 @@ struct BakedLight {
   std::string method;  ///< "single" or "pointcloud"
   Vec3 sun_direction{0, 0, 1};
   std::map<std::string, std::string> metadata;
-  std::vector<float> density;                  ///< grid.voxelCount() values
+  std::vector<float> density;                   ///< grid.voxelCount() values
   std::map<std::string, BakeChannel> channels;  ///< every grid but density, by name
 
   /// The channel, or nullptr when the bake has none of that name.

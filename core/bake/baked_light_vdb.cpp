@@ -12,13 +12,11 @@
 namespace cloudbake {
 namespace {
 
-
 std::string exact(double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.17g", v);
   return buf;
 }
-
 
 openvdb::math::Transform::Ptr latticeTransform(const BakeGrid& g) {
   auto xform = openvdb::math::Transform::createLinearTransform(g.voxel_size);
@@ -43,7 +41,6 @@ typename GridT::Ptr makeGrid(const BakedLight& b, const std::vector<uint8_t>& ma
   return grid;
 }
 
-
 }  // namespace
 
 void writeBakedLight(const std::string& path, const BakedLight& bake) {
@@ -63,8 +60,8 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
       throw InputError(path + ": bake grid '" + name + "' does not match its lattice");
     }
     if (c.components == 1) {
-      grids.push_back(makeGrid<openvdb::FloatGrid>(bake, mask, name,
-                                                   [&](size_t v) { return c.data[v]; }));
+      grids.push_back(
+          makeGrid<openvdb::FloatGrid>(bake, mask, name, [&](size_t v) { return c.data[v]; }));
     } else if (c.components == 3) {
       auto grid = makeGrid<openvdb::Vec3SGrid>(bake, mask, name, [&](size_t v) {
         return openvdb::Vec3s(c.data[3 * v], c.data[3 * v + 1], c.data[3 * v + 2]);
@@ -72,8 +69,8 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
       grid->setVectorType(openvdb::VEC_INVARIANT);
       grids.push_back(grid);
     } else {
-      throw InputError(path + ": bake grid '" + name + "' has " +
-                       std::to_string(c.components) + " components (1 or 3 expected)");
+      throw InputError(path + ": bake grid '" + name + "' has " + std::to_string(c.components) +
+                       " components (1 or 3 expected)");
     }
   }
   openvdb::MetaMap meta;

@@ -10,8 +10,8 @@ PointGrid::PointGrid(const std::vector<Vec3>& points, double cell_size) {
   // At most ~2 cells per point (and 2^24 in all): beyond that cells are mostly empty and only
   // cost memory; a larger cell still finds every neighbour (queries span several cells).
   const double cells_max = std::min(2.0 * double(points.size()) + 8.0, double(1 << 24));
-  const double volume = std::max(extent.x, 1e-300) * std::max(extent.y, 1e-300) *
-                        std::max(extent.z, 1e-300);
+  const double volume =
+      std::max(extent.x, 1e-300) * std::max(extent.y, 1e-300) * std::max(extent.z, 1e-300);
   double cell = cell_size > 0 && std::isfinite(cell_size) ? cell_size : 1.0;
   cell = std::max(cell, maxComponent(extent) * 1e-6);
   for (int guard = 0; guard < 200; ++guard) {
@@ -31,9 +31,9 @@ PointGrid::PointGrid(const std::vector<Vec3>& points, double cell_size) {
   start_.assign(ncells + 1, 0);
   for (size_t i = 0; i < points.size(); ++i) {
     const Vec3 c = (points[i] - origin_) / cell_;
-    const size_t id = (size_t(clampCell(c.z, nz_)) * size_t(ny_) + size_t(clampCell(c.y, ny_))) *
-                          size_t(nx_) +
-                      size_t(clampCell(c.x, nx_));
+    const size_t id =
+        (size_t(clampCell(c.z, nz_)) * size_t(ny_) + size_t(clampCell(c.y, ny_))) * size_t(nx_) +
+        size_t(clampCell(c.x, nx_));
     cell_of[i] = uint32_t(id);
     ++start_[id + 1];
   }
@@ -48,8 +48,8 @@ PointGrid::PointGrid(const std::vector<Vec3>& points, double cell_size) {
   }
 }
 
-double estimateMeanNeighbours(const PointGrid& grid, const std::vector<Vec3>& points,
-                              double radius, int samples, double stop_above) {
+double estimateMeanNeighbours(const PointGrid& grid, const std::vector<Vec3>& points, double radius,
+                              int samples, double stop_above) {
   const size_t n = points.size();
   if (n == 0) return 0;
   const size_t s = std::min(n, size_t(std::max(samples, 1)));

@@ -2,9 +2,6 @@
 // per-pair transfer lists (CSR) the scattering passes gather over.
 #pragma once
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -13,6 +10,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 #include "core/math/vec3.h"
 
 namespace cloudbake {
@@ -69,8 +67,8 @@ class PointGrid {
 /// Mean number of other points within `radius`, from `samples` points spread evenly over the
 /// index range (which follows the lattice, so over the whole cloud). Deterministic. Stops early
 /// and returns some value above `stop_above` once the mean is known to exceed it.
-double estimateMeanNeighbours(const PointGrid& grid, const std::vector<Vec3>& points,
-                              double radius, int samples = 256,
+double estimateMeanNeighbours(const PointGrid& grid, const std::vector<Vec3>& points, double radius,
+                              int samples = 256,
                               double stop_above = std::numeric_limits<double>::infinity());
 
 /// Every (destination, source) pair within the cut-off with a non-negligible transfer weight,
@@ -79,8 +77,8 @@ double estimateMeanNeighbours(const PointGrid& grid, const std::vector<Vec3>& po
 struct NeighbourPairs {
   std::vector<uint64_t> offset;  ///< n + 1 entries
   std::vector<uint32_t> source;
-  std::vector<float> weight;     ///< geometric transfer weight (rule-specific)
-  uint64_t within_radius = 0;    ///< pairs within the cut-off, negligible ones included
+  std::vector<float> weight;   ///< geometric transfer weight (rule-specific)
+  uint64_t within_radius = 0;  ///< pairs within the cut-off, negligible ones included
 
   uint64_t size() const { return source.size(); }
 };
@@ -88,7 +86,7 @@ struct NeighbourPairs {
 /// Builds the pairs for all destinations: weight_fn(dst, src, d) (d: distance, world units)
 /// returns the pair's weight; pairs with weight <= 0 are dropped (a negligible transmittance).
 /// Parallel over blocks of destinations, appended in destination order: deterministic.
-/// `cancelled(fraction)` is polled between chunks of destinations; returning true stops the
+/// `cancelled(fraction)` is polled between blocks of destinations; returning true stops the
 /// build with Cancelled. `reserve` pre-sizes the arrays (the estimate of the pair count).
 template <class WeightFn>
 NeighbourPairs buildNeighbourPairs(const PointGrid& grid, const std::vector<Vec3>& points,
@@ -109,33 +107,38 @@ NeighbourPairs buildNeighbourPairs(const PointGrid& grid, const std::vector<Vec3
   };
   std::vector<Block> blocks(kChunk / kBlock);
   for (size_t chunk = 0; chunk < n; chunk += kChunk) {
-    if (cancelled && cancelled(double(chunk) / double(n))) throw Cancelled();
     const size_t chunk_end = std::min(n, chunk + kChunk);
     const size_t nblocks = (chunk_end - chunk + kBlock - 1) / kBlock;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, nblocks, 1),
-                      [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t b = r.begin(); b != r.end(); ++b) {
-        Block& blk = blocks[b];
-        blk.source.clear();
-        blk.weight.clear();
-        blk.count.clear();
-        blk.within = 0;
-        const size_t d0 = chunk + b * kBlock, d1 = std::min(chunk_end, d0 + kBlock);
-        for (size_t dst = d0; dst < d1; ++dst) {
-          uint32_t count = 0;
-          grid.forEachWithin(points[dst], radius, [&](uint32_t src, double d2) {
-            if (src == dst) return;
-            ++blk.within;
-            const float w = weight_fn(uint32_t(dst), src, std::sqrt(d2));
-            if (!(w > 0)) return;
-            blk.source.push_back(src);
-            blk.weight.push_back(w);
-            ++count;
-          });
-          blk.count.push_back(count);
-        }
-      }
-    });
+    ParallelOptions per_block;  // polled between blocks
+    if (cancelled) {
+      per_block.cancelled = [&](double f) {
+        return cancelled((double(chunk) + f * double(chunk_end - chunk)) / double(n));
+      };
+    }
+    parallelFor(
+        0, int64_t(nblocks),
+        [&](int64_t b) {
+          Block& blk = blocks[size_t(b)];
+          blk.source.clear();
+          blk.weight.clear();
+          blk.count.clear();
+          blk.within = 0;
+          const size_t d0 = chunk + size_t(b) * kBlock, d1 = std::min(chunk_end, d0 + kBlock);
+          for (size_t dst = d0; dst < d1; ++dst) {
+            uint32_t count = 0;
+            grid.forEachWithin(points[dst], radius, [&](uint32_t src, double d2) {
+              if (src == dst) return;
+              ++blk.within;
+              const float w = weight_fn(uint32_t(dst), src, std::sqrt(d2));
+              if (!(w > 0)) return;
+              blk.source.push_back(src);
+              blk.weight.push_back(w);
+              ++count;
+            });
+            blk.count.push_back(count);
+          }
+        },
+        per_block);
     for (size_t b = 0; b < nblocks; ++b) {
       const Block& blk = blocks[b];
       const size_t d0 = chunk + b * kBlock;

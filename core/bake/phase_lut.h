@@ -24,11 +24,8 @@ class PhaseLut {
     const double t = x - i;
     return table_[size_t(i)] * (1 - t) + table_[size_t(i) + 1] * t;
   }
-  /// Luminance-weighted value (0.2126, 0.7152, 0.0722), for scalar weights.
-  double evalLuminance(double cos_theta) const {
-    const Rgb v = eval(cos_theta);
-    return 0.2126 * v.x + 0.7152 * v.y + 0.0722 * v.z;
-  }
+  /// Luminance-weighted value, for scalar weights.
+  double evalLuminance(double cos_theta) const { return luminance(eval(cos_theta)); }
 
  private:
   int size_;

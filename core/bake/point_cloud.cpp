@@ -1,12 +1,10 @@
 #include "core/bake/point_cloud.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 #include "core/math/rng.h"
 
 namespace cloudbake {
@@ -52,23 +50,22 @@ PointCloud placePoints(const BakeGrid& grid, const std::vector<float>& density, 
   cloud.position.resize(size_t(n));
   cloud.density.resize(size_t(n));
   const size_t nxy = size_t(grid.nx) * size_t(grid.ny);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, size_t(n), 4096),
-                    [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t p = r.begin(); p != r.end(); ++p) {
-      const size_t v = voxel_of[p];
-      const int k = int(v / nxy), jj = int((v % nxy) / size_t(grid.nx)),
-                i = int(v % size_t(grid.nx));
-      Rng rng(mixBits(seed, p));
-      const double ux = rng.uniform(), uy = rng.uniform(), uz = rng.uniform();
-      const Vec3 pos = grid.center(i, jj, k) + Vec3(ux - 0.5, uy - 0.5, uz - 0.5) * h;
-      cloud.position[p] = pos;
-      // Inside its own voxel the trilinear weight of that voxel is >= 1/8, so D > 0; the floor
-      // only guards denormal densities.
-      const float dv = sampleTrilinear(grid, density.data(), pos);
-      cloud.density[p] = std::max(dv, 0.125f * density[v]);
-      if (!(cloud.density[p] > 0)) cloud.density[p] = 1e-30f;
-    }
-  });
+  parallelFor(0, n,
+              [&](size_t p) {
+                const size_t v = voxel_of[p];
+                const int k = int(v / nxy), jj = int((v % nxy) / size_t(grid.nx)),
+                          i = int(v % size_t(grid.nx));
+                Rng rng(mixBits(seed, p));
+                const double ux = rng.uniform(), uy = rng.uniform(), uz = rng.uniform();
+                const Vec3 pos = grid.center(i, jj, k) + Vec3(ux - 0.5, uy - 0.5, uz - 0.5) * h;
+                cloud.position[p] = pos;
+                // Inside its own voxel the trilinear weight of that voxel is >= 1/8, so D > 0; the
+                // floor only guards denormal densities.
+                const float dv = sampleTrilinear(grid, density.data(), pos);
+                cloud.density[p] = std::max(dv, 0.125f * density[v]);
+                if (!(cloud.density[p] > 0)) cloud.density[p] = 1e-30f;
+              },
+              {kCheapIterationGrain});
   return cloud;
 }
 
@@ -76,12 +73,9 @@ void computePointSunTransmittance(PointCloud& cloud, const BakeGrid& grid,
                                   const std::vector<float>& density, double extinction,
                                   const Vec3& sun_dir, double step) {
   cloud.sun.assign(cloud.size(), 0.f);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, cloud.size(), 256),
-                    [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t p = r.begin(); p != r.end(); ++p) {
-      cloud.sun[p] = float(marchTransmittance(grid, density.data(), extinction, cloud.position[p],
-                                              sun_dir, step));
-    }
+  parallelFor(0, int64_t(cloud.size()), [&](size_t p) {
+    cloud.sun[p] = float(
+        marchTransmittance(grid, density.data(), extinction, cloud.position[p], sun_dir, step));
   });
 }
 

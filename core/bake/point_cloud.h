@@ -16,11 +16,11 @@ namespace cloudbake {
 /// (systematic sampling of the lattice's mass), so every point stands for the same mass m and a
 /// point's volume is V_i = m / D_i: dense regions get more, smaller points.
 struct PointCloud {
-  std::vector<Vec3> position;   ///< P_i, world units
-  std::vector<float> density;   ///< D_i: trilinear lattice density at P_i (> 0)
-  std::vector<float> sun;       ///< Ci_i: transmittance from P_i to the sun, [0, 1]
-  double mass = 0;              ///< m = M / n, density x world units^3 (M: the lattice's mass)
-  size_t occupied_voxels = 0;   ///< lattice voxels with density > 0
+  std::vector<Vec3> position;  ///< P_i, world units
+  std::vector<float> density;  ///< D_i: trilinear lattice density at P_i (> 0)
+  std::vector<float> sun;      ///< Ci_i: transmittance from P_i to the sun, [0, 1]
+  double mass = 0;             ///< m = M / n, density x world units^3 (M: the lattice's mass)
+  size_t occupied_voxels = 0;  ///< lattice voxels with density > 0
   /// Mean point spacing (occupied volume / n)^(1/3), world units: occupied volume = occupied
   /// voxels x voxel_size^3 (not their bounding box, which would overstate it for round clouds).
   double spacing = 0;

@@ -1,8 +1,5 @@
 #include "core/bake/point_splat.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -10,6 +7,7 @@
 
 #include "core/bake/neighbour_grid.h"
 #include "core/error.h"
+#include "core/math/parallel.h"
 
 namespace cloudbake {
 
@@ -25,14 +23,13 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
   float* mr = bake.add(bake_grids::kMieRatio, 1).data.data();
   const bool sky = !result.co_sky.empty();
   float* cs = sky ? bake.add(bake_grids::kSkyMultipleFluence, 3).data.data() : nullptr;
-  constexpr int kSlices = 8;  // z slices between cancellation polls
-  for (int k0 = 0; k0 < g.nz; k0 += kSlices) {
-    if (cancelled && cancelled(double(k0) / g.nz)) throw Cancelled();
-    const int k1 = std::min(g.nz, k0 + kSlices);
-    tbb::parallel_for(tbb::blocked_range<int>(k0 * g.ny, k1 * g.ny),
-                      [&](const tbb::blocked_range<int>& r) {
-      for (int row = r.begin(); row != r.end(); ++row) {
-        const int k = row / g.ny, j = row % g.ny;
+  ParallelOptions rows;
+  rows.grain = g.ny;  // a z slice of rows between cancellation polls
+  rows.cancelled = cancelled;
+  parallelFor(
+      0, int64_t(g.nz) * g.ny,
+      [&](int64_t row) {
+        const int k = int(row / g.ny), j = int(row % g.ny);
         for (int i = 0; i < g.nx; ++i) {
           const size_t v = g.index(i, j, k);
           if (!support[v]) continue;
@@ -84,9 +81,8 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
           }
           mr[v] = float(std::clamp(rsum / wsum, 0.0, 1.0));
         }
-      }
-    });
-  }
+      },
+      rows);
   return rs;
 }
 

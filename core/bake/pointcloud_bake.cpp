@@ -2,7 +2,6 @@
 
 #include <chrono>
 #include <cmath>
-#include <sstream>
 #include <string>
 
 #include "core/bake/bake_lattice.h"
@@ -11,22 +10,16 @@
 #include "core/bake/sky_visibility.h"
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
+#include "core/format.h"
 
 namespace cloudbake {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
-template <class T>
-std::string str(const T& v) {
-  std::ostringstream s;
-  s.precision(9);
-  s << v;
-  return s.str();
-}
+// Significant digits of the floating-point metadata (a float's worth, as the files have always
+// had).
+constexpr int kMetadataDigits = 9;
 
 // Progress of one stage mapped into [from, to] of the whole bake.
 BakeProgressFn subRange(const BakeProgressFn& progress, double from, double to) {
@@ -94,36 +87,37 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
   md["cloudbake:points"] = str(result.cloud.size());
   md["cloudbake:passes"] = str(options.passes);
   md["cloudbake:passes_run"] = str(result.passes_run);
-  md["cloudbake:radius"] = str(result.radius);
-  md["cloudbake:radius_option"] = str(options.radius);
-  md["cloudbake:mean_neighbours"] = str(result.mean_neighbours);
-  md["cloudbake:point_spacing"] = str(result.cloud.spacing);
-  md["cloudbake:splat_radius"] = str(splat_radius);
+  md["cloudbake:radius"] = str(result.radius, kMetadataDigits);
+  md["cloudbake:radius_option"] = str(options.radius, kMetadataDigits);
+  md["cloudbake:mean_neighbours"] = str(result.mean_neighbours, kMetadataDigits);
+  md["cloudbake:point_spacing"] = str(result.cloud.spacing, kMetadataDigits);
+  md["cloudbake:splat_radius"] = str(splat_radius, kMetadataDigits);
   md["cloudbake:rule"] = paper ? "paper" : "normalized";
   // How a view turns Co, R and light_dir into in-scattered light (render_from_bake.cpp).
   md["cloudbake:angular_model"] = paper ? "beam" : "p1";
   md["cloudbake:output_mapping"] = options.output_mapping ? "true" : "false";
-  md["cloudbake:tolerance"] = str(options.tolerance);
-  md["cloudbake:last_relative_change"] = str(result.last_relative_change);
-  md["cloudbake:tail_ratio"] = str(result.tail_ratio);
+  md["cloudbake:tolerance"] = str(options.tolerance, kMetadataDigits);
+  md["cloudbake:last_relative_change"] = str(result.last_relative_change, kMetadataDigits);
+  md["cloudbake:tail_ratio"] = str(result.tail_ratio, kMetadataDigits);
   md["cloudbake:pair_interactions"] = str(result.pair_interactions);
   md["cloudbake:pairs"] = str(result.pairs);
   md["cloudbake:light_resolution"] = str(options.light_resolution);
-  md["cloudbake:step"] = str(options.step);
+  md["cloudbake:step"] = str(options.step, kMetadataDigits);
   md["cloudbake:seed"] = str(options.seed);
   if (!result.transfer_scale.empty()) {
     double mean = 0;
     for (const float k : result.transfer_scale) mean += k;
-    md["cloudbake:mean_transfer_scale"] = str(mean / double(result.transfer_scale.size()));
+    md["cloudbake:mean_transfer_scale"] =
+        str(mean / double(result.transfer_scale.size()), kMetadataDigits);
   }
   md["cloudbake:sky"] = options.sky ? "true" : "false";
-  md["cloudbake:seconds_lattice"] = str(seconds_lattice);
-  md["cloudbake:seconds_sun_transmittance"] = str(seconds_sun);
-  md["cloudbake:seconds_sky_visibility"] = str(seconds_sky);
-  md["cloudbake:seconds_points"] = str(result.seconds_points);
-  md["cloudbake:seconds_neighbours"] = str(result.seconds_neighbours);
-  md["cloudbake:seconds_passes"] = str(result.seconds_passes);
-  md["cloudbake:seconds_splat"] = str(seconds_splat);
+  md["cloudbake:seconds_lattice"] = str(seconds_lattice, kMetadataDigits);
+  md["cloudbake:seconds_sun_transmittance"] = str(seconds_sun, kMetadataDigits);
+  md["cloudbake:seconds_sky_visibility"] = str(seconds_sky, kMetadataDigits);
+  md["cloudbake:seconds_points"] = str(result.seconds_points, kMetadataDigits);
+  md["cloudbake:seconds_neighbours"] = str(result.seconds_neighbours, kMetadataDigits);
+  md["cloudbake:seconds_passes"] = str(result.seconds_passes, kMetadataDigits);
+  md["cloudbake:seconds_splat"] = str(seconds_splat, kMetadataDigits);
   report(1.0, "done");
 
   if (stats) {

@@ -13,9 +13,9 @@ namespace cloudbake {
 
 /// Knobs of method `pointcloud` (shot keys beside "method": "pointcloud").
 struct PointcloudOptions {
-  int points = 65536;    ///< points inside the volume, [64, 2^24]; the quality knob
-  int passes = 32;       ///< maximum scattering passes, [1, 1000]
-  double radius = 0;     ///< neighbourhood cut-off, world units; 0: 3x the mean point spacing
+  int points = 65536;       ///< points inside the volume, [64, 2^24]; the quality knob
+  int passes = 32;          ///< maximum scattering passes, [1, 1000]
+  double radius = 0;        ///< neighbourhood cut-off, world units; 0: 3x the mean point spacing
   double tolerance = 0.01;  ///< stop when a pass changes Co by less than this (relative), (0, 1]
   enum class Rule { kNormalized, kPaper };
   Rule rule = Rule::kNormalized;
@@ -26,7 +26,7 @@ struct PointcloudOptions {
   /// Add the geometric tail of the orders after the last pass (normalised rule); false shows
   /// exactly the orders computed, e.g. for a pass-by-pass sequence (seed 000's Figure 9).
   bool tail = true;
-  uint64_t seed = 1;            ///< point jitter; same seed, same bake at any thread count
+  uint64_t seed = 1;  ///< point jitter; same seed, same bake at any thread count
 };
 
 /// What a pointcloud bake did, also recorded in the bake's metadata.

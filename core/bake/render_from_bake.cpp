@@ -61,9 +61,6 @@
 // the image does not depend on the thread count. spp = 1 is the pixel centre.
 #include "core/bake/render_from_bake.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -71,13 +68,14 @@
 #include <cstdint>
 #include <limits>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "core/bake/phase_lut.h"
 #include "core/bake/sky_sh_scatter.h"
 #include "core/error.h"
+#include "core/format.h"
+#include "core/math/parallel.h"
 #include "core/math/rng.h"
 #include "core/transport/camera.h"
 #include "core/transport/sky.h"
@@ -94,18 +92,6 @@ std::string angularModel(const BakedLight& bake) {
 
 constexpr int kBlock = 8;      // empty-space block side, voxels (an OpenVDB leaf)
 constexpr int kTileSize = 16;  // pixels per tile side (work unit)
-
-template <typename T>
-std::string str(const T& v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
-std::string str(const Vec3& v) {
-  std::ostringstream os;
-  os << "[" << v.x << ", " << v.y << ", " << v.z << "]";
-  return os.str();
-}
 
 void validateOptions(const BakeRenderOptions& o, double voxel_size) {
   if (!std::isfinite(o.step) || o.step < 0) {
@@ -335,26 +321,24 @@ class BakeMarcher {
     // Block b covers w in [8b, 8b + 8), i.e. lookups with floor(index) in [8b - 1, 8b + 6],
     // which read voxels 8b - 1 .. 8b + 7: the block dilated by one voxel.
     std::atomic<bool> bad{false};
-    tbb::parallel_for(tbb::blocked_range<int>(0, nbz_), [&](const tbb::blocked_range<int>& r) {
-      for (int bk = r.begin(); bk != r.end(); ++bk) {
-        const int k0 = std::max(0, kBlock * bk - 1), k1 = std::min(nz_ - 1, kBlock * bk + 7);
-        for (int bj = 0; bj < nby_; ++bj) {
-          const int j0 = std::max(0, kBlock * bj - 1), j1 = std::min(ny_ - 1, kBlock * bj + 7);
-          for (int bi = 0; bi < nbx_; ++bi) {
-            const int i0 = std::max(0, kBlock * bi - 1), i1 = std::min(nx_ - 1, kBlock * bi + 7);
-            float m = 0;
-            for (int k = k0; k <= k1; ++k) {
-              for (int j = j0; j <= j1; ++j) {
-                const float* row = density_ + grid_.index(0, j, k);
-                for (int i = i0; i <= i1; ++i) {
-                  const float v = row[i];
-                  if (!(v >= 0) || !std::isfinite(v)) bad = true;
-                  m = std::max(m, v);
-                }
+    parallelFor(0, nbz_, [&](int bk) {
+      const int k0 = std::max(0, kBlock * bk - 1), k1 = std::min(nz_ - 1, kBlock * bk + 7);
+      for (int bj = 0; bj < nby_; ++bj) {
+        const int j0 = std::max(0, kBlock * bj - 1), j1 = std::min(ny_ - 1, kBlock * bj + 7);
+        for (int bi = 0; bi < nbx_; ++bi) {
+          const int i0 = std::max(0, kBlock * bi - 1), i1 = std::min(nx_ - 1, kBlock * bi + 7);
+          float m = 0;
+          for (int k = k0; k <= k1; ++k) {
+            for (int j = j0; j <= j1; ++j) {
+              const float* row = density_ + grid_.index(0, j, k);
+              for (int i = i0; i <= i1; ++i) {
+                const float v = row[i];
+                if (!(v >= 0) || !std::isfinite(v)) bad = true;
+                m = std::max(m, v);
               }
             }
-            block_max_[(size_t(bk) * nby_ + bj) * nbx_ + bi] = m;
           }
+          block_max_[(size_t(bk) * nby_ + bj) * nbx_ + bi] = m;
         }
       }
     });

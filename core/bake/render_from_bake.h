@@ -12,9 +12,9 @@ namespace cloudbake {
 
 /// Options of renderFromBake.
 struct BakeRenderOptions {
-  double step = 0;           ///< march step, world units; 0: half a lattice voxel
-  int samples_per_pixel = 1; ///< stratified jittered rays per pixel, [1, 1024]
-  uint64_t seed = 1;         ///< jitter; same image at any thread count
+  double step = 0;            ///< march step, world units; 0: half a lattice voxel
+  int samples_per_pixel = 1;  ///< stratified jittered rays per pixel, [1, 1024]
+  uint64_t seed = 1;          ///< jitter; same image at any thread count
   /// The march stops where the view transmittance falls below this (the rest is < 1e-4 of
   /// what is behind, and of the in-scattering left).
   double min_transmittance = 1e-4;
@@ -22,10 +22,11 @@ struct BakeRenderOptions {
 };
 
 /// Renders `camera` from `bake` lit by `sun` (its irradiance scales the baked light; its
-/// direction is not read: a bake holds one light direction, bake.sun_direction) and `sky`, with medium.extinction, albedo and phase (medium.density is not
-/// read: the bake's own density is). Layers and units as renderPathTraced (path_tracer.h):
-/// `sun` = single + multiple scattering of sunlight, `sky` = the sky's ambient term,
-/// `single` = sun single scattering + sky term, `multiple` = the baked Co term, beauty = sun + sky
+/// direction is not read: a bake holds one light direction, bake.sun_direction) and `sky`, with
+/// medium.extinction, albedo and phase (medium.density is not read: the bake's own density is).
+/// Layers and units as renderPathTraced (path_tracer.h): `sun` = single + multiple scattering of
+/// sunlight, `sky` = the sky's ambient term, `single` = sun single scattering + sky term,
+/// `multiple` = the baked Co term, beauty = sun + sky
 /// + the sky seen through the cloud, alpha = 1 - transmittance. Empty space is skipped by 8^3
 /// blocks (the VDB leaf size), integration is trapezoidal. InputError for bad camera/options, a
 /// bake lacking sky_visibility under a non-black sky, or a missing sun_transmittance grid.

@@ -1,38 +1,25 @@
 #include "core/bake/scattering_passes.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <sstream>
+#include <functional>
 #include <string>
 
 #include "core/bake/neighbour_grid.h"
 #include "core/bake/phase_lut.h"
 #include "core/bake/sky_visibility.h"
 #include "core/error.h"
+#include "core/format.h"
+#include "core/math/parallel.h"
 
 namespace cloudbake {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-double lum(const Rgb& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
 
 constexpr double kMaxPaperCi = 1e30;  // the paper rule grows without bound; keep floats finite
-constexpr size_t kPassChunk = size_t(1) << 16;  // destinations between cancellation polls
-
-template <class T>
-std::string str(const T& v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
+constexpr int64_t kDestinationGrain = 128;  // destinations per chunk
 
 // The similarity (transport) reduction of the normalised rule: s = 1 - lum(a g) scales the
 // extinction, `albedo` = a (1 - g) / s per channel; `isotropic` is false only when the phase
@@ -47,17 +34,35 @@ TransportScaling transportScaling(const Medium& medium) {
   TransportScaling ts;
   const Rgb g = medium.phase->meanCosine();
   const Rgb a = medium.albedo;
-  if (!(lum(g) > 0)) {
+  if (!(luminance(g) > 0)) {
     ts.albedo = a;
     return ts;
   }
-  ts.s = 1 - lum(a * g);
+  ts.s = 1 - luminance(a * g);
   ts.isotropic = true;
   for (int c = 0; c < 3; ++c) {
     ts.albedo[c] = ts.s > 0 ? std::min(1.0, a[c] * (1 - g[c]) / ts.s) : 0.0;
   }
   return ts;
 }
+
+// What the passes of either rule read; runPointcloud sets it up once.
+struct PassInputs {
+  const NeighbourPairs& pairs;
+  const Medium& medium;
+  Vec3 sun_dir;  // unit, towards the sun
+  const PointcloudOptions& options;
+  bool geometric_tail;
+  // Polled with (fraction of the pass, pass) between chunks of destinations; may be empty.
+  std::function<bool(double, int)> cancelled = {};
+  // The normalised rule only: the lattice, the reduced medium's sky visibility (the escape
+  // probability of header step 6), the reduction itself and, for sky light, the true medium's
+  // sky visibility (null: no sky passes).
+  const BakeGrid* grid = nullptr;
+  const std::vector<float>* escape_visibility = nullptr;
+  TransportScaling ts = {};
+  const std::vector<float>* true_visibility = nullptr;
+};
 
 // What a source contributes, packed for the gather loop (one cache line per source).
 struct NormalisedSource {
@@ -74,188 +79,214 @@ struct PaperSource {
   float cr, cg, cb;  // Ci
 };
 
-// Runs `body(dst)` for every destination, in chunks with a cancellation poll between them.
+// Runs `body(dst)` for every destination of a pass, in parallel, polling the cancellation.
 template <class Body>
-void forEachDestination(size_t n, const std::function<bool(double)>& cancelled, const Body& body) {
-  for (size_t c0 = 0; c0 < n; c0 += kPassChunk) {
-    if (cancelled && cancelled(double(c0) / double(n))) throw Cancelled();
-    const size_t c1 = std::min(n, c0 + kPassChunk);
-    tbb::parallel_for(tbb::blocked_range<size_t>(c0, c1, 128),
-                      [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t j = r.begin(); j != r.end(); ++j) body(j);
-    });
+void forEachDestination(const PassInputs& in, size_t n, int pass, const Body& body) {
+  ParallelOptions chunks;
+  chunks.grain = kDestinationGrain;
+  if (in.cancelled) chunks.cancelled = [&](double f) { return in.cancelled(f, pass); };
+  parallelFor(
+      0, int64_t(n), [&](int64_t j) { body(size_t(j)); }, chunks);
+}
+
+// The gather loop of both rules, for destination j at `q`: per source, in the sources' float
+// precision, the unit vector from the source to j and the phase value between the source's L
+// and it, handed to add(source, weight, phase, dx, dy, dz).
+template <class Source, class Add>
+void gatherTransfers(const NeighbourPairs& pairs, const std::vector<Source>& src,
+                     const PhaseLut& lut, size_t j, const Vec3& q, Add&& add) {
+  const float qx = float(q.x), qy = float(q.y), qz = float(q.z);
+  const uint64_t e = pairs.offset[j + 1];
+  for (uint64_t k = pairs.offset[j]; k < e; ++k) {
+    const Source& s = src[pairs.source[k]];
+    float dx = qx - s.px, dy = qy - s.py, dz = qz - s.pz;
+    const float inv = 1.f / std::sqrt(dx * dx + dy * dy + dz * dz);
+    dx *= inv;
+    dy *= inv;
+    dz *= inv;
+    const Rgb ph = lut.eval(double(s.lx * dx + s.ly * dy + s.lz * dz));
+    add(s, double(pairs.weight[k]), ph, dx, dy, dz);
   }
 }
 
-// The normalised rule (derivation in the header).
-void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Medium& medium,
-                   const Vec3& sun_dir, const PointcloudOptions& options, bool geometric_tail,
-                   const BakeGrid& grid, const std::vector<float>& sky_visibility,
-                   const TransportScaling& ts, const std::vector<float>* true_visibility,
-                   const std::function<bool(double, int)>& cancelled) {
+// The normalised rule's own-sphere factor 1 - exp(-sigma_t r) per point, scaled by k_i, the
+// ratio of the medium's collision fraction 1 - P_escape to the discretised one c_i = self_i +
+// sum_j w_ij / (4 pi) (header, step 6); k_i and 1 - P_escape go to `out`.
+std::vector<double> scaledOwnSpheres(const PassInputs& in, PointCloudResult& out) {
   const PointCloud& pc = out.cloud;
   const size_t n = pc.size();
-  const PhaseLut lut(*medium.phase);
-  // The passes run on the similarity-reduced medium (header, step 7): isotropic scattering with
-  // extinction s * sigma_t and albedo a (1 - g) / s.
-  const Rgb albedo = ts.albedo;
-  const double ext = medium.extinction * ts.s;
-  // Own-sphere factor 1 - exp(-sigma_t r) per point, and the collision fraction of each
-  // source's isotropic emission as discretised, c_i = self_i + sum_j w_ij / (4 pi), against the
-  // medium's own 1 - P_escape (header, step 6): the source's transfers are scaled by the ratio.
+  const double ext = in.medium.extinction * in.ts.s;
   std::vector<double> self(n), captured(n);
   for (size_t j = 0; j < n; ++j) {
     const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[j]));
     self[j] = -std::expm1(-ext * pc.density[j] * r);
     captured[j] = self[j];
   }
-  for (uint64_t q = 0; q < pairs.size(); ++q) {
-    captured[pairs.source[q]] += pairs.weight[q] * kInv4Pi;
+  for (uint64_t q = 0; q < in.pairs.size(); ++q) {
+    captured[in.pairs.source[q]] += in.pairs.weight[q] * kInv4Pi;
   }
   out.collision.resize(n);
   out.transfer_scale.resize(n);
   for (size_t i = 0; i < n; ++i) {
-    const double vis = sampleTrilinear(grid, sky_visibility.data(), pc.position[i]);
+    const double vis = sampleTrilinear(*in.grid, in.escape_visibility->data(), pc.position[i]);
     const double target = std::clamp(1 - vis, 0.0, 1.0);
     out.collision[i] = float(target);
     const double k = captured[i] > 0 ? target / captured[i] : 1.0;
     out.transfer_scale[i] = float(k);
     self[i] *= k;
   }
-  std::vector<Rgb> delta(n), next(n);  // Delta^k, Delta^{k+1}
-  std::vector<Vec3> dir(n, -sun_dir), next_dir(n);
-  std::vector<double> ratio(n, 1.0), next_ratio(n);
-  std::vector<Vec3> flux(n), total_flux(n, Vec3(0.0));  // F of the last pass, and of all
-  std::vector<double> incoming(n), total_incoming(n, 0.0);
-  std::vector<Rgb> co(n, Rgb(0.0));
-  std::vector<NormalisedSource> src(n);
-  double order_sum = 0;
-  // Order 0 of the reduced problem: the sun's beam attenuated by the reduced extinction, which
-  // counts light scattered into the forward peak as not scattered: Ci' = Ci^s.
-  std::vector<double> ci_reduced(n);
+  return self;
+}
+
+// The sun's orders of the normalised rule, per point (header, steps 3-5 and 7).
+struct SunOrders {
+  SunOrders(size_t n, const Vec3& sun_dir)
+      : delta(n),
+        next(n),
+        dir(n, -sun_dir),
+        next_dir(n),
+        ratio(n, 1.0),
+        next_ratio(n),
+        flux(n),
+        total_flux(n, Vec3(0.0)),
+        incoming(n),
+        total_incoming(n, 0.0),
+        co(n, Rgb(0.0)),
+        ci_reduced(n) {}
+  std::vector<Rgb> delta, next;                  // Delta^k, Delta^{k+1}
+  std::vector<Vec3> dir, next_dir;               // L
+  std::vector<double> ratio, next_ratio;         // R
+  std::vector<Vec3> flux, total_flux;            // F of the last pass, and of all
+  std::vector<double> incoming, total_incoming;  // lum of the gathered light, likewise
+  std::vector<Rgb> co;                           // the orders so far
+  std::vector<double> ci_reduced;                // order 0: Ci' = Ci^s
+};
+
+// One pass of the sun's orders: Delta^{k+1}, and its flux for the next R and L.
+void gatherSunOrder(const PassInputs& in, const PhaseLut& lut, const std::vector<double>& self,
+                    const PointCloudResult& out, int pass, SunOrders& o,
+                    std::vector<NormalisedSource>& src) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  for (size_t i = 0; i < n; ++i) {
+    const Vec3 p = pc.position[i];
+    const double r = o.ratio[i];
+    const Vec3 l = r > 0 ? o.dir[i] : Vec3(0.0);
+    const double k = out.transfer_scale[i];
+    const Rgb a = o.delta[i] * (r * k), b = o.delta[i] * ((1 - r) * kInv4Pi * k);
+    src[i] = {float(p.x), float(p.y), float(p.z), float(l.x), float(l.y), float(l.z),
+              float(a.x), float(a.y), float(a.z), float(b.x), float(b.y), float(b.z)};
+  }
+  forEachDestination(in, n, pass, [&](size_t j) {
+    double sr = 0, sg = 0, sb = 0, fx = 0, fy = 0, fz = 0;
+    gatherTransfers(
+        in.pairs, src, lut, j, pc.position[j],
+        [&](const NormalisedSource& s, double w, const Rgb& ph, float dx, float dy, float dz) {
+          const double jr = w * (s.ar * ph.x + s.br), jg = w * (s.ag * ph.y + s.bg),
+                       jb = w * (s.ab * ph.z + s.bb);
+          sr += jr;
+          sg += jg;
+          sb += jb;
+          const double l = luminance(Rgb(jr, jg, jb));
+          fx += l * dx;
+          fy += l * dy;
+          fz += l * dz;
+        });
+    const Rgb in_light = Rgb(sr, sg, sb) + o.delta[j] * self[j];
+    o.next[j] = in.ts.albedo * in_light;
+    const Vec3 f(fx, fy, fz);
+    const double fl = length(f), il = luminance(in_light);
+    o.flux[j] = f;
+    o.incoming[j] = il;
+    if (fl > 0 && il > 0) {
+      o.next_dir[j] = f / fl;
+      o.next_ratio[j] = std::min(1.0, fl / il);
+    } else {
+      o.next_dir[j] = Vec3(0.0);
+      o.next_ratio[j] = 0;
+    }
+  });
+}
+
+// Adds the order just gathered; true when the passes stop (converged or the last), after
+// adding the geometric tail of the orders not computed (header, step 5).
+bool addSunOrder(const PassInputs& in, int pass, double prev_sum, SunOrders& o,
+                 PointCloudResult& out, double* sum_out) {
+  const size_t n = o.co.size();
+  double sum = 0, co_sum = 0;
   for (size_t j = 0; j < n; ++j) {
-    ci_reduced[j] = std::pow(double(pc.sun[j]), ts.s);
-    delta[j] = Rgb(ci_reduced[j]);
-    order_sum += lum(delta[j]);
+    o.co[j] += o.next[j];
+    o.total_flux[j] += o.flux[j];
+    o.total_incoming[j] += o.incoming[j];
+    sum += luminance(o.next[j]);
+    co_sum += luminance(o.co[j]);
   }
-  std::fill(ratio.begin(), ratio.end(), ts.isotropic ? 0.0 : 1.0);
-  out.order_luminance.assign(1, order_sum);
-  double prev_sum = order_sum;
-  for (int pass = 0; pass < options.passes; ++pass) {
-    for (size_t i = 0; i < n; ++i) {
-      const Vec3 p = pc.position[i];
-      const double r = ratio[i];
-      const Vec3 l = r > 0 ? dir[i] : Vec3(0.0);
-      const double k = out.transfer_scale[i];
-      const Rgb a = delta[i] * (r * k), b = delta[i] * ((1 - r) * kInv4Pi * k);
-      src[i] = {float(p.x), float(p.y), float(p.z), float(l.x), float(l.y), float(l.z),
-                float(a.x), float(a.y), float(a.z), float(b.x), float(b.y), float(b.z)};
-    }
-    forEachDestination(n, [&](double f) { return cancelled(f, pass); }, [&](size_t j) {
-      const float qx = float(pc.position[j].x), qy = float(pc.position[j].y),
-                  qz = float(pc.position[j].z);
-      double sr = 0, sg = 0, sb = 0, fx = 0, fy = 0, fz = 0;
-      const uint64_t e = pairs.offset[j + 1];
-      for (uint64_t q = pairs.offset[j]; q < e; ++q) {
-        const NormalisedSource& s = src[pairs.source[q]];
-        float dx = qx - s.px, dy = qy - s.py, dz = qz - s.pz;
-        const float inv = 1.f / std::sqrt(dx * dx + dy * dy + dz * dz);
-        dx *= inv;
-        dy *= inv;
-        dz *= inv;
-        const Rgb ph = lut.eval(double(s.lx * dx + s.ly * dy + s.lz * dz));
-        const double w = pairs.weight[q];
-        const double jr = w * (s.ar * ph.x + s.br), jg = w * (s.ag * ph.y + s.bg),
-                     jb = w * (s.ab * ph.z + s.bb);
-        sr += jr;
-        sg += jg;
-        sb += jb;
-        const double l = 0.2126 * jr + 0.7152 * jg + 0.0722 * jb;
-        fx += l * dx;
-        fy += l * dy;
-        fz += l * dz;
-      }
-      const Rgb in = Rgb(sr, sg, sb) + delta[j] * self[j];
-      next[j] = albedo * in;
-      const Vec3 f(fx, fy, fz);
-      const double fl = length(f), il = lum(in);
-      flux[j] = f;
-      incoming[j] = il;
-      if (fl > 0 && il > 0) {
-        next_dir[j] = f / fl;
-        next_ratio[j] = std::min(1.0, fl / il);
-      } else {
-        next_dir[j] = Vec3(0.0);
-        next_ratio[j] = 0;
-      }
-    });
-    double sum = 0, co_sum = 0;
+  o.delta.swap(o.next);
+  o.dir.swap(o.next_dir);
+  o.ratio.swap(o.next_ratio);
+  if (in.ts.isotropic) std::fill(o.ratio.begin(), o.ratio.end(), 0.0);
+  out.order_luminance.push_back(sum);
+  out.pair_interactions += in.pairs.size();
+  out.passes_run = pass + 1;
+  out.last_relative_change = co_sum > 0 ? sum / co_sum : 0.0;
+  *sum_out = sum;
+  const bool done = out.last_relative_change < in.options.tolerance;
+  if (!done && pass + 1 != in.options.passes) return false;
+  const double q = prev_sum > 0 ? sum / prev_sum : 0.0;
+  if (in.geometric_tail && q > 0 && q < 1) {
+    out.tail_ratio = q;
+    const double g = q / (1 - q);
     for (size_t j = 0; j < n; ++j) {
-      co[j] += next[j];
-      total_flux[j] += flux[j];
-      total_incoming[j] += incoming[j];
-      sum += lum(next[j]);
-      co_sum += lum(co[j]);
+      o.co[j] += o.delta[j] * g;
+      o.total_flux[j] += o.flux[j] * g;
+      o.total_incoming[j] += o.incoming[j] * g;
     }
-    delta.swap(next);
-    dir.swap(next_dir);
-    ratio.swap(next_ratio);
-    if (ts.isotropic) std::fill(ratio.begin(), ratio.end(), 0.0);
-    out.order_luminance.push_back(sum);
-    out.pair_interactions += pairs.size();
-    out.passes_run = pass + 1;
-    out.last_relative_change = co_sum > 0 ? sum / co_sum : 0.0;
-    const bool done = out.last_relative_change < options.tolerance;
-    if (done || pass + 1 == options.passes) {
-      const double q = prev_sum > 0 ? sum / prev_sum : 0.0;
-      if (geometric_tail && q > 0 && q < 1) {
-        out.tail_ratio = q;
-        const double g = q / (1 - q);
-        for (size_t j = 0; j < n; ++j) {
-          co[j] += delta[j] * g;
-          total_flux[j] += flux[j] * g;
-          total_incoming[j] += incoming[j] * g;
-        }
-      }
-      break;
-    }
-    prev_sum = sum;
   }
+  return true;
+}
+
+// Co, light_dir and mie_ratio from the sun's orders plus the forward-scattered beam Ci' - Ci,
+// which travels along the sun's direction.
+void finishSunOrders(const PassInputs& in, SunOrders& o, PointCloudResult& out) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
   out.co.resize(n);
   out.light_dir.resize(n);
   out.mie_ratio.resize(n);
   for (size_t j = 0; j < n; ++j) {
-    // Scattered fluence = diffuse (the reduced problem's orders) + the forward-scattered beam
-    // Ci' - Ci, which travels along the sun's direction.
-    const double beam = std::max(0.0, ci_reduced[j] - double(pc.sun[j]));
-    co[j] += Rgb(beam);
-    total_flux[j] += -sun_dir * beam;
-    total_incoming[j] += beam;
-    out.co[j] = co[j];
-    const double fl = length(total_flux[j]);
-    if (fl > 0 && total_incoming[j] > 0) {
-      out.light_dir[j] = total_flux[j] / fl;
-      out.mie_ratio[j] = float(std::min(1.0, fl / total_incoming[j]));
+    const double beam = std::max(0.0, o.ci_reduced[j] - double(pc.sun[j]));
+    o.co[j] += Rgb(beam);
+    o.total_flux[j] += -in.sun_dir * beam;
+    o.total_incoming[j] += beam;
+    out.co[j] = o.co[j];
+    const double fl = length(o.total_flux[j]);
+    if (fl > 0 && o.total_incoming[j] > 0) {
+      out.light_dir[j] = o.total_flux[j] / fl;
+      out.mie_ratio[j] = float(std::min(1.0, fl / o.total_incoming[j]));
     } else {
       out.light_dir[j] = Vec3(0.0);
       out.mie_ratio[j] = 0.f;
     }
   }
+}
 
-  // Sky light (header, step 8): the same transfers for a uniform sky of unit radiance.
-  if (!true_visibility) return;
+// Sky light (header, step 8): the same transfers for a uniform sky of unit radiance.
+void runSkyOrders(const PassInputs& in, const std::vector<double>& self, PointCloudResult& out) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  const NeighbourPairs& pairs = in.pairs;
   std::vector<Rgb> d(n), nx(n), acc(n, Rgb(0.0)), src_sky(n);
   std::vector<double> beam(n);
   for (size_t j = 0; j < n; ++j) {
-    const double vr = sampleTrilinear(grid, sky_visibility.data(), pc.position[j]);
-    const double vt = sampleTrilinear(grid, true_visibility->data(), pc.position[j]);
+    const double vr = sampleTrilinear(*in.grid, in.escape_visibility->data(), pc.position[j]);
+    const double vt = sampleTrilinear(*in.grid, in.true_visibility->data(), pc.position[j]);
     d[j] = Rgb(4 * kPi * vr);
     beam[j] = 4 * kPi * std::max(0.0, vr - vt);
   }
   double prev = 0;
-  for (int pass = 0; pass < options.passes; ++pass) {
+  for (int pass = 0; pass < in.options.passes; ++pass) {
     for (size_t i = 0; i < n; ++i) src_sky[i] = d[i] * (out.transfer_scale[i] * kInv4Pi);
-    forEachDestination(n, [&](double f) { return cancelled(f, pass); }, [&](size_t j) {
+    forEachDestination(in, n, pass, [&](size_t j) {
       double sr = 0, sg = 0, sb = 0;
       const uint64_t e = pairs.offset[j + 1];
       for (uint64_t q = pairs.offset[j]; q < e; ++q) {
@@ -265,20 +296,20 @@ void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Med
         sg += w * s.y;
         sb += w * s.z;
       }
-      nx[j] = albedo * (Rgb(sr, sg, sb) + d[j] * self[j]);
+      nx[j] = in.ts.albedo * (Rgb(sr, sg, sb) + d[j] * self[j]);
     });
     double sum = 0, acc_sum = 0;
     for (size_t j = 0; j < n; ++j) {
       acc[j] += nx[j];
-      sum += lum(nx[j]);
-      acc_sum += lum(acc[j]);
+      sum += luminance(nx[j]);
+      acc_sum += luminance(acc[j]);
     }
     d.swap(nx);
     out.pair_interactions += pairs.size();
-    const bool done = !(acc_sum > 0) || sum / acc_sum < options.tolerance;
-    if (done || pass + 1 == options.passes) {
+    const bool done = !(acc_sum > 0) || sum / acc_sum < in.options.tolerance;
+    if (done || pass + 1 == in.options.passes) {
       const double q = prev > 0 ? sum / prev : 0.0;
-      if (geometric_tail && q > 0 && q < 1) {
+      if (in.geometric_tail && q > 0 && q < 1) {
         for (size_t j = 0; j < n; ++j) acc[j] += d[j] * (q / (1 - q));
       }
       break;
@@ -289,52 +320,74 @@ void runNormalised(PointCloudResult& out, const NeighbourPairs& pairs, const Med
   for (size_t j = 0; j < n; ++j) out.co_sky[j] = acc[j] + Rgb(beam[j]);
 }
 
-// Seed 000's Eq. 1-5 (readings in the header).
-void runPaper(PointCloudResult& out, const NeighbourPairs& pairs, const Medium& medium,
-              const Vec3& sun_dir, const PointcloudOptions& options,
-              const std::function<bool(double, int)>& cancelled) {
+// The normalised rule (derivation in the header). The passes run on the similarity-reduced
+// medium (header, step 7): isotropic scattering with extinction s * sigma_t and albedo
+// a (1 - g) / s.
+void runNormalised(const PassInputs& in, PointCloudResult& out) {
   const PointCloud& pc = out.cloud;
   const size_t n = pc.size();
-  const PhaseLut lut(*medium.phase);
-  const Rgb albedo = medium.albedo;
+  const PhaseLut lut(*in.medium.phase);
+  const std::vector<double> self = scaledOwnSpheres(in, out);
+  SunOrders o(n, in.sun_dir);
+  std::vector<NormalisedSource> src(n);
+  // Order 0 of the reduced problem: the sun's beam attenuated by the reduced extinction, which
+  // counts light scattered into the forward peak as not scattered: Ci' = Ci^s.
+  double order_sum = 0;
+  for (size_t j = 0; j < n; ++j) {
+    o.ci_reduced[j] = std::pow(double(pc.sun[j]), in.ts.s);
+    o.delta[j] = Rgb(o.ci_reduced[j]);
+    order_sum += luminance(o.delta[j]);
+  }
+  std::fill(o.ratio.begin(), o.ratio.end(), in.ts.isotropic ? 0.0 : 1.0);
+  out.order_luminance.assign(1, order_sum);
+  double prev_sum = order_sum;
+  for (int pass = 0; pass < in.options.passes; ++pass) {
+    gatherSunOrder(in, lut, self, out, pass, o, src);
+    double sum = 0;
+    if (addSunOrder(in, pass, prev_sum, o, out, &sum)) break;
+    prev_sum = sum;
+  }
+  finishSunOrders(in, o, out);
+  if (in.true_visibility) runSkyOrders(in, self, out);
+}
+
+// Seed 000's Eq. 1-5 (readings in the header).
+void runPaper(const PassInputs& in, PointCloudResult& out) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  const PhaseLut lut(*in.medium.phase);
+  const Rgb albedo = in.medium.albedo;
   std::vector<Rgb> ci(n), co(n);
-  std::vector<Vec3> dir(n, -sun_dir), lsum(n);
+  std::vector<Vec3> dir(n, -in.sun_dir), lsum(n);
   std::vector<double> ratio(n, 1.0);
   std::vector<PaperSource> src(n);
   double ci_sum = 0;
   for (size_t j = 0; j < n; ++j) {
     ci[j] = Rgb(double(pc.sun[j]));
-    ci_sum += lum(ci[j]);
+    ci_sum += luminance(ci[j]);
   }
   out.order_luminance.assign(1, ci_sum);
-  for (int pass = 0; pass < options.passes; ++pass) {
+  for (int pass = 0; pass < in.options.passes; ++pass) {
     for (size_t i = 0; i < n; ++i) {
       const Vec3 p = pc.position[i], l = dir[i];
-      src[i] = {float(p.x), float(p.y), float(p.z), float(l.x), float(l.y), float(l.z),
-                float(ratio[i]), float(ci[i].x), float(ci[i].y), float(ci[i].z)};
+      src[i] = {float(p.x), float(p.y),      float(p.z),     float(l.x),     float(l.y),
+                float(l.z), float(ratio[i]), float(ci[i].x), float(ci[i].y), float(ci[i].z)};
     }
-    forEachDestination(n, [&](double f) { return cancelled(f, pass); }, [&](size_t j) {
-      const float qx = float(pc.position[j].x), qy = float(pc.position[j].y),
-                  qz = float(pc.position[j].z);
+    forEachDestination(in, n, pass, [&](size_t j) {
       double cr = 0, cg = 0, cb = 0, lx = 0, ly = 0, lz = 0;
-      const uint64_t e = pairs.offset[j + 1];
-      for (uint64_t q = pairs.offset[j]; q < e; ++q) {
-        const PaperSource& s = src[pairs.source[q]];
-        float dx = qx - s.px, dy = qy - s.py, dz = qz - s.pz;
-        const float inv = 1.f / std::sqrt(dx * dx + dy * dy + dz * dz);
-        dx *= inv;
-        dy *= inv;
-        dz *= inv;
-        const Rgb am = lut.eval(double(s.lx * dx + s.ly * dy + s.lz * dz)) * (4 * kPi);
-        const double ad = pairs.weight[q], r = s.r;
-        cr += ad * (am.x * r + (1 - r)) * s.cr;
-        cg += ad * (am.y * r + (1 - r)) * s.cg;
-        cb += ad * (am.z * r + (1 - r)) * s.cb;
-        const double l = ad * (lum(am) * r + (1 - r));
-        lx += l * dx;
-        ly += l * dy;
-        lz += l * dz;
-      }
+      gatherTransfers(
+          in.pairs, src, lut, j, pc.position[j],
+          [&](const PaperSource& s, double ad, const Rgb& ph, float dx, float dy, float dz) {
+            const Rgb am = ph * (4 * kPi);
+            const double r = s.r;
+            cr += ad * (am.x * r + (1 - r)) * s.cr;
+            cg += ad * (am.y * r + (1 - r)) * s.cg;
+            cb += ad * (am.z * r + (1 - r)) * s.cb;
+            const double l = ad * (luminance(am) * r + (1 - r));
+            lx += l * dx;
+            ly += l * dy;
+            lz += l * dz;
+          });
       co[j] = albedo * Rgb(cr, cg, cb);
       lsum[j] = Vec3(lx, ly, lz);
     });
@@ -345,22 +398,22 @@ void runPaper(PointCloudResult& out, const NeighbourPairs& pairs, const Medium& 
       ratio[j] -= ratio[j] * std::exp(-len);  // Eq. 1
       if (len > 0) dir[j] = lsum[j] / len;
       ci[j] = min(ci[j] + co[j], Rgb(kMaxPaperCi));
-      co_sum += lum(co[j]);
-      ci_sum += lum(ci[j]);
+      co_sum += luminance(co[j]);
+      ci_sum += luminance(ci[j]);
     }
     out.order_luminance.push_back(ci_sum);
-    out.pair_interactions += pairs.size();
+    out.pair_interactions += in.pairs.size();
     out.passes_run = pass + 1;
     out.last_relative_change = ci_sum > 0 ? std::min(1.0, co_sum / ci_sum) : 0.0;
-    if (out.last_relative_change < options.tolerance) break;
+    if (out.last_relative_change < in.options.tolerance) break;
   }
   out.co.resize(n);
   out.light_dir = dir;
   out.mie_ratio.resize(n);
   for (size_t j = 0; j < n; ++j) {
     const Rgb initial(double(pc.sun[j]));
-    out.co[j] = options.output_mapping ? Rgb(1.0) - exp(-ci[j])
-                                       : max(ci[j] - initial, Rgb(0.0));  // Eq. 2 or scattered
+    out.co[j] = in.options.output_mapping ? Rgb(1.0) - exp(-ci[j])
+                                          : max(ci[j] - initial, Rgb(0.0));  // Eq. 2 or scattered
     out.mie_ratio[j] = float(std::clamp(ratio[j], 0.0, 1.0));
   }
 }
@@ -387,8 +440,7 @@ void checkPointcloudInput(const Medium& medium, const PointcloudOptions& o) {
   if (!medium.density) throw InputError("medium: density: no volume");
   if (!medium.phase) throw InputError("medium: phase: no phase function");
   if (!(medium.extinction >= 0) || !std::isfinite(medium.extinction)) {
-    throw InputError("medium: extinction: must be finite and >= 0, got " +
-                     str(medium.extinction));
+    throw InputError("medium: extinction: must be finite and >= 0, got " + str(medium.extinction));
   }
   for (int c = 0; c < 3; ++c) {
     if (!(medium.albedo[c] >= 0 && medium.albedo[c] <= 1)) {
@@ -399,9 +451,8 @@ void checkPointcloudInput(const Medium& medium, const PointcloudOptions& o) {
 
 PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& density,
                                const std::vector<float>& sky_visibility, const Medium& medium,
-                               const Vec3& sun_dir_in,
-                               const PointcloudOptions& options, bool geometric_tail,
-                               const BakeProgressFn& progress) {
+                               const Vec3& sun_dir_in, const PointcloudOptions& options,
+                               bool geometric_tail, const BakeProgressFn& progress) {
   checkPointcloudInput(medium, options);
   if (!isFinite(sun_dir_in) || !(length(sun_dir_in) > 0)) {
     throw InputError("sun: direction: must be a finite nonzero vector");
@@ -440,8 +491,8 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
       estimateMeanNeighbours(point_grid, pc.position, out.radius, 256, max_mean);
   if (mean_estimate > max_mean) {
     throw InputError("radius: " + str(out.radius) + " gives about " +
-                     str(uint64_t(mean_estimate * double(n))) + " neighbour pairs for " +
-                     str(n) + " points, more than the " + str(kMaxNeighbourPairs) +
+                     str(uint64_t(mean_estimate * double(n))) + " neighbour pairs for " + str(n) +
+                     " points, more than the " + str(kMaxNeighbourPairs) +
                      " that fit in memory; use a smaller radius or fewer points");
   }
   const uint64_t reserve = uint64_t(std::min(mean_estimate * 1.1 + 8, max_mean) * double(n));
@@ -468,15 +519,15 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
       if (tau > 16.2) return 0.f;
       return float(em * std::exp(-tau) / std::max(d * d, double(clamp_r2[src])));
     };
-    pairs = buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve,
-                                cancelled_build);
+    pairs =
+        buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve, cancelled_build);
   } else {
     auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
       const double tau = d * 0.5 * (double(pc.density[src]) + double(pc.density[dst])) * ext;
       return tau > 16.2 ? 0.f : float(std::exp(-tau));  // Eq. 3; below 1e-7 negligible
     };
-    pairs = buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve,
-                                cancelled_build);
+    pairs =
+        buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve, cancelled_build);
   }
   out.pairs = pairs.size();
   out.mean_neighbours = double(pairs.within_radius) / double(n);
@@ -484,11 +535,13 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
 
   t0 = Clock::now();
   const int passes = options.passes;
-  auto cancelled_pass = [&](double f, int pass) {
-    if (!progress) return false;
-    const std::string stage = "pass " + str(pass + 1) + "/" + str(passes);
-    return !progress(0.3 + 0.7 * (pass + f) / passes, stage);
-  };
+  PassInputs in{pairs, medium, sun_dir, options, geometric_tail};
+  if (progress) {
+    in.cancelled = [&](double f, int pass) {
+      const std::string stage = "pass " + str(pass + 1) + "/" + str(passes);
+      return !progress(0.3 + 0.7 * (pass + f) / passes, stage);
+    };
+  }
   if (options.rule == PointcloudOptions::Rule::kNormalized) {
     std::vector<float> computed;
     const std::vector<float>* vis = &sky_visibility;
@@ -502,10 +555,13 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
       vis = &computed;
     }
     const bool sky = options.sky && sky_visibility.size() == grid.voxelCount();
-    runNormalised(out, pairs, medium, sun_dir, options, geometric_tail, grid, *vis, ts,
-                  sky ? &sky_visibility : nullptr, cancelled_pass);
+    in.grid = &grid;
+    in.escape_visibility = vis;
+    in.ts = ts;
+    in.true_visibility = sky ? &sky_visibility : nullptr;
+    runNormalised(in, out);
   } else {
-    runPaper(out, pairs, medium, sun_dir, options, cancelled_pass);
+    runPaper(in, out);
   }
   out.seconds_passes = secondsSince(t0);
   report(1.0, "passes done");

@@ -123,23 +123,23 @@ constexpr double kMaxNeighbourPairs = 4e8;
 
 /// The point cloud after its scattering passes.
 struct PointCloudResult {
-  PointCloud cloud;               ///< P, D, Ci (initial sun transmittance)
-  std::vector<Rgb> co;            ///< Co per point (see the rules above)
+  PointCloud cloud;     ///< P, D, Ci (initial sun transmittance)
+  std::vector<Rgb> co;  ///< Co per point (see the rules above)
   /// Normalised rule with a sky: fluence of sky light scattered at least once per unit radiance
   /// of a uniform sky (header, step 8); empty otherwise.
   std::vector<Rgb> co_sky;
-  std::vector<Vec3> light_dir;    ///< L per point, unit or zero (travel direction)
-  std::vector<float> mie_ratio;   ///< R per point, [0, 1]
+  std::vector<Vec3> light_dir;   ///< L per point, unit or zero (travel direction)
+  std::vector<float> mie_ratio;  ///< R per point, [0, 1]
   /// Normalised rule: 1 - P_escape per point (the target collision fraction) and the factor k_i
   /// its transfers were scaled by (header, step 6).
   std::vector<float> collision, transfer_scale;
-  double radius = 0;              ///< cut-off used, world units
-  double mean_neighbours = 0;     ///< points within the cut-off per point
-  uint64_t pairs = 0;             ///< stored pairs (negligible transmittance dropped)
-  uint64_t pair_interactions = 0; ///< pairs x passes
+  double radius = 0;               ///< cut-off used, world units
+  double mean_neighbours = 0;      ///< points within the cut-off per point
+  uint64_t pairs = 0;              ///< stored pairs (negligible transmittance dropped)
+  uint64_t pair_interactions = 0;  ///< pairs x passes
   int passes_run = 0;
   double last_relative_change = 0;
-  double tail_ratio = 0;          ///< q of the geometric tail (0: none added)
+  double tail_ratio = 0;  ///< q of the geometric tail (0: none added)
   /// Normalised rule: sum_j lum(Delta^k_j) for k = 0 (direct) .. passes_run; paper rule:
   /// sum_j lum(Ci_j) before the first pass and after each.
   std::vector<double> order_luminance;
@@ -160,8 +160,7 @@ void checkPointcloudInput(const Medium& medium, const PointcloudOptions& options
 /// an empty volume or an unusable radius; Cancelled on request.
 PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& density,
                                const std::vector<float>& sky_visibility, const Medium& medium,
-                               const Vec3& sun_dir,
-                               const PointcloudOptions& options, bool geometric_tail = true,
-                               const BakeProgressFn& progress = {});
+                               const Vec3& sun_dir, const PointcloudOptions& options,
+                               bool geometric_tail = true, const BakeProgressFn& progress = {});
 
 }  // namespace cloudbake

@@ -53,7 +53,7 @@ SkyShScatter::SkyShScatter(const std::array<ShCoefficients, 3>& sky, const Phase
   const auto lambda = phaseEigenvalues(lut);
   for (int c = 0; c < 3; ++c) {
     // Column j: the triple product of L_sky with lambda_l(j) Y_j, i.e. the projection of
-    // L_sky(w) p(w . wo) restricted to the Y_j(wo) part.
+    // L_sky(w) p(w . d) restricted to the Y_j(d) part, d the view direction.
     for (int j = 0; j < kShCoefficients; ++j) {
       ShCoefficients e{};
       e[size_t(j)] = float(lambda[size_t(c)][size_t(degree(j))]);

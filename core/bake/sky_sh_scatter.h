@@ -24,8 +24,8 @@ std::string skyTransmittanceSh(int i);
 /// by quadrature over 4096 spherical-Fibonacci directions.
 std::array<ShCoefficients, 3> projectSkyRadiance(const SkyLight& sky);
 
-/// lambda_l (l = 0..3) per channel: integral of p(w . wo) Y_lm(w) dw = lambda_l Y_lm(wo)
-/// (Funk-Hecke), 2 pi integral_{-1}^{1} p(mu) P_l(mu) dmu, integrated in the lut's own
+/// lambda_l (l = 0..3) per channel: integral of p(w . a) Y_lm(w) dw = lambda_l Y_lm(a) for any
+/// unit axis a (Funk-Hecke), 2 pi integral_{-1}^{1} p(mu) P_l(mu) dmu, integrated in the lut's own
 /// parameter so the forward peak is resolved. lambda_0 = 1 for a normalised phase.
 std::array<std::array<double, 4>, 3> phaseEigenvalues(const PhaseLut& lut);
 

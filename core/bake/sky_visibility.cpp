@@ -1,13 +1,11 @@
 #include "core/bake/sky_visibility.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <array>
 #include <cmath>
 #include <mutex>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 
 namespace cloudbake {
 namespace {
@@ -85,26 +83,24 @@ void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgres
     const int b = (a + 1) % 3, c = (a + 2) % 3;
     for (int s = 0; s < dims[a]; ++s) {
       const int ia = e[a] > 0 ? dims[a] - 1 - s : s;  // upstream (towards +e) first
-      tbb::parallel_for(tbb::blocked_range<int>(0, dims[b]), [&](const tbb::blocked_range<int>& r) {
+      parallelFor(0, dims[b], [&](int ib) {
         int idx[3];
         idx[a] = ia;
-        for (int ib = r.begin(); ib != r.end(); ++ib) {
-          idx[b] = ib;
-          for (int ic = 0; ic < dims[c]; ++ic) {
-            idx[c] = ic;
-            const size_t v = g.index(idx[0], idx[1], idx[2]);
-            const int ux = idx[0] + e[0], uy = idx[1] + e[1], uz = idx[2] + e[2];
-            float tv = 1.f;
-            if (ux >= 0 && uy >= 0 && uz >= 0 && ux < g.nx && uy < g.ny && uz < g.nz) {
-              const size_t u = g.index(ux, uy, uz);
-              const double tau = seg * (double(rho[v]) + rho[u]);
-              tv = tau > 0 ? float(t[u] * std::exp(-tau)) : t[u];
-            } else if (rho[v] > 0) {
-              // The last voxel before leaving the lattice: half a segment of its own density.
-              tv = float(std::exp(-seg * rho[v]));
-            }
-            t[v] = tv;
+        idx[b] = ib;
+        for (int ic = 0; ic < dims[c]; ++ic) {
+          idx[c] = ic;
+          const size_t v = g.index(idx[0], idx[1], idx[2]);
+          const int ux = idx[0] + e[0], uy = idx[1] + e[1], uz = idx[2] + e[2];
+          float tv = 1.f;
+          if (ux >= 0 && uy >= 0 && uz >= 0 && ux < g.nx && uy < g.ny && uz < g.nz) {
+            const size_t u = g.index(ux, uy, uz);
+            const double tau = seg * (double(rho[v]) + rho[u]);
+            tv = tau > 0 ? float(t[u] * std::exp(-tau)) : t[u];
+          } else if (rho[v] > 0) {
+            // The last voxel before leaving the lattice: half a segment of its own density.
+            tv = float(std::exp(-seg * rho[v]));
           }
+          t[v] = tv;
         }
       });
     }

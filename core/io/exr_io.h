@@ -6,7 +6,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/transport/image.h"
+#include "core/io/image.h"
 
 namespace cloudbake {
 

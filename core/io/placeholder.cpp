@@ -1,2 +1,4 @@
 // Replaced as soon as the first real io source lands.
-namespace cloudbake { int cloudbake_io_placeholder = 0; }
+namespace cloudbake {
+int cloudbake_io_placeholder = 0;
+}

@@ -10,6 +10,11 @@ namespace cloudbake {
 
 /// Coefficients of one function on the sphere: index l * l + l + m for l in [0, 3], m in [-l, l].
 constexpr int kShCoefficients = 16;
+
+/// sqrt(4 pi): Y_00 = 1 / sqrt(4 pi), so coefficient 0 of a function is sqrt(4 pi) times its
+/// mean over the sphere (the constant 1 is (sqrt(4 pi), 0, ..., 0)). The double nearest to it,
+/// equal to std::sqrt(4 * kPi).
+constexpr double kSqrt4Pi = 3.5449077018110318;
 using ShCoefficients = std::array<float, kShCoefficients>;
 
 /// The 16 real, orthonormal spherical harmonics (integral over the sphere of Y_i Y_j = delta_ij;

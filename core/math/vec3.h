@@ -1,4 +1,21 @@
 // Small 3-vector used for positions, directions and RGB colours throughout core/.
+//
+// Direction conventions, the one set for all of core/ (every direction is a unit vector):
+//  - A travel direction is the way light moves, or a path traced from the camera: Ray::d, the
+//    `travel` of the path tracer, PhaseSample::direction, the light_dir grid (L). A camera ray's
+//    d points from the camera into the scene, against the light that reaches the camera.
+//  - A to-light direction points from the scene towards a light: Sun::direction and every
+//    `sun_dir`, SkySample::to_sky, the argument of SkyLight::radiance(). Sunlight travels along
+//    -sun_dir.
+//  - Where wo/wi are written (formulas, comments) they follow pbrt: both point away from the
+//    scattering point, wo towards where the light goes (the camera), wi towards where it comes
+//    from (the sun, the sky); so a camera ray's d is -wo and sun_dir is a wi.
+//  - The scattering angle theta lies between the travel directions before and after scattering,
+//    cos theta = dot(-wi, wo) (phase_function.h): cos theta = 1 is forward scattering. Traced from
+//    the camera that is dot(sun_dir, ray.d), and phase sampling turns one travel direction of the
+//    path into the next (the same cosine, by reciprocity).
+//  - Henyey-Greenstein g (core/phase/henyey_greenstein.h) is that mean cosine: g > 0 scatters
+//    forward (clouds, ~0.85), g < 0 backward, g = 0 is isotropic.
 #pragma once
 
 #include <algorithm>
@@ -26,17 +43,46 @@ struct Vec3 {
   constexpr Vec3 operator*(double s) const { return {x * s, y * s, z * s}; }
   constexpr Vec3 operator/(double s) const { return {x / s, y / s, z / s}; }
   constexpr Vec3 operator-() const { return {-x, -y, -z}; }
-  Vec3& operator+=(const Vec3& o) { x += o.x; y += o.y; z += o.z; return *this; }
-  Vec3& operator-=(const Vec3& o) { x -= o.x; y -= o.y; z -= o.z; return *this; }
-  Vec3& operator*=(const Vec3& o) { x *= o.x; y *= o.y; z *= o.z; return *this; }
-  Vec3& operator*=(double s) { x *= s; y *= s; z *= s; return *this; }
-  Vec3& operator/=(double s) { x /= s; y /= s; z /= s; return *this; }
+  Vec3& operator+=(const Vec3& o) {
+    x += o.x;
+    y += o.y;
+    z += o.z;
+    return *this;
+  }
+  Vec3& operator-=(const Vec3& o) {
+    x -= o.x;
+    y -= o.y;
+    z -= o.z;
+    return *this;
+  }
+  Vec3& operator*=(const Vec3& o) {
+    x *= o.x;
+    y *= o.y;
+    z *= o.z;
+    return *this;
+  }
+  Vec3& operator*=(double s) {
+    x *= s;
+    y *= s;
+    z *= s;
+    return *this;
+  }
+  Vec3& operator/=(double s) {
+    x /= s;
+    y /= s;
+    z /= s;
+    return *this;
+  }
   constexpr bool operator==(const Vec3& o) const { return x == o.x && y == o.y && z == o.z; }
   constexpr bool operator!=(const Vec3& o) const { return !(*this == o); }
 };
 
 /// Linear RGB triple (radiance, irradiance, albedo, per-channel phase values).
 using Rgb = Vec3;
+
+/// Rec. 709 luminance: the weights every luminance-weighted quantity of core/ uses (albedo times
+/// mean cosine, sky sampling, convergence sums).
+constexpr double luminance(const Rgb& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
 
 constexpr Vec3 operator*(double s, const Vec3& v) { return v * s; }
 constexpr double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
@@ -88,7 +134,10 @@ struct Bounds3 {
   bool empty() const { return min.x > max.x || min.y > max.y || min.z > max.z; }
   Vec3 extent() const { return max - min; }
   Vec3 center() const { return (min + max) * 0.5; }
-  void expand(const Vec3& p) { min = cloudbake::min(min, p); max = cloudbake::max(max, p); }
+  void expand(const Vec3& p) {
+    min = cloudbake::min(min, p);
+    max = cloudbake::max(max, p);
+  }
   bool contains(const Vec3& p) const {
     return p.x >= min.x && p.x <= max.x && p.y >= min.y && p.y <= max.y && p.z >= min.z &&
            p.z <= max.z;
@@ -99,8 +148,8 @@ struct Bounds3 {
 /// [tmin, tmax]. Returns false when it misses. Handles axis-parallel rays (division by +-0
 /// gives +-inf, which the min/max logic treats correctly unless the origin is on a face and
 /// the result is NaN, which we guard).
-inline bool intersectBounds(const Bounds3& b, const Ray& ray, double tmin, double tmax,
-                            double* t0, double* t1) {
+inline bool intersectBounds(const Bounds3& b, const Ray& ray, double tmin, double tmax, double* t0,
+                            double* t1) {
   for (int a = 0; a < 3; ++a) {
     const double inv = 1.0 / ray.d[a];
     double tn = (b.min[a] - ray.o[a]) * inv;

@@ -14,7 +14,8 @@ double hgEval(double g, double cos_theta);
 double hgSampleCosTheta(double g, double u);
 
 /// Henyey-Greenstein phase function with asymmetry `g` in (-1, 1) (default isotropic), grey.
-/// Its mean cosine equals g.
+/// Its mean cosine equals g, with theta between the travel directions before and after
+/// scattering (core/math/vec3.h): g > 0 peaks forward (cos theta = 1), g < 0 backward.
 class HenyeyGreensteinPhase final : public PhaseFunction {
  public:
   /// Throws InputError ("phase.g: ...") unless g is finite and in (-1, 1).

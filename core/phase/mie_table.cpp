@@ -1,14 +1,13 @@
 #include "core/phase/mie_table.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
+#include "core/math/parallel.h"
 #include "core/phase/lorenz_mie.h"
 #include "core/phase/size_distribution.h"
 
@@ -41,10 +40,10 @@ std::vector<double> scatteredIntensityRows(double x0, double dx, int n_x, Comple
   std::vector<double> pi_table, tau_table;
   mieAngularFunctions(n_max, mu, &pi_table, &tau_table);
   std::vector<double> rows(static_cast<size_t>(n_x) * n_mu);
-  tbb::parallel_for(tbb::blocked_range<int>(0, n_x, 8), [&](const tbb::blocked_range<int>& range) {
+  parallelFor(0, n_x, [&](int64_t k0, int64_t k1) {
     std::vector<Complex> a, b;
     std::vector<double> s1r(n_mu), s1i(n_mu), s2r(n_mu), s2i(n_mu);
-    for (int k = range.begin(); k != range.end(); ++k) {
+    for (int k = int(k0); k < k1; ++k) {
       const double x = x0 + dx * k;
       mieCoefficients(x, m, &a, &b);
       std::fill(s1r.begin(), s1r.end(), 0.0);
@@ -149,8 +148,7 @@ MieTablePhase::MieTablePhase(const MieTableOptions& o) {
   os << "mie(reff=" << o.effective_radius_um << "um,veff=" << o.effective_variance << ")";
   description_ = os.str();
   finalize();
-  build_seconds_ =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  build_seconds_ = secondsSince(t_start);
 }
 
 MieTablePhase::MieTablePhase(const std::vector<double>& theta_deg, const std::vector<Rgb>& values) {

@@ -12,10 +12,10 @@ namespace cloudbake {
 struct PhaseSpec {
   enum class Type { kIsotropic, kHenyeyGreenstein, kMieApprox, kMie };
   Type type = Type::kIsotropic;
-  double g = 0.0;                    ///< hg: asymmetry in (-1, 1)
-  double diameter_um = 20.0;         ///< mie_approx: droplet diameter, micrometres (5..50)
-  double effective_radius_um = 10.0; ///< mie: effective radius of the gamma size distribution
-  double effective_variance = 0.1;   ///< mie: effective variance (dimensionless, > 0)
+  double g = 0.0;                     ///< hg: asymmetry in (-1, 1)
+  double diameter_um = 20.0;          ///< mie_approx: droplet diameter, micrometres (5..50)
+  double effective_radius_um = 10.0;  ///< mie: effective radius of the gamma size distribution
+  double effective_variance = 0.1;    ///< mie: effective variance (dimensionless, > 0)
   /// Any type: Mie/isotropic ratio R in [0, 1]; p = R p_type + (1 - R) / (4 pi). 1 = unblended.
   double mie_ratio = 1.0;
 };

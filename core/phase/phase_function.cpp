@@ -4,10 +4,10 @@
 
 namespace cloudbake {
 
-PhaseSample PhaseFunction::sample(const Vec3& w_in, double u1, double u2) const {
+PhaseSample PhaseFunction::sample(const Vec3& travel, double u1, double u2) const {
   const double cos_theta = sampleCosTheta(u1);
   PhaseSample s;
-  s.wi = directionFromCosTheta(w_in, cos_theta, u2);
+  s.direction = directionFromCosTheta(travel, cos_theta, u2);
   s.value = eval(cos_theta);
   s.pdf = pdf(cos_theta);
   return s;

@@ -9,17 +9,17 @@ namespace cloudbake {
 
 /// Result of sampling a phase function.
 struct PhaseSample {
-  Vec3 wi;        ///< new propagation direction (unit)
-  Rgb value;      ///< phase value p(theta) per channel, sr^-1
-  double pdf = 0; ///< density of `wi` in sr^-1 (>0 whenever any channel of value is > 0)
+  Vec3 direction;  ///< travel direction after scattering (unit; core/math/vec3.h)
+  Rgb value;       ///< phase value p(theta) per channel, sr^-1
+  double pdf = 0;  ///< density of `direction` in sr^-1 (>0 whenever any channel of value is > 0)
 };
 
 /// A normalised phase function: for each RGB channel, the integral of p over the sphere is 1.
 ///
-/// Angle convention (stated once, used everywhere): theta is the angle between the direction
-/// light travels *before* scattering and the direction it travels *after*; theta = 0 (cos = 1) is
-/// forward scattering, theta = 180 deg (cos = -1) is backscatter (glory). Phase functions here are
-/// rotationally symmetric, so they are functions of cos(theta) only.
+/// Angle convention (the direction conventions of core/math/vec3.h): theta is the angle between
+/// the direction light travels *before* scattering and the direction it travels *after*; theta = 0
+/// (cos = 1) is forward scattering, theta = 180 deg (cos = -1) is backscatter (glory). Phase
+/// functions here are rotationally symmetric, so they are functions of cos(theta) only.
 ///
 /// Chromatic phase functions (the tabulated Mie solution) return a different value per channel
 /// but a single sampling pdf; estimators weight by value/pdf per channel, which is unbiased as
@@ -38,11 +38,11 @@ class PhaseFunction {
   /// sample()). Must be distributed as pdf(cos_theta) * 2 pi on [-1, 1].
   virtual double sampleCosTheta(double u) const = 0;
 
-  /// Samples a new propagation direction for light travelling along `w_in` (unit).
-  PhaseSample sample(const Vec3& w_in, double u1, double u2) const;
+  /// Samples the travel direction after scattering of light travelling along `travel` (unit).
+  PhaseSample sample(const Vec3& travel, double u1, double u2) const;
 
-  /// Value for explicit directions: light travelling along `w_in`, leaving along `w_out`.
-  Rgb eval(const Vec3& w_in, const Vec3& w_out) const { return eval(dot(w_in, w_out)); }
+  /// Value for explicit travel directions: light travelling along `before`, then along `after`.
+  Rgb eval(const Vec3& before, const Vec3& after) const { return eval(dot(before, after)); }
 
   /// True if channels differ (callers may then skip per-channel work when false).
   virtual bool chromatic() const { return false; }

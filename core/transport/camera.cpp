@@ -1,21 +1,15 @@
 #include "core/transport/camera.h"
 
 #include <cmath>
-#include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 
 namespace cloudbake {
 namespace {
 
 [[noreturn]] void fail(const Camera& camera, const std::string& field, const std::string& why) {
   throw InputError("view '" + camera.name + "': camera." + field + ": " + why);
-}
-
-std::string str(const Vec3& v) {
-  std::ostringstream os;
-  os << "[" << v.x << ", " << v.y << ", " << v.z << "]";
-  return os.str();
 }
 
 }  // namespace
@@ -37,15 +31,11 @@ void validateCamera(const Camera& c) {
   }
   if (c.type == Camera::Type::kPerspective) {
     if (!std::isfinite(c.fov_deg) || !(c.fov_deg > 0) || !(c.fov_deg < 180)) {
-      std::ostringstream os;
-      os << "must be in (0, 180) degrees, got " << c.fov_deg;
-      fail(c, "fov_deg", os.str());
+      fail(c, "fov_deg", "must be in (0, 180) degrees, got " + str(c.fov_deg));
     }
   } else if (c.type == Camera::Type::kOrthographic) {
     if (!std::isfinite(c.width) || !(c.width > 0)) {
-      std::ostringstream os;
-      os << "must be finite and > 0 world units, got " << c.width;
-      fail(c, "width", os.str());
+      fail(c, "width", "must be finite and > 0 world units, got " + str(c.width));
     }
   } else {
     fail(c, "type", "unknown camera type");
@@ -53,10 +43,9 @@ void validateCamera(const Camera& c) {
   if (c.width_px < 1 || c.width_px > kMaxImageSide || c.height_px < 1 ||
       c.height_px > kMaxImageSide ||
       static_cast<long long>(c.width_px) * c.height_px > kMaxImagePixels) {
-    std::ostringstream os;
-    os << "must be 1..16384 pixels per side and at most 2^26 pixels, got " << c.width_px << "x"
-       << c.height_px;
-    fail(c, "resolution", os.str());
+    fail(c, "resolution",
+         "must be 1..16384 pixels per side and at most 2^26 pixels, got " + str(c.width_px) + "x" +
+             str(c.height_px));
   }
 }
 

@@ -4,9 +4,9 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
-#include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/math/rng.h"
 #include "core/transport/camera.h"
 #include "core/transport/sky.h"
@@ -20,18 +20,6 @@ constexpr double kInfinity = std::numeric_limits<double>::infinity();
 // Russian roulette starts after this many scattering events; earlier orders carry most of the
 // image and are cheap, later ones are rouletted on the throughput (unbiased, Arvo & Kirk 1990).
 constexpr int kRouletteDepth = 3;
-
-template <typename T>
-std::string str(const T& v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
-std::string str(const Vec3& v) {
-  std::ostringstream os;
-  os << "[" << v.x << ", " << v.y << ", " << v.z << "]";
-  return os.str();
-}
 
 void validateMedium(const Medium& m) {
   if (!m.density) throw InputError("medium.density: no density field given");
@@ -134,10 +122,11 @@ class Integrator {
       beta *= albedo_;
       if (!(maxComponent(beta) > 0)) return;  // pure absorber: nothing scatters
       const int order = depth + 1;
-      const Vec3 wo = ray.d;
+      // The path's travel direction (-wo): cos theta to a light is dot(travel, to-light).
+      const Vec3 travel = ray.d;
 
       if (sun_on_) {
-        const Rgb f = phase_.eval(dot(wo, sun_dir_));
+        const Rgb f = phase_.eval(dot(travel, sun_dir_));
         if (maxComponent(f) > 0) {
           const double tr =
               ratioTrack(field_, lookup, extinction_, {c.p, sun_dir_}, 0, kInfinity, rng);
@@ -148,11 +137,11 @@ class Integrator {
         const double u1 = rng.uniform(), u2 = rng.uniform();
         const SkySample s = sky_.sample(u1, u2);
         if (s.pdf > 0 && maxComponent(s.radiance) > 0) {
-          const double cos_theta = dot(wo, s.wi);
+          const double cos_theta = dot(travel, s.to_sky);
           const Rgb f = phase_.eval(cos_theta);
           if (maxComponent(f) > 0) {
             const double tr =
-                ratioTrack(field_, lookup, extinction_, {c.p, s.wi}, 0, kInfinity, rng);
+                ratioTrack(field_, lookup, extinction_, {c.p, s.to_sky}, 0, kInfinity, rng);
             if (tr > 0) {
               const double w = powerHeuristic(s.pdf, phase_.pdf(cos_theta));
               add(out, false, order, beta * f * s.radiance * (tr * w / s.pdf));
@@ -162,11 +151,11 @@ class Integrator {
       }
 
       const double u1 = rng.uniform(), u2 = rng.uniform();
-      const PhaseSample ps = phase_.sample(wo, u1, u2);
+      const PhaseSample ps = phase_.sample(travel, u1, u2);
       if (!(ps.pdf > 0)) return;
       beta *= ps.value / ps.pdf;
       phase_pdf = ps.pdf;
-      ray = {c.p, ps.wi};
+      ray = {c.p, ps.direction};
       if (order >= kRouletteDepth) {
         const double q = std::min(1.0, maxComponent(beta));
         if (q < 1.0) {

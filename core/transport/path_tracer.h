@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "core/transport/image.h"
+#include "core/io/image.h"
 #include "core/transport/scene.h"
 
 namespace cloudbake {

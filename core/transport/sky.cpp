@@ -113,9 +113,9 @@ Rgb SkyLight::radiance(const Vec3& w) const {
 SkySample SkyLight::sample(double u1, double u2) const {
   SkySample s;
   if (sky_.type != Sky::Type::kMap) {
-    s.wi = sampleUniformSphere(u1, u2);
+    s.to_sky = sampleUniformSphere(u1, u2);
     s.pdf = kInv4Pi;
-    s.radiance = radiance(s.wi);
+    s.radiance = radiance(s.to_sky);
     return s;
   }
   if (black_) return s;
@@ -124,9 +124,9 @@ SkySample SkyLight::sample(double u1, double u2) const {
   const double theta = v * kPi, phi = u * 2 * kPi;
   const double sin_theta = std::sin(theta);
   if (!(sin_theta > 0) || !(pdf_uv > 0)) return s;  // measure-zero pole: discard
-  s.wi = Vec3(sin_theta * std::cos(phi), sin_theta * std::sin(phi), std::cos(theta));
+  s.to_sky = Vec3(sin_theta * std::cos(phi), sin_theta * std::sin(phi), std::cos(theta));
   s.pdf = pdf_uv / (2 * kPi * kPi * sin_theta);
-  // Read the pixel the sample came from (not via atan2 of wi) so lookup and pdf always agree.
+  // Read the pixel the sample came from (not via atan2 of to_sky) so lookup and pdf always agree.
   const int x = std::clamp(static_cast<int>(u * map_.width), 0, map_.width - 1);
   const int y = std::clamp(static_cast<int>(v * map_.height), 0, map_.height - 1);
   const float* p = map_.at(x, y);

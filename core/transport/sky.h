@@ -4,8 +4,8 @@
 #include <memory>
 #include <string>
 
+#include "core/io/image.h"
 #include "core/math/vec3.h"
-#include "core/transport/image.h"
 #include "core/transport/piecewise_constant.h"
 #include "core/transport/scene.h"
 
@@ -16,9 +16,9 @@ constexpr long long kMaxSkyMapPixels = 1ll << 25;
 
 /// A direction sampled towards the sky.
 struct SkySample {
-  Vec3 wi;         ///< unit direction from the scene towards the sky
-  Rgb radiance;    ///< sky radiance arriving from wi (W m^-2 sr^-1 in the lights' units)
-  double pdf = 0;  ///< solid-angle density of wi, sr^-1 (0: discard the sample)
+  Vec3 to_sky;     ///< unit direction from the scene towards the sky (light travels along -to_sky)
+  Rgb radiance;    ///< sky radiance arriving from to_sky (W m^-2 sr^-1 in the lights' units)
+  double pdf = 0;  ///< solid-angle density of to_sky, sr^-1 (0: discard the sample)
 };
 
 /// Evaluates and samples a Sky.
@@ -48,7 +48,6 @@ class SkyLight {
 
  private:
   void buildMap(const Image& map, double scale, const std::string& what);
-  static double luminance(const Rgb& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
 
   Sky sky_;
   bool black_ = true;

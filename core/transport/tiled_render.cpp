@@ -1,11 +1,11 @@
 #include "core/transport/tiled_render.h"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <mutex>
+
+#include "core/math/parallel.h"
 
 namespace cloudbake {
 
@@ -18,32 +18,38 @@ bool renderTiles(int width, int height, int tile_size, int threads, const Progre
   std::atomic<int> tiles_done{0};
   std::mutex progress_mutex;
   int reported = 0;
+  ParallelOptions per_tile;  // the flag is polled before every tile
+  per_tile.cancelled = [&](double) { return cancelled.load(std::memory_order_relaxed); };
   auto run = [&] {
     if (setup) setup();
-    tbb::parallel_for(tbb::blocked_range<int>(0, tiles, 1), [&](const tbb::blocked_range<int>& r) {
-      for (int t = r.begin(); t != r.end(); ++t) {
-        if (cancelled.load(std::memory_order_relaxed)) return;
-        TileRect rect;
-        rect.index = t;
-        rect.x0 = (t % tiles_x) * tile_size;
-        rect.y0 = (t / tiles_x) * tile_size;
-        rect.x1 = std::min(rect.x0 + tile_size, width);
-        rect.y1 = std::min(rect.y0 + tile_size, height);
-        render_tile(rect, cancelled);
-        const int done = ++tiles_done;
-        if (progress) {
-          std::lock_guard<std::mutex> lock(progress_mutex);
-          reported = std::max(reported, done);
-          if (!cancelled.load() && !progress(double(reported) / tiles)) cancelled = true;
-        }
-      }
-    });
+    parallelFor(
+        0, tiles,
+        [&](int t) {
+          TileRect rect;
+          rect.index = t;
+          rect.x0 = (t % tiles_x) * tile_size;
+          rect.y0 = (t / tiles_x) * tile_size;
+          rect.x1 = std::min(rect.x0 + tile_size, width);
+          rect.y1 = std::min(rect.y0 + tile_size, height);
+          render_tile(rect, cancelled);
+          const int done = ++tiles_done;
+          if (progress) {
+            std::lock_guard<std::mutex> lock(progress_mutex);
+            reported = std::max(reported, done);
+            if (!cancelled.load() && !progress(double(reported) / tiles)) cancelled = true;
+          }
+        },
+        per_tile);
   };
-  if (threads > 0) {
-    tbb::task_arena arena(threads);
-    arena.execute(run);
-  } else {
-    run();
+  try {
+    if (threads > 0) {
+      tbb::task_arena arena(threads);
+      arena.execute(run);
+    } else {
+      run();
+    }
+  } catch (const Cancelled&) {
+    if (!cancelled) throw;  // not our flag: someone else's cancellation
   }
   return !cancelled;
 }

@@ -6,8 +6,7 @@
 
 namespace cloudbake {
 
-MajorantGrid::MajorantGrid(const Bounds3& bounds, int nx, int ny, int nz,
-                           std::vector<float> maxima)
+MajorantGrid::MajorantGrid(const Bounds3& bounds, int nx, int ny, int nz, std::vector<float> maxima)
     : bounds_(bounds), nx_(nx), ny_(ny), nz_(nz), maxima_(std::move(maxima)) {
   if (nx < 1 || ny < 1 || nz < 1 ||
       maxima_.size() != static_cast<size_t>(nx) * static_cast<size_t>(ny) * nz) {

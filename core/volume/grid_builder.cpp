@@ -1,10 +1,8 @@
 // Parallel construction of sparse grids from per-block evaluators (see openvdb_grid.h).
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <memory>
 #include <vector>
 
+#include "core/math/parallel.h"
 #include "core/volume/openvdb_grid.h"
 
 namespace cloudbake {
@@ -28,9 +26,9 @@ openvdb::FloatGrid::Ptr buildGridFromBlocks(const openvdb::CoordBBox& box, doubl
     std::unique_ptr<LeafT> leaf;
   };
   std::vector<Result> results(count);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4), [&](const auto& r) {
+  parallelFor(0, int64_t(count), [&](int64_t lo, int64_t hi) {
     float values[LeafT::SIZE];
-    for (size_t b = r.begin(); b != r.end(); ++b) {
+    for (size_t b = size_t(lo); b < size_t(hi); ++b) {
       const int bx = static_cast<int>(b % n[0]);
       const int by = static_cast<int>((b / n[0]) % n[1]);
       const int bz = static_cast<int>(b / (static_cast<size_t>(n[0]) * n[1]));

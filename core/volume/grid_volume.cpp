@@ -1,8 +1,6 @@
 #include "core/volume/grid_volume.h"
 
 #include <openvdb/tools/Interpolation.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -10,6 +8,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/math/parallel.h"
 #include "core/volume/openvdb_grid.h"
 
 namespace cloudbake {
@@ -74,27 +73,25 @@ CellMaxima dilatedCellMaxima(const openvdb::FloatTree& tree, const openvdb::Coor
   leaves.reserve(tree.leafCount());
   for (auto it = tree.cbeginLeaf(); it; ++it) leaves.push_back(it.getLeaf());
   std::vector<float> local(leaves.size() * 27, 0.f);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.size()), [&](const auto& r) {
-    for (size_t l = r.begin(); l != r.end(); ++l) {
-      float* m = &local[l * 27];
-      const float* data = leaves[l]->buffer().data();
-      // Neighbour slots a voxel at local coordinate c feeds: its own block (1), plus the lower
-      // neighbour (0) when c == 0 and the upper one (2) when c == 7.
-      static constexpr int kSlots[8][2] = {{0, 1}, {1, 1}, {1, 1}, {1, 1},
-                                           {1, 1}, {1, 1}, {1, 1}, {1, 2}};
-      for (int x = 0; x < 8; ++x)
-        for (int y = 0; y < 8; ++y)
-          for (int z = 0; z < 8; ++z) {
-            const float value = data[(x << 6) | (y << 3) | z];
-            if (!(value > 0.f)) continue;
-            for (int dx : kSlots[x])
-              for (int dy : kSlots[y])
-                for (int dz : kSlots[z]) {
-                  float& slot = m[(dx * 3 + dy) * 3 + dz];
-                  slot = std::max(slot, value);
-                }
-          }
-    }
+  parallelFor(0, int64_t(leaves.size()), [&](size_t l) {
+    float* m = &local[l * 27];
+    const float* data = leaves[l]->buffer().data();
+    // Neighbour slots a voxel at local coordinate c feeds: its own block (1), plus the lower
+    // neighbour (0) when c == 0 and the upper one (2) when c == 7.
+    static constexpr int kSlots[8][2] = {{0, 1}, {1, 1}, {1, 1}, {1, 1},
+                                         {1, 1}, {1, 1}, {1, 1}, {1, 2}};
+    for (int x = 0; x < 8; ++x)
+      for (int y = 0; y < 8; ++y)
+        for (int z = 0; z < 8; ++z) {
+          const float value = data[(x << 6) | (y << 3) | z];
+          if (!(value > 0.f)) continue;
+          for (int dx : kSlots[x])
+            for (int dy : kSlots[y])
+              for (int dz : kSlots[z]) {
+                float& slot = m[(dx * 3 + dy) * 3 + dz];
+                slot = std::max(slot, value);
+              }
+        }
   });
   for (size_t l = 0; l < leaves.size(); ++l) {
     const openvdb::Coord o = leaves[l]->origin();
@@ -227,7 +224,7 @@ std::shared_ptr<const GridVolume> makeGridVolume(openvdb::FloatGrid::Ptr grid,
     }
     const Vec3 csize = mbounds.extent() / Vec3(nw[0], nw[1], nw[2]);
     std::vector<float> maxima(static_cast<size_t>(nw[0]) * nw[1] * nw[2], 0.f);
-    tbb::parallel_for(0, nw[2], [&](int cz) {
+    parallelFor(0, nw[2], [&](int cz) {
       for (int cy = 0; cy < nw[1]; ++cy)
         for (int cx = 0; cx < nw[0]; ++cx) {
           openvdb::Vec3d lo(1e300), hi(-1e300);

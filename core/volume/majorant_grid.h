@@ -37,9 +37,7 @@ class MajorantGrid {
   bool traverse(const Ray& ray, double tmin, double tmax, Fn&& fn) const;
 
  private:
-  size_t index(int x, int y, int z) const {
-    return (static_cast<size_t>(z) * ny_ + y) * nx_ + x;
-  }
+  size_t index(int x, int y, int z) const { return (static_cast<size_t>(z) * ny_ + y) * nx_ + x; }
   Bounds3 bounds_;
   int nx_ = 0, ny_ = 0, nz_ = 0;
   std::vector<float> maxima_;

@@ -268,155 +268,207 @@ class PlyBody {
   int64_t index_ = 0;
 };
 
-TriangleMesh parsePly(const std::string& text, const std::string& path) {
-  size_t pos = 0;
-  int line_no = 0;
-  auto fail = [&](const std::string& why) {
-    throw InputError(path + ":" + std::to_string(line_no) + ": " + why);
-  };
-  auto nextLine = [&]() -> std::string {
-    if (pos >= text.size()) fail("header ends before end_header");
-    size_t end = text.find('\n', pos);
-    if (end == std::string::npos) end = text.size();
-    std::string line = text.substr(pos, end - pos);
-    pos = end + 1;
-    ++line_no;
+// The header: format, elements and their properties, and where the body starts.
+struct PlyHeader {
+  PlyFormat format = PlyFormat::kAscii;
+  std::vector<PlyElement> elements;
+  size_t body = 0;  // offset of the first byte after end_header
+};
+
+// Reads the header line by line; errors name the line.
+class PlyHeaderReader {
+ public:
+  PlyHeaderReader(const std::string& text, const std::string& path) : text_(text), path_(path) {}
+
+  PlyHeader read() {
+    if (nextLine() != "ply") fail("not a PLY file (first line must be 'ply')");
+    PlyHeader header;
+    bool have_format = false;
+    for (;;) {
+      const std::string line = nextLine();
+      std::istringstream ls(line);
+      std::string key;
+      ls >> key;
+      if (key.empty() || key == "comment" || key == "obj_info") continue;
+      if (key == "end_header") break;
+      if (key == "format") {
+        header.format = format(ls);
+        have_format = true;
+      } else if (key == "element") {
+        header.elements.push_back(element(ls, line));
+      } else if (key == "property") {
+        if (header.elements.empty()) fail("property before any element");
+        header.elements.back().props.push_back(property(ls, line));
+      } else {
+        fail("unknown header keyword '" + key + "'");
+      }
+    }
+    if (!have_format) fail("header has no format line");
+    header.body = pos_;
+    return header;
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& why) const {
+    throw InputError(path_ + ":" + std::to_string(line_no_) + ": " + why);
+  }
+
+  std::string nextLine() {
+    if (pos_ >= text_.size()) fail("header ends before end_header");
+    size_t end = text_.find('\n', pos_);
+    if (end == std::string::npos) end = text_.size();
+    std::string line = text_.substr(pos_, end - pos_);
+    pos_ = end + 1;
+    ++line_no_;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     return line;
-  };
-  if (nextLine() != "ply") fail("not a PLY file (first line must be 'ply')");
-  PlyFormat format = PlyFormat::kAscii;
-  bool have_format = false;
-  std::vector<PlyElement> elements;
-  for (;;) {
-    const std::string line = nextLine();
-    std::istringstream ls(line);
-    std::string key;
-    ls >> key;
-    if (key.empty() || key == "comment" || key == "obj_info") continue;
-    if (key == "end_header") break;
-    if (key == "format") {
-      std::string f, version;
-      ls >> f >> version;
-      if (f == "ascii")
-        format = PlyFormat::kAscii;
-      else if (f == "binary_little_endian")
-        format = PlyFormat::kLittle;
-      else if (f == "binary_big_endian")
-        format = PlyFormat::kBig;
-      else
-        fail("unknown format '" + f + "'");
-      have_format = true;
-    } else if (key == "element") {
-      PlyElement el;
-      std::string count;
-      ls >> el.name >> count;
-      long long c = -1;
-      if (el.name.empty() || !parseInt(count.data(), count.data() + count.size(), &c) || c < 0) {
-        fail("bad element line '" + line + "'");
+  }
+
+  PlyFormat format(std::istringstream& ls) const {
+    std::string f, version;
+    ls >> f >> version;
+    if (f == "ascii") return PlyFormat::kAscii;
+    if (f == "binary_little_endian") return PlyFormat::kLittle;
+    if (f == "binary_big_endian") return PlyFormat::kBig;
+    fail("unknown format '" + f + "'");
+  }
+
+  PlyElement element(std::istringstream& ls, const std::string& line) const {
+    PlyElement el;
+    std::string count;
+    ls >> el.name >> count;
+    long long c = -1;
+    if (el.name.empty() || !parseInt(count.data(), count.data() + count.size(), &c) || c < 0) {
+      fail("bad element line '" + line + "'");
+    }
+    // Every element takes at least one byte, so larger counts mean a corrupt header.
+    if (static_cast<unsigned long long>(c) > text_.size()) {
+      fail("element count " + count + " exceeds the file size");
+    }
+    el.count = c;
+    return el;
+  }
+
+  PlyProperty property(std::istringstream& ls, const std::string& line) const {
+    PlyProperty p;
+    std::string type;
+    ls >> type;
+    if (type == "list") {
+      std::string count_type, item_type;
+      ls >> count_type >> item_type >> p.name;
+      p.is_list = true;
+      if (!plyType(count_type, &p.count_type) || !isIntegerType(p.count_type) ||
+          !plyType(item_type, &p.type)) {
+        fail("bad list property '" + line + "'");
       }
-      // Every element takes at least one byte, so larger counts mean a corrupt header.
-      if (static_cast<unsigned long long>(c) > text.size()) {
-        fail("element count " + count + " exceeds the file size");
-      }
-      el.count = c;
-      elements.push_back(el);
-    } else if (key == "property") {
-      if (elements.empty()) fail("property before any element");
-      PlyProperty p;
-      std::string type;
-      ls >> type;
-      if (type == "list") {
-        std::string count_type, item_type;
-        ls >> count_type >> item_type >> p.name;
-        p.is_list = true;
-        if (!plyType(count_type, &p.count_type) || !isIntegerType(p.count_type) ||
-            !plyType(item_type, &p.type)) {
-          fail("bad list property '" + line + "'");
-        }
-      } else {
-        ls >> p.name;
-        if (!plyType(type, &p.type)) fail("unknown property type '" + type + "'");
-      }
-      if (p.name.empty()) fail("property without a name");
-      elements.back().props.push_back(p);
     } else {
-      fail("unknown header keyword '" + key + "'");
+      ls >> p.name;
+      if (!plyType(type, &p.type)) fail("unknown property type '" + type + "'");
+    }
+    if (p.name.empty()) fail("property without a name");
+    return p;
+  }
+
+  const std::string& text_;
+  const std::string& path_;
+  size_t pos_ = 0;
+  int line_no_ = 0;
+};
+
+// Which properties of an element the mesh reads: x, y, z of a vertex, the index list of a face
+// (-1: none).
+struct PlyRoles {
+  int xyz[3] = {-1, -1, -1};
+  int indices = -1;
+};
+
+// The roles of `el`'s properties; InputError when a vertex or face element lacks what the mesh
+// needs.
+PlyRoles plyRoles(const PlyElement& el, const std::string& path) {
+  PlyRoles roles;
+  for (size_t i = 0; i < el.props.size(); ++i) {
+    const PlyProperty& p = el.props[i];
+    if (el.name == "vertex" && !p.is_list) {
+      for (int a = 0; a < 3; ++a)
+        if (p.name == std::string(1, static_cast<char>('x' + a)))
+          roles.xyz[a] = static_cast<int>(i);
+    }
+    if (el.name == "face" && p.is_list &&
+        (p.name == "vertex_indices" || p.name == "vertex_index")) {
+      roles.indices = static_cast<int>(i);
     }
   }
-  if (!have_format) fail("header has no format line");
+  if (el.name == "vertex" && (roles.xyz[0] < 0 || roles.xyz[1] < 0 || roles.xyz[2] < 0)) {
+    throw InputError(path + ": element vertex needs properties x, y and z");
+  }
+  if (el.name == "face") {
+    if (roles.indices < 0) {
+      throw InputError(path + ": element face needs a list property vertex_indices");
+    }
+    if (!isIntegerType(el.props[roles.indices].type)) {
+      throw InputError(path + ": face vertex_indices must have an integer type");
+    }
+  }
+  return roles;
+}
 
-  TriangleMesh mesh;
-  bool have_vertices = false, have_faces = false;
-  PlyBody body(text, pos, format, path);
-  for (const PlyElement& el : elements) {
-    int xyz[3] = {-1, -1, -1};
-    int indices = -1;
+// Reads every item of `el` from the body: vertices and faces (fanned into triangles) into
+// `mesh`, other elements skipped.
+void readPlyElement(const PlyElement& el, const PlyRoles& roles, PlyBody& body,
+                    TriangleMesh& mesh) {
+  std::vector<int64_t> face;
+  for (int64_t n = 0; n < el.count; ++n) {
+    body.setContext(el.name, n);
+    Vec3 v;
     for (size_t i = 0; i < el.props.size(); ++i) {
       const PlyProperty& p = el.props[i];
-      if (el.name == "vertex" && !p.is_list) {
+      if (!p.is_list) {
+        const double value = body.read(p.type);
         for (int a = 0; a < 3; ++a)
-          if (p.name == std::string(1, static_cast<char>('x' + a))) xyz[a] = static_cast<int>(i);
+          if (static_cast<int>(i) == roles.xyz[a]) v[a] = value;
+        continue;
       }
-      if (el.name == "face" && p.is_list &&
-          (p.name == "vertex_indices" || p.name == "vertex_index")) {
-        indices = static_cast<int>(i);
+      const double count = body.read(p.count_type);
+      if (count < 0 || count > 1e6) body.fail("bad list length " + std::to_string(count));
+      const bool is_face = static_cast<int>(i) == roles.indices;
+      if (is_face) face.clear();
+      for (int k = 0; k < static_cast<int>(count); ++k) {
+        const double value = body.read(p.type);
+        if (is_face) face.push_back(static_cast<int64_t>(value));
       }
     }
     if (el.name == "vertex") {
-      if (xyz[0] < 0 || xyz[1] < 0 || xyz[2] < 0) {
-        throw InputError(path + ": element vertex needs properties x, y and z");
+      if (!isFinite(v)) body.fail("non-finite coordinate");
+      mesh.vertices.push_back(v);
+    } else if (el.name == "face") {
+      if (face.size() < 3) body.fail("face needs at least 3 vertices");
+      for (int64_t idx : face) {
+        if (idx < 0 || idx >= static_cast<int64_t>(mesh.vertices.size())) {
+          body.fail("vertex index " + std::to_string(idx) + " out of range (" +
+                    std::to_string(mesh.vertices.size()) + " vertices)");
+        }
       }
+      for (size_t k = 1; k + 1 < face.size(); ++k) {
+        mesh.triangles.push_back({static_cast<int32_t>(face[0]), static_cast<int32_t>(face[k]),
+                                  static_cast<int32_t>(face[k + 1])});
+      }
+    }
+  }
+}
+
+TriangleMesh parsePly(const std::string& text, const std::string& path) {
+  const PlyHeader header = PlyHeaderReader(text, path).read();
+  TriangleMesh mesh;
+  bool have_vertices = false, have_faces = false;
+  PlyBody body(text, header.body, header.format, path);
+  for (const PlyElement& el : header.elements) {
+    const PlyRoles roles = plyRoles(el, path);
+    if (el.name == "vertex") {
       have_vertices = true;
       mesh.vertices.reserve(el.count);
     }
-    if (el.name == "face") {
-      if (indices < 0) {
-        throw InputError(path + ": element face needs a list property vertex_indices");
-      }
-      if (!isIntegerType(el.props[indices].type)) {
-        throw InputError(path + ": face vertex_indices must have an integer type");
-      }
-      have_faces = true;
-    }
-    std::vector<int64_t> face;
-    for (int64_t n = 0; n < el.count; ++n) {
-      body.setContext(el.name, n);
-      Vec3 v;
-      for (size_t i = 0; i < el.props.size(); ++i) {
-        const PlyProperty& p = el.props[i];
-        if (!p.is_list) {
-          const double value = body.read(p.type);
-          for (int a = 0; a < 3; ++a)
-            if (static_cast<int>(i) == xyz[a]) v[a] = value;
-          continue;
-        }
-        const double count = body.read(p.count_type);
-        if (count < 0 || count > 1e6) body.fail("bad list length " + std::to_string(count));
-        const bool is_face = static_cast<int>(i) == indices;
-        if (is_face) face.clear();
-        for (int k = 0; k < static_cast<int>(count); ++k) {
-          const double value = body.read(p.type);
-          if (is_face) face.push_back(static_cast<int64_t>(value));
-        }
-      }
-      if (el.name == "vertex") {
-        if (!isFinite(v)) body.fail("non-finite coordinate");
-        mesh.vertices.push_back(v);
-      } else if (el.name == "face") {
-        if (face.size() < 3) body.fail("face needs at least 3 vertices");
-        for (int64_t idx : face) {
-          if (idx < 0 || idx >= static_cast<int64_t>(mesh.vertices.size())) {
-            body.fail("vertex index " + std::to_string(idx) + " out of range (" +
-                      std::to_string(mesh.vertices.size()) + " vertices)");
-          }
-        }
-        for (size_t k = 1; k + 1 < face.size(); ++k) {
-          mesh.triangles.push_back({static_cast<int32_t>(face[0]), static_cast<int32_t>(face[k]),
-                                    static_cast<int32_t>(face[k + 1])});
-        }
-      }
-    }
+    if (el.name == "face") have_faces = true;
+    readPlyElement(el, roles, body, mesh);
   }
   if (!have_vertices) throw InputError(path + ": PLY file has no vertex element");
   if (!have_faces) throw InputError(path + ": PLY file has no face element");

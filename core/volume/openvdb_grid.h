@@ -44,7 +44,7 @@ using BlockEvaluator = std::function<bool(const openvdb::Coord& origin, float* v
 
 /// Builds a grid over the inclusive index box `box` with a uniform-scale transform of
 /// `voxel_size` (voxel ijk centred at world ijk * voxel_size), evaluating the leaf-aligned 8^3
-/// blocks in parallel (tbb::parallel_for) and inserting them serially, so the result does not
+/// blocks in parallel (parallelFor) and inserting them serially, so the result does not
 /// depend on the thread count. Voxels outside `box` and voxels with value 0 stay inactive;
 /// uniform non-zero blocks become active tiles. The evaluator is called concurrently.
 openvdb::FloatGrid::Ptr buildGridFromBlocks(const openvdb::CoordBBox& box, double voxel_size,

@@ -127,8 +127,8 @@ DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& o) {
         continue;
       }
       const Vec3 q = vi * (g.h / max_size * o.frequency);
-      const double v =
-          env * 2.0 * (o.time == 0 ? fbm01(noise, q, o.octaves, o.persistence)
+      const double v = env * 2.0 *
+                       (o.time == 0 ? fbm01(noise, q, o.octaves, o.persistence)
                                     : evolvingFbm01(noise, q, o.octaves, o.persistence, o.time));
       values[i] = static_cast<float>(o.density * eliasCloudDensity(v, o.cover, o.sharpness));
     }

@@ -11,17 +11,17 @@ namespace cloudbake {
 
 /// Fractal (fBm) noise used to modulate mesh densities and in the Perlin cloud (seeds 000, 004).
 struct NoiseOptions {
-  double frequency = 4.0;     ///< base frequency, cycles per unit of the shape's largest extent
-  int octaves = 4;            ///< number of fBm octaves, 1..12
-  double persistence = 0.5;   ///< amplitude ratio between octaves, (0, 1]
-  double amount = 0.5;        ///< 0: no modulation, 1: density fully multiplied by noise in [0,1]
+  double frequency = 4.0;    ///< base frequency, cycles per unit of the shape's largest extent
+  int octaves = 4;           ///< number of fBm octaves, 1..12
+  double persistence = 0.5;  ///< amplitude ratio between octaves, (0, 1]
+  double amount = 0.5;       ///< 0: no modulation, 1: density fully multiplied by noise in [0,1]
   uint64_t seed = 1;
 };
 
 /// Loads a float grid from an OpenVDB file.
 struct VdbSourceOptions {
-  std::string path;               ///< .vdb file (already resolved to an absolute path)
-  std::string grid = "density";   ///< float grid name
+  std::string path;              ///< .vdb file (already resolved to an absolute path)
+  std::string grid = "density";  ///< float grid name
 };
 
 /// Voxelises a triangle mesh (OBJ or PLY, ASCII or binary) into a fog volume whose interior
@@ -39,15 +39,15 @@ struct MeshSourceOptions {
 /// The Perlin-noise cloud of seed 004: fBm noise shaped by an ellipsoidal envelope, with cloud
 /// cover and sharpness (Hugo Elias's exponential mapping). Never touches the grid boundary.
 struct PerlinCloudOptions {
-  Vec3 center{0, 0, 0.5};      ///< world centre of the cloud's box
-  Vec3 size{2, 2, 1};          ///< world extent of the box (x, y, z)
-  int resolution = 128;        ///< voxels along the largest extent, 8..1024
-  double cover = 0.45;         ///< 0..1: higher = more sky showing through (less cloud)
-  double sharpness = 0.9;      ///< (0, 1): lower = harder edges
-  double density = 1.0;        ///< peak density
-  int octaves = 5;             ///< 1..12
-  double frequency = 3.0;      ///< base frequency, cycles per box
-  double persistence = 0.5;    ///< (0, 1]
+  Vec3 center{0, 0, 0.5};    ///< world centre of the cloud's box
+  Vec3 size{2, 2, 1};        ///< world extent of the box (x, y, z)
+  int resolution = 128;      ///< voxels along the largest extent, 8..1024
+  double cover = 0.45;       ///< 0..1: higher = more sky showing through (less cloud)
+  double sharpness = 0.9;    ///< (0, 1): lower = harder edges
+  double density = 1.0;      ///< peak density
+  int octaves = 5;           ///< 1..12
+  double frequency = 3.0;    ///< base frequency, cycles per box
+  double persistence = 0.5;  ///< (0, 1]
   uint64_t seed = 1;
   /// Cloud time (|time| <= 1e6): each octave's noise drifts through its own lattice at a speed
   /// growing with the octave, so small puffs change faster than the large shapes and the cloud

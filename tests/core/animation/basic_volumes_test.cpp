@@ -3,7 +3,6 @@
 #include "core/animation/basic_volumes.h"
 
 #include <gtest/gtest.h>
-
 #include <unistd.h>
 
 #include <cstdio>
@@ -11,16 +10,17 @@
 
 #include "core/error.h"
 #include "core/io/vdb_io.h"
-#include "core/volume/analytic.h"
 #include "core/shot/shot_parser.h"
+#include "core/volume/analytic.h"
 
 namespace cloudbake {
 namespace {
 
 SequenceVolumeSpec proceduralSequence(int frames, double step) {
   const std::string shot = R"({"version": 1, "name": "anim",
-    "volume": {"sequence": {"frames": )" + std::to_string(frames) +
-                           R"(, "time_step": )" + std::to_string(step) + R"(,
+    "volume": {"sequence": {"frames": )" +
+                           std::to_string(frames) + R"(, "time_step": )" + std::to_string(step) +
+                           R"(,
       "procedural": {"type": "perlin_cloud", "resolution": 24, "seed": 3, "cover": 0.4}}},
     "medium": {"extinction": 1, "albedo": 0.9, "phase": {"type": "isotropic"}},
     "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]}},
@@ -38,15 +38,17 @@ TEST(BasicVolumes, ThirtyProceduralFramesOnOneLatticeAndAnEndlessWalk) {
   const std::vector<double> p = transitionProbabilities(d, 30, o);
   const std::vector<BlendFrame> walk = endlessWalk(p, 30, 1000, o);
   const double input = maxInputFrameChange(db.frames), endless = maxFrameChange(db.frames, walk);
-  std::printf("[ animation ] procedural cloud, 30 basic volumes: largest frame-to-frame RMS "
-              "density change: input %.4f, 1000-frame walk %.4f\n", input, endless);
+  std::printf(
+      "[ animation ] procedural cloud, 30 basic volumes: largest frame-to-frame RMS "
+      "density change: input %.4f, 1000-frame walk %.4f\n",
+      input, endless);
   EXPECT_GT(input, 0);
   EXPECT_LE(endless, 2.0 * input);
 }
 
 TEST(BasicVolumes, VdbFramesMustShareOneTransform) {
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("cloudbake_basic_volumes_" + std::to_string(::getpid()));
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("cloudbake_basic_volumes_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   VdbWriteOptions fine, coarse;
   fine.voxel_size = 0.1;
@@ -77,9 +79,9 @@ TEST(BasicVolumes, VdbFramesMustShareOneTransform) {
 TEST(BasicVolumes, BadDatabasesAreRefused) {
   EXPECT_THROW(buildBasicVolumes(proceduralSequence(1, 0.1), 24), InputError);
   EXPECT_THROW(buildBasicVolumes(proceduralSequence(3, 0.1), 4), InputError);  // resolution
-  EXPECT_THROW(buildBasicVolumes(proceduralSequence(3, 0.1), 24,
-                                 "shot.json", [](double) { return false; }),
-               Cancelled);
+  EXPECT_THROW(
+      buildBasicVolumes(proceduralSequence(3, 0.1), 24, "shot.json", [](double) { return false; }),
+      Cancelled);
 }
 
 }  // namespace

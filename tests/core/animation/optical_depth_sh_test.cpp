@@ -41,7 +41,8 @@ TEST(OpticalDepth, SweepsMatchRayMarchesThroughASphere) {
       for (int j = 8; j < g.ny - 8; j += 4)
         for (int i = 8; i < g.nx - 8; i += 4) {
           const Vec3 p = g.center(i, j, k);
-          const double t = marchTransmittance(g, lattice.density.data(), ext, p, w, 0.01 * g.voxel_size);
+          const double t =
+              marchTransmittance(g, lattice.density.data(), ext, p, w, 0.01 * g.voxel_size);
           const double ref = -std::log(std::max(t, 1e-30));
           worst = std::max(worst, std::abs(tau[g.index(i, j, k)] - ref) / (ref + 0.1));
         }

@@ -122,9 +122,11 @@ TEST(ShExp, MatchesDirectlyProjectedTransmittanceInACloud) {
   err /= n;
   err_dc /= n;
   err_fit /= n;
-  std::printf("[ shexp ] mean relative L2 error against directly projected transmittance: %.4f "
-              "(exp of the constant term alone: %.4f); against exp of the order-4 optical depth "
-              "it approximates: %.4f; %d voxels\n", err, err_dc, err_fit, n);
+  std::printf(
+      "[ shexp ] mean relative L2 error against directly projected transmittance: %.4f "
+      "(exp of the constant term alone: %.4f); against exp of the order-4 optical depth "
+      "it approximates: %.4f; %d voxels\n",
+      err, err_dc, err_fit, n);
   EXPECT_LT(err_fit, 0.15);
   EXPECT_LT(err, 0.15);
   EXPECT_LT(err, 0.25 * err_dc);

@@ -19,12 +19,15 @@ BasicVolumes circlingBlob(int n, int size = 16) {
   BasicVolumes frames(size_t(n), std::vector<float>(size_t(size) * size * size));
   for (int f = 0; f < n; ++f) {
     const double a = 2 * M_PI * f / n;
-    const double cx = size / 2.0 + size / 4.0 * std::cos(a), cy = size / 2.0 + size / 4.0 * std::sin(a);
+    const double cx = size / 2.0 + size / 4.0 * std::cos(a),
+                 cy = size / 2.0 + size / 4.0 * std::sin(a);
     for (int k = 0; k < size; ++k)
       for (int j = 0; j < size; ++j)
         for (int i = 0; i < size; ++i) {
-          const double r2 = (i - cx) * (i - cx) + (j - cy) * (j - cy) + (k - size / 2.0) * (k - size / 2.0);
-          frames[size_t(f)][(size_t(k) * size + size_t(j)) * size + size_t(i)] = float(std::exp(-r2 / 8));
+          const double r2 =
+              (i - cx) * (i - cx) + (j - cy) * (j - cy) + (k - size / 2.0) * (k - size / 2.0);
+          frames[size_t(f)][(size_t(k) * size + size_t(j)) * size + size_t(i)] =
+              float(std::exp(-r2 / 8));
         }
   }
   return frames;
@@ -129,8 +132,10 @@ TEST(VideoTexture, TheEndlessWalkIsSeededAndNeverJumps) {
   // The largest frame-to-frame change of the endless sequence stays near the input's own.
   const double input = maxInputFrameChange(frames);
   const double endless = maxFrameChange(frames, walk);
-  std::printf("[ animation ] largest frame-to-frame RMS density change: input %.4f, 1000-frame walk"
-              " %.4f (%d dissolved frames)\n", input, endless, jumps);
+  std::printf(
+      "[ animation ] largest frame-to-frame RMS density change: input %.4f, 1000-frame walk"
+      " %.4f (%d dissolved frames)\n",
+      input, endless, jumps);
   EXPECT_LE(endless, 1.5 * input);
   // Control: hard cuts to random frames do jump, so the check above can fail.
   o.dissolve_frames = 0;

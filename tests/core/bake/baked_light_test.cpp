@@ -10,9 +10,9 @@
 
 #include "core/bake/baked_light_vdb.h"
 #include "core/error.h"
-#include "tests/core/bake/bake_test_util.h"
 #include "core/io/vdb_io.h"
 #include "core/volume/analytic.h"
+#include "tests/core/bake/bake_test_util.h"
 
 namespace cloudbake {
 namespace {
@@ -140,8 +140,7 @@ TEST_F(BakeFile, RoundTripsExactlyWithVdbConventions) {
   }
   const Vec3 c = b.grid.center(5, 4, 6);
   EXPECT_FLOAT_EQ(vdb.floatAt("density", c), b.density[b.grid.index(5, 4, 6)]);
-  EXPECT_FLOAT_EQ(float(vdb.vec3At("Co", c).z),
-                  b.find("Co")->data[3 * b.grid.index(5, 4, 6) + 2]);
+  EXPECT_FLOAT_EQ(float(vdb.vec3At("Co", c).z), b.find("Co")->data[3 * b.grid.index(5, 4, 6) + 2]);
 }
 
 TEST_F(BakeFile, BadFilesAreRefusedNamingThePath) {

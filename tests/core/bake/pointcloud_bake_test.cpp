@@ -31,8 +31,6 @@
 namespace cloudbake {
 namespace {
 
-double lum(const Rgb& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
-
 /// A lattice for the homogeneous sphere of radius a at the origin: `res` voxels across the
 /// diameter plus one empty voxel of margin, each voxel the fraction of it inside (4^3 samples).
 struct Lattice {
@@ -220,8 +218,8 @@ TEST(NormalisedRule, AlbedoScalesTheScatteredLight) {
   const PointCloudResult one = run(1.0), half = run(0.5), zero = run(0.0);
   double s1 = 0, s05 = 0;
   for (size_t j = 0; j < one.co.size(); ++j) {
-    s1 += lum(one.co[j]);
-    s05 += lum(half.co[j]);
+    s1 += luminance(one.co[j]);
+    s05 += luminance(half.co[j]);
     EXPECT_LE(half.co[j].x, one.co[j].x * (1 + 1e-9));
     EXPECT_EQ(zero.co[j], Rgb(0.0));
   }
@@ -248,8 +246,8 @@ TEST(NormalisedRule, GeometricTailMatchesRunningAllOrders) {
   EXPECT_GT(all.passes_run, 20);
   double st = 0, sa = 0, s24 = 0;
   for (size_t j = 0; j < all.co.size(); ++j) {
-    st += lum(tail.co[j]);
-    sa += lum(all.co[j]);
+    st += luminance(tail.co[j]);
+    sa += luminance(all.co[j]);
   }
   for (int k = 1; k <= 24; ++k) s24 += all.order_luminance[size_t(k)];
   std::printf("tail: q %.4f, %.5g vs %.5g after %d passes; ratios", tail.tail_ratio, st, sa,
@@ -371,7 +369,7 @@ TEST(PaperRule, RunsAndStaysFiniteWithBothOutputs) {
       ASSERT_GE(r.mie_ratio[j], 0.f);
       ASSERT_LE(r.mie_ratio[j], 1.f);
       ASSERT_NEAR(length(r.light_dir[j]), 1, 1e-9);
-      total += lum(r.co[j]);
+      total += luminance(r.co[j]);
     }
     EXPECT_GT(total, 0);
     // Eq. 1 lowers R where the scattered light arrives from all sides (Lsum short).
@@ -455,16 +453,16 @@ PointcloudOptions smallBake() {
 }
 
 TEST(Pointcloud, BakeHoldsTheDocumentedGrids) {
-  const Medium m = sphereMedium(1, 3, Rgb(0.9, 0.95, 1.0),
-                                std::make_shared<HenyeyGreensteinPhase>(0.6));
+  const Medium m =
+      sphereMedium(1, 3, Rgb(0.9, 0.95, 1.0), std::make_shared<HenyeyGreensteinPhase>(0.6));
   PointcloudStats stats;
   const BakedLight bake = bakePointcloud(m, Vec3(0, 0, 2), smallBake(), {}, &stats);
   EXPECT_NO_THROW(bake.validate("pointcloud bake"));
   EXPECT_EQ(bake.method, "pointcloud");
   EXPECT_EQ(bake.sun_direction, Vec3(0, 0, 1));
-  for (const char* name : {bake_grids::kSunTransmittance, bake_grids::kSkyVisibility,
-                           bake_grids::kMultipleFluence, bake_grids::kLightDir,
-                           bake_grids::kMieRatio, bake_grids::kCd}) {
+  for (const char* name :
+       {bake_grids::kSunTransmittance, bake_grids::kSkyVisibility, bake_grids::kMultipleFluence,
+        bake_grids::kLightDir, bake_grids::kMieRatio, bake_grids::kCd}) {
     EXPECT_NE(bake.find(name), nullptr) << name;
   }
   const auto& sun = bake.find(bake_grids::kSunTransmittance)->data;
@@ -489,10 +487,10 @@ TEST(Pointcloud, BakeHoldsTheDocumentedGrids) {
   EXPECT_GT(stats.pair_interactions, sun_interactions);
   EXPECT_EQ(stats.pair_interactions % std::stoull(bake.metadata.at("cloudbake:pairs")), 0u);
   ASSERT_NE(bake.find(bake_grids::kSkyMultipleFluence), nullptr);
-  for (const char* key : {"cloudbake:points", "cloudbake:passes_run", "cloudbake:radius",
-                          "cloudbake:rule", "cloudbake:tolerance",
-                          "cloudbake:last_relative_change", "cloudbake:tail_ratio",
-                          "cloudbake:pair_interactions", "cloudbake:seconds_passes"}) {
+  for (const char* key :
+       {"cloudbake:points", "cloudbake:passes_run", "cloudbake:radius", "cloudbake:rule",
+        "cloudbake:tolerance", "cloudbake:last_relative_change", "cloudbake:tail_ratio",
+        "cloudbake:pair_interactions", "cloudbake:seconds_passes"}) {
     EXPECT_EQ(bake.metadata.count(key), 1u) << key;
   }
   EXPECT_EQ(bake.metadata.at("cloudbake:rule"), "normalized");
@@ -517,8 +515,7 @@ TEST(Pointcloud, ExtremeMediaGiveFiniteValidBakes) {
     o.rule = c.rule;
     o.passes = 30;
     const BakedLight bake =
-        bakePointcloud(sphereMedium(1, c.extinction, Rgb(c.albedo), isotropic()),
-                       Vec3(1, 1, 1), o);
+        bakePointcloud(sphereMedium(1, c.extinction, Rgb(c.albedo), isotropic()), Vec3(1, 1, 1), o);
     expectAllFinite(bake);
     EXPECT_NO_THROW(bake.validate("extreme"));
   }

@@ -13,9 +13,9 @@
 #include "core/bake/sky_visibility.h"
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
-#include "tests/core/bake/bake_test_util.h"
 #include "core/phase/henyey_greenstein.h"
 #include "core/volume/analytic.h"
+#include "tests/core/bake/bake_test_util.h"
 
 namespace cloudbake {
 namespace {
@@ -40,8 +40,8 @@ TEST(BakeLattice, KeepsTheMassAndAnEmptyMargin) {
       for (int i = 0; i < g.nx; ++i) {
         const float d = b.density[g.index(i, j, k)];
         mass += d;
-        const bool margin = i == 0 || j == 0 || k == 0 || i == g.nx - 1 || j == g.ny - 1 ||
-                            k == g.nz - 1;
+        const bool margin =
+            i == 0 || j == 0 || k == 0 || i == g.nx - 1 || j == g.ny - 1 || k == g.nz - 1;
         if (margin) {
           EXPECT_EQ(d, 0.f);
         }

@@ -8,8 +8,8 @@ namespace cloudbake {
 namespace {
 
 TEST(Vec3, FrameIsOrthonormalForAnyAxis) {
-  for (const Vec3 n : {Vec3(0, 0, 1), Vec3(0, 0, -1), normalize(Vec3(1, 2, 3)),
-                       normalize(Vec3(-1e-9, 0, -1))}) {
+  for (const Vec3 n :
+       {Vec3(0, 0, 1), Vec3(0, 0, -1), normalize(Vec3(1, 2, 3)), normalize(Vec3(-1e-9, 0, -1))}) {
     const Frame f = Frame::fromZ(n);
     EXPECT_NEAR(dot(f.s, f.t), 0, 1e-12);
     EXPECT_NEAR(dot(f.s, f.n), 0, 1e-12);

@@ -42,8 +42,8 @@ std::string goldenShot(const std::string& method, const std::string& knobs) {
 
 struct Golden {
   std::string method;
-  std::string knobs;  // JSON text after "method"
-  int version;        // the method's version these values were pinned for
+  std::string knobs;                   // JSON text after "method"
+  int version;                         // the method's version these values were pinned for
   std::map<std::string, double> mean;  // per layer: mean of R, G, B over the image
   double pixel;                        // beauty R at the centre pixel
 };
@@ -93,8 +93,10 @@ Measured measure(const Golden& g) {
 }
 
 std::string versionFile(const std::string& method) {
-  return "core/methods/" + method + ".cpp (MethodInfo::version), or a shared version in "
-         "core/methods/versions.h (now " + sharedVersionSalt() + ")";
+  return "core/methods/" + method +
+         ".cpp (MethodInfo::version), or a shared version in "
+         "core/methods/versions.h (now " +
+         sharedVersionSalt() + ")";
 }
 
 TEST(Golden, EveryRunnableMethodHasGoldenValues) {
@@ -119,9 +121,10 @@ TEST(Golden, OutputsMatchThePinnedValuesOfTheirVersion) {
       std::printf("}, %.9g},\n", m.pixel);
       continue;
     }
-    ASSERT_EQ(version, g.version)
-        << "method '" << g.method << "' is now version " << version << " but its golden values "
-        << "were pinned for version " << g.version << ": re-pin them (see " << __FILE__ << ")";
+    ASSERT_EQ(version, g.version) << "method '" << g.method << "' is now version " << version
+                                  << " but its golden values "
+                                  << "were pinned for version " << g.version
+                                  << ": re-pin them (see " << __FILE__ << ")";
     // Deterministic code: only floating-point reassociation may move the numbers.
     auto close = [](double a, double b) { return std::abs(a - b) <= 1e-4 * std::abs(b) + 1e-7; };
     for (const auto& [layer, pinned] : g.mean) {

@@ -132,12 +132,15 @@ TEST(MethodRegistry, AlgorithmVersionsAreInEveryKeyOfWhatAMethodComputes) {
 
 TEST(MethodRegistry, ADefaultKnobGivesTheSameKeysAsSettingItToItsDefault) {
   const ShotCacheKeys a = computeCacheKeys(parseShot(shotOf("pointcloud"), ""));
-  const ShotCacheKeys b = computeCacheKeys(parseShot(shotOf("pointcloud", R"(, "points": 65536)"), ""));
-  const ShotCacheKeys c = computeCacheKeys(parseShot(shotOf("pointcloud", R"(, "points": 4096)"), ""));
+  const ShotCacheKeys b =
+      computeCacheKeys(parseShot(shotOf("pointcloud", R"(, "points": 65536)"), ""));
+  const ShotCacheKeys c =
+      computeCacheKeys(parseShot(shotOf("pointcloud", R"(, "points": 4096)"), ""));
   EXPECT_EQ(a.light, b.light);
   EXPECT_NE(a.light, c.light);
   // A view-only knob leaves the bake alone.
-  const ShotCacheKeys d = computeCacheKeys(parseShot(shotOf("pointcloud", R"(, "step": 0.01)"), ""));
+  const ShotCacheKeys d =
+      computeCacheKeys(parseShot(shotOf("pointcloud", R"(, "step": 0.01)"), ""));
   EXPECT_EQ(a.light, d.light);
 }
 

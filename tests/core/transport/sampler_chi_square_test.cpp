@@ -16,9 +16,9 @@
 #include <vector>
 
 #include "core/io/exr_io.h"
+#include "core/io/image.h"
 #include "core/math/rng.h"
 #include "core/math/vec3.h"
-#include "core/transport/image.h"
 #include "core/transport/piecewise_constant.h"
 #include "core/transport/scene.h"
 #include "core/transport/sky.h"
@@ -199,7 +199,7 @@ std::vector<double> skyObserved(const SkyLight& sky, int n, uint64_t seed, int* 
       ++*discarded;
       continue;
     }
-    observed[sphereBin(s.wi)] += 1.0;
+    observed[sphereBin(s.to_sky)] += 1.0;
   }
   return observed;
 }

@@ -104,9 +104,9 @@ TEST(Sky, MapImportanceSamplingIsConsistentAndUnbiased) {
     }
     // Sampling and evaluation agree.
     if (i < 2000) {
-      ASSERT_NEAR(length(smp.wi), 1.0, 1e-12);
-      ASSERT_NEAR(sky.pdf(smp.wi) / smp.pdf, 1.0, 1e-6);
-      const Rgb l = sky.radiance(smp.wi);
+      ASSERT_NEAR(length(smp.to_sky), 1.0, 1e-12);
+      ASSERT_NEAR(sky.pdf(smp.to_sky) / smp.pdf, 1.0, 1e-6);
+      const Rgb l = sky.radiance(smp.to_sky);
       ASSERT_NEAR(l.x, smp.radiance.x, 1e-6 * (1 + l.x));
     }
     for (int c = 0; c < 3; ++c) est[c].add(smp.radiance[c] / smp.pdf);

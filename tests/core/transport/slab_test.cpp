@@ -55,7 +55,7 @@ TEST(VanDeHulstSlab, ReflectanceAndTransmittanceByParticleTracing) {
       }
       if (rng.uniform() >= kAlbedo) break;  // absorbed
       const double u1 = rng.uniform(), u2 = rng.uniform();
-      ray = {c.p, phase.sample(ray.d, u1, u2).wi};
+      ray = {c.p, phase.sample(ray.d, u1, u2).direction};
     }
     reflected.add(r);
     transmitted.add(t);

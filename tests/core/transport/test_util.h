@@ -5,7 +5,7 @@
 #include <memory>
 #include <vector>
 
-#include "core/transport/image.h"
+#include "core/io/image.h"
 #include "core/volume/density_field.h"
 
 namespace cloudbake {

@@ -2,10 +2,10 @@
 
 #include <gtest/gtest.h>
 
-#include "core/error.h"
-
 #include <algorithm>
 #include <cmath>
+
+#include "core/error.h"
 
 namespace cloudbake {
 namespace {

@@ -28,8 +28,7 @@ TEST(MajorantGrid, TraversalCoversTheRayWithoutGapsInOrder) {
     EXPECT_GT(b, a);
     // The majorant must be the one of the cell containing the segment's midpoint.
     const Vec3 mid = ray.at(0.5 * (a + b));
-    const int x = static_cast<int>(mid.x), y = static_cast<int>(mid.y),
-              z = static_cast<int>(mid.z);
+    const int x = static_cast<int>(mid.x), y = static_cast<int>(mid.y), z = static_cast<int>(mid.z);
     EXPECT_EQ(maj, g.cell(x, y, z));
     last = b;
     ++cells;
