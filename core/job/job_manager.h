@@ -33,7 +33,8 @@ struct JobLimits {
   int max_views = 64;
   int64_t max_samples = 1 << 16;  ///< samples per pixel
   int64_t max_frames = 1000;      ///< frames of an animated volume (sequence)
-  int64_t max_points = int64_t(1) << 22;  ///< points of a point-based bake (pointcloud, precomputed)
+  int64_t max_points =
+      int64_t(1) << 22;  ///< points of a point-based bake (pointcloud, precomputed)
   /// Voxels of the volume: a mesh's resolution^3 or box (voxel_size over its bounds), a
   /// procedural grid, a VDB's active voxels, the bake.vdb grid of a box or sphere. 256 Mi
   /// voxels are 1 GiB of floats.

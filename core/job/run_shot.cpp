@@ -167,6 +167,8 @@ const Scene& ShotRun::scene() {
                          ? opt_.volumes->getOrBuild(keys_.volume, build, &result_.volume_cached)
                          : build();
   density_built_ = true;
+  result_.steps.push_back(
+      {"volume", "", -1, secondsSince(t0), {{"cached", result_.volume_cached ? 1.0 : 0.0}}});
   // Built lazily, inside whichever stage first needs it: keep that stage and fraction.
   report(progress_.stage, progress_.fraction,
          "built " + s.medium.density->describe() + " in " + fixed(secondsSince(t0), 2) + " s" +

@@ -82,6 +82,8 @@ BakedLight obtainBake(MethodRun& run, const LightBakeFn& bake, double total, std
     }
   }
   const BakeGrid& g = light->grid;
+  result.steps.push_back(
+      {"bake", "", -1, secondsSince(t0), {{"cached", how == "baked" ? 0.0 : 1.0}}});
   run.report("bake", 1 / total,
              "light " + how + " in " + fixed(secondsSince(t0), 2) + " s (" + std::to_string(g.nx) +
                  "x" + std::to_string(g.ny) + "x" + std::to_string(g.nz) + " lattice)");
@@ -216,6 +218,7 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake) {
                   {{"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
                    {"cloudbake:seed", std::to_string(ro.seed)}});
     ++run.result().views_from_bake;
+    run.result().steps.push_back({"view", camera.name, -1, secondsSince(t0), {}});
     run.poll((2 + i) / total, 1);
     run.report("render", (2 + i) / total,
                label + ": rendered in " + fixed(secondsSince(t0), 2) + " s", camera.name);

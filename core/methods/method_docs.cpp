@@ -70,14 +70,13 @@ std::string methodsMarkdown() {
 }
 
 Json bakeSchema() {
-  Json props = {
-      {"method", {{"enum", methodNames()}, {"default", BakeSpec{}.method}}},
-      {"samples",
-       {{"type", "integer"},
-        {"minimum", 1},
-        {"maximum", 1000000},
-        {"description", "paths (pathtrace) or rays (views from a bake) per pixel"}}},
-      {"seed", {{"default", 1}}}};
+  Json props = {{"method", {{"enum", methodNames()}, {"default", BakeSpec{}.method}}},
+                {"samples",
+                 {{"type", "integer"},
+                  {"minimum", 1},
+                  {"maximum", 1000000},
+                  {"description", "paths (pathtrace) or rays (views from a bake) per pixel"}}},
+                {"seed", {{"default", 1}}}};
   props["seed"]["allOf"] = Json::array({Json{{"$ref", "#/$defs/seed"}}});
   std::set<std::string> all;
   for (const BakeMethod* m : bakeMethods()) {

@@ -151,7 +151,9 @@ class PathtraceMethod final : public BakeMethod {
       run.writeView(camera.name, camera, layers,
                     {{"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
                      {"cloudbake:seed", std::to_string(pt.seed)}});
-      const RunResult& r = run.result();
+      RunResult& r = run.result();
+      r.steps.push_back(
+          {"view", camera.name, -1, secondsSince(t0), {{"cached", from_cache ? 1.0 : 0.0}}});
       const std::string how = !from_cache ? ": rendered in "
                               : r.views_reused_direction > 0
                                   ? ": from the cached bake of a sun direction " +

@@ -78,11 +78,18 @@ PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions&
         [&](double f) { return run.pollMessage(0.1 + 0.4 * f, "precomputing basic volumes"); });
     size_t bytes = 0;
     for (const BasicVolumePrecompute& b : db.basic) bytes += b.bytes();
+    const double mib = double(bytes) / db.basic.size() / (1 << 20);
+    run.result().steps.push_back({"precompute",
+                                  "",
+                                  -1,
+                                  secondsSince(t0),
+                                  {{"cached", 0.0},
+                                   {"basic_volumes", double(db.basic.size())},
+                                   {"mib_per_basic_volume", mib}}});
     run.report("bake", 0.5,
                "precomputed " + std::to_string(db.basic.size()) + " basic volume(s) in " +
                    fixed(secondsSince(t0), 2) + " s (" + std::to_string(db.tree.points.size()) +
-                   " sample points; " + fixed(double(bytes) / db.basic.size() / (1 << 20), 1) +
-                   " MiB per basic volume)");
+                   " sample points; " + fixed(mib, 1) + " MiB per basic volume)");
     return db;
   };
   RunResult& result = run.result();
@@ -101,12 +108,18 @@ PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions&
       &computed);
   (computed ? result.bakes_computed : result.bakes_cached) += 1;
   if (computed) return db;
+  const auto t_read = std::chrono::steady_clock::now();
   try {
     db = readPrecomputedDatabase(entry);
   } catch (const InputError& e) {
     // The cache verified the entry's checksums: unreadable data is our fault, not input.
     throw InternalError(std::string("cached precompute unreadable: ") + e.what());
   }
+  result.steps.push_back({"precompute",
+                          "",
+                          -1,
+                          secondsSince(t_read),
+                          {{"cached", 1.0}, {"basic_volumes", double(db.basic.size())}}});
   run.report(
       "bake", 0.5,
       "precompute of " + std::to_string(db.basic.size()) + " basic volume(s) from the cache");
@@ -166,6 +179,7 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
                    {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
                    {"cloudbake:seed", std::to_string(ro.seed)}});
     ++run.result().views_from_bake;
+    run.result().steps.push_back({"view", camera.name, f, secondsSince(t_view), {}});
     run.report("render", progress.at(f, 2 + i),
                "frame " + std::to_string(f) + ", view '" + camera.name + "' " +
                    std::to_string(camera.width_px) + "x" + std::to_string(camera.height_px) +
@@ -326,6 +340,8 @@ void PrecomputedMethod::run(MethodRun& run) const {
     FrameLightStats stats;
     const BakedLight light = lightAnimationFrame(db, bf, sunDirection(shot), lights.medium.albedo,
                                                  sky_sh, frame_options, &stats);
+    run.result().steps.push_back(
+        {"light", "", f, stats.seconds, {{"orders", double(stats.orders)}}});
     run.report("render", progress.at(f, 0),
                "frame " + std::to_string(f) + " (basic volumes " + std::to_string(bf.a) + ", " +
                    std::to_string(bf.b) + ", w " + fixed(bf.w, 3) + "): lit in " +

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -75,6 +76,19 @@ struct OutputFile {
   std::string sha256;
 };
 
+/// One timed step of a run, for `cloudbake render --stats-json` and the benchmarks: `step` is
+/// "volume" (building the density), "bake" (a light bake, or its read from the cache),
+/// "precompute" (method precomputed's database), "light" (one animation frame's lighting) or
+/// "view" (one view rendered or served); `view` and `frame` say which (frame -1: none);
+/// `values` holds the step's own numbers ("orders", "mib_per_basic_volume", "cached" 0/1).
+struct StepTime {
+  std::string step;
+  std::string view;
+  int frame = -1;
+  double seconds = 0;
+  std::map<std::string, double> values;
+};
+
 /// What a run did. `views_rendered` counts path-traced views (scattering computations);
 /// `views_cached` views served from the cache (and scaled to the sun irradiance). Bake methods
 /// (single, pointcloud) compute their light once per light direction (`bakes_computed`) or
@@ -93,6 +107,7 @@ struct RunResult {
   bool volume_cached = false;
   bool vdb_cached = false;
   double seconds = 0;
+  std::vector<StepTime> steps;  ///< in the order they ran
 };
 
 }  // namespace cloudbake

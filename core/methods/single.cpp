@@ -11,8 +11,10 @@ class SingleMethod final : public BakeMethod {
     info_.name = "single";
     info_.summary =
         "single scattering from a transmittance-to-sun lattice and sky visibility; no multiple "
-        "scattering (after the 'Volumetric Clouds' ray marcher, 2009-2010)";
-    info_.citation = "'Volumetric Clouds', a voxel ray-marching cloud renderer (2009-2010)";
+        "scattering (slsdo 2010)";
+    info_.citation =
+        "slsdo 2010, \"Volumetric Clouds: a volume renderer that utilizes ray casting and ray "
+        "marching through a 3D voxel grid\"";
     info_.version = 1;
     info_.default_samples = 1;
     info_.bakes_light = true;

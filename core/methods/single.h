@@ -1,5 +1,5 @@
-// Method `single`: single scattering from a precomputed transmittance-to-sun lattice, as in the
-// "Volumetric Clouds" voxel ray marcher (2009-2010), with the exact phase function applied
+// Method `single`: single scattering from a precomputed transmittance-to-sun lattice, as in
+// slsdo's "Volumetric Clouds" voxel ray marcher (2010), with the exact phase function applied
 // when a view is rendered; multiple scattering is not modelled.
 #pragma once
 

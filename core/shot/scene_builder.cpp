@@ -65,7 +65,8 @@ DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame
     // The cloud at its own time plus `frame` steps: the octaves drift (perlin_cloud.h).
     PerlinCloudOptions options = sequence.procedural->perlin;
     options.time += frame * sequence.time_step;
-    return labelled(source, "/volume/sequence/procedural", [&] { return makePerlinCloud(options); });
+    return labelled(source, "/volume/sequence/procedural",
+                    [&] { return makePerlinCloud(options); });
   }
   VdbSourceOptions options;
   options.path = sequence.paths.at(static_cast<size_t>(frame));

@@ -165,7 +165,8 @@ SequenceVolumeSpec parseSequence(const Object& o) {
         parseProcedural(Object(r, *proc, o.path("procedural"), {CLOUDBAKE_PROCEDURAL_KEYS}));
     if (!frames) r.fail(o.path("frames"), "missing (required with procedural)");
     s.frames = int(r.integer(*frames, o.path("frames"), 1, kMaxFrames));
-    if (auto* t = o.find("time_step")) s.time_step = r.numberIn(*t, o.path("time_step"), 0, 1e3, true);
+    if (auto* t = o.find("time_step"))
+      s.time_step = r.numberIn(*t, o.path("time_step"), 0, 1e3, true);
   }
   return s;
 }
