@@ -208,8 +208,8 @@ TEST_F(RenderCli, MissingFilesExitWith3) {
 TEST_F(RenderCli, MethodsNotImplementedAreRefusedClearly) {
   json j = slab();
   j["bake"] = {{"method", "auto"}, {"tolerance", 0.1}};
-  const CliResult r = run("render '" + writeShot("auto.json", j).string() + "' --out '" +
-                          dir_.string() + "'");
+  const CliResult r =
+      run("render '" + writeShot("auto.json", j).string() + "' --out '" + dir_.string() + "'");
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("/bake/method: 'auto' is not implemented in this version"),
             std::string::npos)
@@ -236,8 +236,8 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   j["views"][0]["resolution"] = {16, 16};
   j["outputs"] = {{"exr", true}, {"vdb", true}};
   const fs::path out = dir_ / "pc";
-  CliResult r = run("render '" + writeShot("pc.json", j).string() + "' --out '" + out.string() +
-                    "' --quiet");
+  CliResult r =
+      run("render '" + writeShot("pc.json", j).string() + "' --out '" + out.string() + "' --quiet");
   ASSERT_EQ(r.rc, 0) << r.err;
   const std::string bake = (out / "bake.vdb").string();
   r = run("bake-slice '" + bake + "' --grid mie_ratio --axis y --png '" +
