@@ -1,14 +1,19 @@
 // `cloudbake render SHOT.json --out DIR [--threads N] [--samples N] [--quiet] [--png]`: renders
 // every view of a shot in-process with the shot's bake method (docs/shot-format.md) and writes
 // DIR/<view>.exr (beauty + sun, sky, single, multiple layers) and DIR/bake.vdb on request.
+#include <sys/resource.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
+#include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -29,7 +34,48 @@ struct RenderOptions {
   bool quiet = false;
   bool png = false;
   double png_exposure = 0;
+  std::string stats_json;  // "": none
 };
+
+// The run's numbers for benchmarks and pipelines (docs/cli.md): counters, per-step seconds, the
+// seconds per kind of step, and the process's peak resident memory.
+void writeStatsJson(const std::string& path, const ShotSpec& shot, const RunResult& r) {
+  nlohmann::json steps = nlohmann::json::array();
+  std::map<std::string, double> totals;
+  for (const StepTime& s : r.steps) {
+    nlohmann::json j = {{"step", s.step}, {"seconds", s.seconds}};
+    if (!s.view.empty()) j["view"] = s.view;
+    if (s.frame >= 0) j["frame"] = s.frame;
+    for (const auto& [k, v] : s.values) j[k] = v;
+    steps.push_back(j);
+    totals[s.step] += s.seconds;
+  }
+  struct rusage usage {};
+  getrusage(RUSAGE_SELF, &usage);  // ru_maxrss is in KiB on Linux
+  const nlohmann::json stats = {{"shot", shot.name},
+                                {"method", shot.bake.method},
+                                {"seconds", r.seconds},
+                                {"peak_rss_mib", double(usage.ru_maxrss) / 1024.0},
+                                {"seconds_by_step", totals},
+                                {"steps", steps},
+                                {"counters",
+                                 {{"views_rendered", r.views_rendered},
+                                  {"views_cached", r.views_cached},
+                                  {"bakes_computed", r.bakes_computed},
+                                  {"bakes_cached", r.bakes_cached},
+                                  {"views_from_bake", r.views_from_bake},
+                                  {"views_reused_direction", r.views_reused_direction}}}};
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp);
+    out << stats.dump(1) << "\n";
+    out.close();
+    if (!out) throw InputError("--stats-json: cannot write '" + path + "'");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) throw InputError("--stats-json: cannot write '" + path + "': " + ec.message());
+}
 
 // Per-view progress on stderr: an updating line on a terminal, one line per 10% otherwise (logs
 // and CI capture stay readable).
@@ -129,6 +175,7 @@ std::vector<std::string> render(const RenderOptions& opt) {
     return true;
   };
   const RunResult result = runShot(shot, run);
+  if (!opt.stats_json.empty()) writeStatsJson(opt.stats_json, shot, result);
   std::vector<std::string> written;
   for (const OutputFile& f : result.files) written.push_back(f.path);
   return written;
@@ -155,6 +202,9 @@ void addRenderCommand(CLI::App& app, int* exit_code) {
   cmd->add_flag("--quiet", opt->quiet, "no progress on stderr");
   cmd->add_flag("--png", opt->png,
                 "also write an auto-exposed sRGB preview DIR/<view>.png beside each EXR");
+  cmd->add_option("--stats-json", opt->stats_json,
+                  "also write the run's counters, per-step seconds and peak memory as JSON to "
+                  "this file (docs/cli.md)");
   cmd->add_option("--png-exposure", opt->png_exposure,
                   "fixed exposure of the PNG previews (radiance multiplier; default: auto), so "
                   "previews of different lighting compare");

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <set>
 #include <string>
 
 #include "core/io/exr_io.h"
@@ -166,6 +167,36 @@ TEST_F(RenderCli, WritesVdbAndPngWhenAsked) {
   EXPECT_EQ(vdb.grids()[0].name, "density");
   EXPECT_NEAR(vdb.floatAt("density", Vec3(0.05, 0.05, 0.25)), 2.0, 1e-6);
   EXPECT_EQ(vdb.floatAt("density", Vec3(0.05, 0.05, 0.75)), 0.0);
+}
+
+TEST_F(RenderCli, StatsJsonHasCountersStepsAndPeakMemory) {
+  json j = slab();
+  j["bake"] = {{"method", "single"}, {"light_resolution", 12}};
+  const fs::path shot = writeShot("stats.json", j);
+  const fs::path stats = dir_ / "stats.out.json";
+  const CliResult r = run("render '" + shot.string() + "' --out '" + (dir_ / "o").string() +
+                          "' --quiet --stats-json '" + stats.string() + "'");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json s = json::parse(slurp(stats));
+  EXPECT_EQ(s.at("method"), "single");
+  EXPECT_EQ(s.at("counters").at("bakes_computed"), 1);
+  EXPECT_EQ(s.at("counters").at("views_from_bake"), 1);
+  EXPECT_GT(s.at("peak_rss_mib").get<double>(), 1.0);
+  std::set<std::string> kinds;
+  double sum = 0;
+  for (const json& step : s.at("steps")) {
+    kinds.insert(step.at("step").get<std::string>());
+    EXPECT_GE(step.at("seconds").get<double>(), 0.0);
+    sum += step.at("seconds").get<double>();
+  }
+  EXPECT_EQ(kinds, (std::set<std::string>{"volume", "bake", "view"}));
+  EXPECT_LE(sum, s.at("seconds").get<double>() + 1e-6);  // steps are parts of the run
+  // An unwritable path is a clear error naming the flag, not a success without the file.
+  const CliResult bad =
+      run("render '" + shot.string() + "' --out '" + (dir_ / "o").string() +
+          "' --quiet --stats-json '" + (dir_ / "no/such/dir/s.json").string() + "'");
+  EXPECT_EQ(bad.rc, 2) << bad.err;
+  EXPECT_NE(bad.err.find("--stats-json"), std::string::npos) << bad.err;
 }
 
 TEST_F(RenderCli, BadShotExitsWith2AndNamesTheField) {
