@@ -26,7 +26,7 @@ void writePreviewPng(const std::string& path, const Image& beauty, double fixed_
   for (int y = 0; y < beauty.height; ++y) {
     for (int x = 0; x < beauty.width; ++x) {
       const float* p = beauty.at(x, y);
-      lum.push_back(0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]);
+      lum.push_back(luminance(Rgb(p[0], p[1], p[2])));
     }
   }
   const size_t k = std::min(lum.size() - 1, size_t(0.99 * double(lum.size())));

@@ -164,6 +164,15 @@ void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const 
   }
 }
 
+void checkPointCount(int64_t points, const std::string& pointer, const MethodLimits& limits,
+                     const std::string& source) {
+  if (limits.max_points > 0 && points > limits.max_points) {
+    throw InputError(source + ": " + pointer + ": " + std::to_string(points) +
+                     " points exceed this server's limit of " + std::to_string(limits.max_points) +
+                     " (--max-points)");
+  }
+}
+
 std::vector<std::string> lightBakePlanLines(const ShotSpec& shot, int64_t resolution) {
   return {std::string("volume: ") + volumeTypeName(shot.volume) + ", resampled to a " +
               std::to_string(resolution) + "-voxel lattice (longest side)",

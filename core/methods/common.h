@@ -35,6 +35,10 @@ nlohmann::json bakeKnobMaterial(const BakeMethod& method, const ShotSpec& shot);
 void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const std::string& what,
                         const MethodLimits& limits, const std::string& source);
 
+/// InputError naming `pointer` and --max-points when `points` exceeds the server's limit.
+void checkPointCount(int64_t points, const std::string& pointer, const MethodLimits& limits,
+                     const std::string& source);
+
 /// The dry-run lines every light-baking method starts with (lattice, sun, sky).
 std::vector<std::string> lightBakePlanLines(const ShotSpec& shot, int64_t resolution);
 

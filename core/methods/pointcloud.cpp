@@ -78,11 +78,7 @@ class PointcloudMethod final : public BakeMethod {
                    const std::string& source) const override {
     const PointcloudOptions o = pointcloudOptions(shot);
     checkLatticeVoxels(o.light_resolution, 1, "a bake lattice", limits, source);
-    if (limits.max_points > 0 && o.points > limits.max_points) {
-      throw InputError(source + ": /bake/points: " + std::to_string(o.points) +
-                       " points exceed this server's limit of " +
-                       std::to_string(limits.max_points) + " (--max-points)");
-    }
+    checkPointCount(o.points, "/bake/points", limits, source);
   }
 
   void run(MethodRun& run) const override {

@@ -307,12 +307,7 @@ void PrecomputedMethod::checkLimits(const ShotSpec& shot, const MethodLimits& li
       o.light_resolution, 17.0 * o.basic_volumes,
       "a database of " + std::to_string(o.basic_volumes) + " basic volume(s), 17 floats per voxel,",
       limits, source);
-  if (limits.max_points > 0 && o.precompute.sample_points > limits.max_points) {
-    throw InputError(source +
-                     ": /bake/sample_points: " + std::to_string(o.precompute.sample_points) +
-                     " points exceed this server's limit of " + std::to_string(limits.max_points) +
-                     " (--max-points)");
-  }
+  checkPointCount(o.precompute.sample_points, "/bake/sample_points", limits, source);
   if (limits.max_frames > 0 && o.frames > limits.max_frames) {
     throw InputError(source + ": /bake/frames: " + std::to_string(o.frames) +
                      " output frames exceed this server's limit of " +

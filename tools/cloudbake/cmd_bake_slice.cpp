@@ -99,7 +99,7 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code) {
     };
     auto value = [&](size_t voxel) {
       const float* x = data->data() + voxel * size_t(components);
-      return components == 3 ? 0.2126 * x[0] + 0.7152 * x[1] + 0.0722 * x[2] : double(x[0]);
+      return components == 3 ? luminance(Rgb(x[0], x[1], x[2])) : double(x[0]);
     };
     double lo = 1e300, hi = -1e300;
     for (int iv = 0; iv < n[v]; ++iv)
