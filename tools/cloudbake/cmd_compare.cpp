@@ -1,6 +1,9 @@
-// `cloudbake compare TEST.exr REFERENCE.exr [--json]`: how far a view (e.g. from a bake method)
-// lands from a reference render of the same view: per layer, the mean of each image and the
-// relative RMSE, sqrt(mean over pixels and RGB of (x - r)^2) / mean(r).
+// `cloudbake compare TEST.exr REFERENCE.exr [--json] [--cloud-alpha A]`: how far a view (e.g.
+// from a bake method) lands from a reference render of the same view: per layer, the mean of
+// each image and the relative RMSE, sqrt(mean over pixels and RGB of (x - r)^2) / mean(r), plus
+// the pseudo-layer `scattered` = sun + sky (the cloud's own light). With --cloud-alpha only the
+// pixels where the reference's beauty alpha is at least A count, so the background does not
+// dilute the error of the cloud.
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -19,7 +22,11 @@ struct LayerStats {
   double mean_test = 0, mean_ref = 0, rel_rmse = 0;
 };
 
-LayerStats compareLayer(const Image& test, const Image& ref, const std::string& what) {
+// The pixels that count: all, or those whose reference alpha is at least `min_alpha`.
+using PixelMask = std::vector<bool>;
+
+LayerStats compareLayer(const Image& test, const Image& ref, const PixelMask& mask,
+                        const std::string& what) {
   if (test.width != ref.width || test.height != ref.height) {
     throw InputError(what + ": images differ in size (" + std::to_string(test.width) + "x" +
                      std::to_string(test.height) + " vs " + std::to_string(ref.width) + "x" +
@@ -28,7 +35,8 @@ LayerStats compareLayer(const Image& test, const Image& ref, const std::string& 
   double sum_t = 0, sum_r = 0, sq = 0;
   size_t n = 0;
   for (int y = 0; y < ref.height; ++y)
-    for (int x = 0; x < ref.width; ++x)
+    for (int x = 0; x < ref.width; ++x) {
+      if (!mask.empty() && !mask[size_t(y) * ref.width + x]) continue;
       for (int c = 0; c < 3 && c < ref.channels && c < test.channels; ++c) {
         const double t = test.at(x, y)[c], r = ref.at(x, y)[c];
         if (!std::isfinite(t) || !std::isfinite(r)) {
@@ -40,6 +48,7 @@ LayerStats compareLayer(const Image& test, const Image& ref, const std::string& 
         sq += (t - r) * (t - r);
         ++n;
       }
+    }
   LayerStats s;
   if (n == 0) return s;
   s.mean_test = sum_t / double(n);
@@ -48,33 +57,74 @@ LayerStats compareLayer(const Image& test, const Image& ref, const std::string& 
   return s;
 }
 
+PixelMask cloudMask(const ExrContents& ref, double min_alpha, const std::string& ref_path) {
+  if (!(min_alpha > 0)) return {};
+  auto it = ref.layers.find("");
+  if (it == ref.layers.end() || it->second.channels < 4) {
+    throw InputError("--cloud-alpha: " + ref_path + " has no beauty alpha channel");
+  }
+  const Image& beauty = it->second;
+  PixelMask mask(size_t(beauty.width) * beauty.height);
+  size_t kept = 0;
+  for (int y = 0; y < beauty.height; ++y)
+    for (int x = 0; x < beauty.width; ++x) {
+      const bool in = beauty.at(x, y)[3] >= min_alpha;
+      mask[size_t(y) * beauty.width + x] = in;
+      kept += in;
+    }
+  if (kept == 0) {
+    throw InputError("--cloud-alpha: no pixel of " + ref_path +
+                     " has alpha >= " + std::to_string(min_alpha));
+  }
+  return mask;
+}
+
+// sun + sky of one file, when it has both.
+void addScattered(ExrContents* c) {
+  auto sun = c->layers.find("sun"), sky = c->layers.find("sky");
+  if (sun == c->layers.end() || sky == c->layers.end()) return;
+  if (sun->second.data.size() != sky->second.data.size()) return;
+  Image sum = sun->second;
+  for (size_t i = 0; i < sum.data.size(); ++i) sum.data[i] += sky->second.data[i];
+  c->layers["scattered"] = std::move(sum);
+}
+
 }  // namespace
 
 void addCompareCommand(CLI::App& app, int* exit_code) {
   struct Options {
     std::string test, ref;
     bool json = false;
+    double cloud_alpha = 0;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "compare",
       "Compare a rendered view with a reference of the same view: per layer (beauty, sun, sky, "
-      "single, multiple) the means and the relative RMSE sqrt(mean((x - r)^2)) / mean(r) over "
-      "pixels and RGB");
+      "single, multiple, and scattered = sun + sky) the means and the relative RMSE "
+      "sqrt(mean((x - r)^2)) / mean(r) over pixels and RGB");
   cmd->add_option("test", opt->test, "the EXR to judge")->required();
   cmd->add_option("reference", opt->ref, "the reference EXR (e.g. a converged pathtrace)")
       ->required();
   cmd->add_flag("--json", opt->json, "one JSON object on stdout");
+  cmd->add_option("--cloud-alpha", opt->cloud_alpha,
+                  "count only the pixels whose reference beauty alpha is at least this (0..1; "
+                  "default 0 = every pixel)")
+      ->check(CLI::Range(0.0, 1.0));
   cmd->callback([opt, exit_code] {
-    const ExrContents test = readExr(opt->test);
-    const ExrContents ref = readExr(opt->ref);
+    ExrContents test = readExr(opt->test);
+    ExrContents ref = readExr(opt->ref);
+    const PixelMask mask = cloudMask(ref, opt->cloud_alpha, opt->ref);
+    addScattered(&test);
+    addScattered(&ref);
     nlohmann::json out = nlohmann::json::object();
     if (!opt->json) std::printf("%-10s %14s %14s %10s\n", "layer", "mean", "reference", "rel_rmse");
     for (const auto& [name, image] : ref.layers) {
       auto it = test.layers.find(name);
       if (it == test.layers.end()) continue;
       const std::string label = name.empty() ? "beauty" : name;
-      const LayerStats s = compareLayer(it->second, image, opt->test + " layer '" + label + "'");
+      const LayerStats s =
+          compareLayer(it->second, image, mask, opt->test + " layer '" + label + "'");
       out[label] = {
           {"mean", s.mean_test}, {"reference_mean", s.mean_ref}, {"rel_rmse", s.rel_rmse}};
       if (!opt->json) {

@@ -319,6 +319,23 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   }
   EXPECT_NEAR(twice.at("sun").at("rel_rmse").get<double>(),
               std::sqrt(s2 / double(ref.data.size())) / (s1 / double(ref.data.size())), 1e-4);
+  // scattered = sun + sky; the cloud mask drops the dark background, so the cloud's mean rises.
+  EXPECT_NEAR(twice.at("scattered").at("reference_mean").get<double>(),
+              twice.at("sun").at("reference_mean").get<double>() +
+                  twice.at("sky").at("reference_mean").get<double>(),
+              1e-6);
+  r = run("compare '" + (out2 / "nadir.exr").string() + "' '" + view +
+          "' --json --cloud-alpha 0.3");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json cloud = json::parse(r.out);
+  EXPECT_GT(cloud.at("scattered").at("reference_mean").get<double>(),
+            1.2 * twice.at("scattered").at("reference_mean").get<double>());
+  EXPECT_NEAR(cloud.at("sun").at("mean").get<double>(),
+              2 * cloud.at("sun").at("reference_mean").get<double>(), 1e-6);
+  // The sphere's alpha peaks at 1 - exp(-2): no pixel reaches 0.99.
+  r = run("compare '" + view + "' '" + view + "' --cloud-alpha 0.99");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--cloud-alpha: no pixel"), std::string::npos) << r.err;
   r = run("compare '" + view + "' '" + (dir_ / "none.exr").string() + "'");
   EXPECT_NE(r.rc, 0);
 }
