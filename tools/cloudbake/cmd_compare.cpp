@@ -2,8 +2,8 @@
 // from a bake method) lands from a reference render of the same view: per layer, the mean of
 // each image and the relative RMSE, sqrt(mean over pixels and RGB of (x - r)^2) / mean(r), plus
 // the pseudo-layer `scattered` = sun + sky (the cloud's own light). With --cloud-alpha only the
-// pixels where the reference's beauty alpha is at least A count, so the background does not
-// dilute the error of the cloud.
+// pixels where the reference's beauty alpha (or that of --mask-from FILE) is at least A count,
+// so the background does not dilute the error of the cloud.
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -96,6 +96,7 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
     std::string test, ref;
     bool json = false;
     double cloud_alpha = 0;
+    std::string mask_from;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
@@ -111,10 +112,21 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
                   "count only the pixels whose reference beauty alpha is at least this (0..1; "
                   "default 0 = every pixel)")
       ->check(CLI::Range(0.0, 1.0));
+  cmd->add_option("--mask-from", opt->mask_from,
+                  "with --cloud-alpha: take the alpha from this EXR's beauty instead of the "
+                  "reference's (e.g. to compare two renders of another renderer over one cloud)");
   cmd->callback([opt, exit_code] {
     ExrContents test = readExr(opt->test);
     ExrContents ref = readExr(opt->ref);
-    const PixelMask mask = cloudMask(ref, opt->cloud_alpha, opt->ref);
+    if (!opt->mask_from.empty() && !(opt->cloud_alpha > 0)) {
+      throw InputError("--mask-from: needs --cloud-alpha");
+    }
+    const PixelMask mask = opt->mask_from.empty() ? cloudMask(ref, opt->cloud_alpha, opt->ref)
+                                                  : cloudMask(readExr(opt->mask_from),
+                                                              opt->cloud_alpha, opt->mask_from);
+    if (!mask.empty() && mask.size() != size_t(ref.width) * ref.height) {
+      throw InputError("--mask-from: " + opt->mask_from + " differs in size from " + opt->ref);
+    }
     addScattered(&test);
     addScattered(&ref);
     nlohmann::json out = nlohmann::json::object();

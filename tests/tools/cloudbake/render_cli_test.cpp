@@ -332,6 +332,13 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
             1.2 * twice.at("scattered").at("reference_mean").get<double>());
   EXPECT_NEAR(cloud.at("sun").at("mean").get<double>(),
               2 * cloud.at("sun").at("reference_mean").get<double>(), 1e-6);
+  r = run("compare '" + (out2 / "nadir.exr").string() + "' '" + view +
+          "' --json --cloud-alpha 0.3 --mask-from '" + view + "'");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out).at("sun"), cloud.at("sun"));
+  r = run("compare '" + view + "' '" + view + "' --mask-from '" + view + "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--mask-from: needs --cloud-alpha"), std::string::npos) << r.err;
   // The sphere's alpha peaks at 1 - exp(-2): no pixel reaches 0.99.
   r = run("compare '" + view + "' '" + view + "' --cloud-alpha 0.99");
   EXPECT_EQ(r.rc, 2);
