@@ -93,14 +93,30 @@ class PathtraceMethod final : public BakeMethod {
     info_.name = "pathtrace";
     info_.summary =
         "the unbiased reference: volumetric path tracing with delta tracking and next-event "
-        "estimation (Novak et al. 2018)";
+        "estimation (Novak et al. 2018), sun-directional importance sampling and shadow-ray "
+        "splitting (Buras & Mayer 2011)";
     info_.citation =
         "Novak, Georgiev, Hanika and Jarosz 2018, \"Monte Carlo methods for volumetric light "
-        "transport simulation\" (Eurographics STAR)";
-    info_.version = 1;
+        "transport simulation\" (Eurographics STAR); Buras and Mayer 2011, \"Efficient unbiased "
+        "variance reduction techniques for Monte Carlo simulations of radiative transfer in "
+        "cloudy atmospheres: the solution\" (JQSRT 112)";
+    // 2: sun-directional importance sampling and shadow-ray splitting/roulette by default.
+    info_.version = 2;
     info_.default_samples = 64;
-    info_.knobs = {Knob::integer("max_depth", 1, 1000000, PathTracerOptions{}.max_depth,
-                                 "scattering events per path")};
+    info_.knobs = {
+        Knob::integer("max_depth", 1, 1000000, PathTracerOptions{}.max_depth,
+                      "scattering events per path"),
+        Knob::number("sun_guiding", 0, 0.95, std::nullopt, "",
+                     "probability that a collision also starts a walk along the phase function "
+                     "about the sun (sun-directional importance sampling, Buras & Mayer 2011); "
+                     "0 turns it off",
+                     /*exclusive_min=*/false)
+            .derivedDefault("0.5 V / (V + 40), V = 4 pi integral(p^2) - 1 of the phase"),
+        Knob::integer("sun_split_max", 1, 64, PathTracerOptions{}.sun_split_max,
+                      "most shadow rays towards the sun at one collision (split where the "
+                      "predicted contribution is large, rouletted where small); 1 turns both "
+                      "off"),
+    };
   }
   const MethodInfo& info() const override { return info_; }
 
@@ -185,6 +201,8 @@ PathTracerOptions pathTracerOptions(const ShotSpec& shot, int threads) {
   pt.samples_per_pixel = shot.bake.samples;
   pt.seed = shot.bake.seed;
   pt.max_depth = int(shot.bake.knobs.integer("max_depth"));
+  pt.sun_guiding = shot.bake.knobs.optionalNumber("sun_guiding").value_or(-1.0);
+  pt.sun_split_max = int(shot.bake.knobs.integer("sun_split_max"));
   pt.threads = threads;
   return pt;
 }

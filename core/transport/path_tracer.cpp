@@ -9,7 +9,9 @@
 #include "core/format.h"
 #include "core/math/rng.h"
 #include "core/transport/camera.h"
+#include "core/transport/shadow_splitting.h"
 #include "core/transport/sky.h"
+#include "core/transport/sun_guiding.h"
 #include "core/transport/tiled_render.h"
 #include "core/transport/tracking.h"
 
@@ -64,6 +66,13 @@ void validateOptions(const PathTracerOptions& o) {
     throw InputError("samples_per_pixel: must be in 1..16777216, got " + str(o.samples_per_pixel));
   }
   if (o.max_depth < 1) throw InputError("max_depth: must be >= 1, got " + str(o.max_depth));
+  if (!(o.sun_guiding < 1) || std::isnan(o.sun_guiding)) {
+    throw InputError("sun_guiding: must be < 1 (negative: chosen from the phase), got " +
+                     str(o.sun_guiding));
+  }
+  if (o.sun_split_max < 1 || o.sun_split_max > 64) {
+    throw InputError("sun_split_max: must be in 1..64, got " + str(o.sun_split_max));
+  }
   if (o.threads < 0 || o.threads > 4096) {
     throw InputError("threads: must be in 0..4096 (0 = all), got " + str(o.threads));
   }
@@ -84,15 +93,17 @@ struct PathSample {
 };
 
 /// The per-path estimator: delta tracking to real collisions; at each, next-event estimation
-/// of the sun (delta light, shadowed by ratio tracking) and of the sky (one light sample, MIS
-/// with phase sampling by the power heuristic, Veach 1997), then phase sampling for the next
-/// direction. Throughput carries sigma_s/sigma_t = albedo per channel and value/pdf per channel
-/// of a chromatic phase function; the real/null decision uses the grey sigma_t, so no spectral
-/// MIS is needed.
+/// of the sun (delta light, shadowed by ratio tracking, split or rouletted by its predicted
+/// size) and of the sky (one light sample, MIS with phase sampling by the power heuristic,
+/// Veach 1997); with probability eps_t a second walk along the lobe about the sun
+/// (core/transport/sun_guiding.h); then phase sampling for the next direction, whose MIS weight
+/// against the lobe multiplies all that follows its collision. Throughput carries
+/// sigma_s/sigma_t = albedo per channel and value/pdf per channel of a chromatic phase
+/// function; the real/null decision uses the grey sigma_t, so no spectral MIS is needed.
 class Integrator {
  public:
   Integrator(const Medium& medium, const Vec3& sun_dir, const Rgb& sun_e, const SkyLight& sky,
-             int max_depth)
+             const PathTracerOptions& options, double sun_guiding)
       : field_(*medium.density),
         phase_(*medium.phase),
         extinction_(medium.extinction),
@@ -101,72 +112,131 @@ class Integrator {
         sun_e_(sun_e),
         sun_on_(maxComponent(sun_e) > 0),
         sky_(sky),
-        max_depth_(max_depth) {}
+        guide_(*medium.phase, sun_dir, sun_on_ ? sun_guiding : 0.0),
+        max_depth_(options.max_depth),
+        split_max_(options.sun_split_max) {}
 
-  void trace(Ray ray, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
-    Rgb beta(1.0);
-    double phase_pdf = 0;            // pdf of the phase sample that produced `ray` (depth > 0)
-    for (int depth = 0;; ++depth) {  // depth = scattering events so far
-      const Collision c = deltaTrack(field_, lookup, extinction_, ray, 0, kInfinity, rng);
+  void trace(const Ray& ray, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
+    walk(Walk{ray}, lookup, rng, out);
+  }
+
+ private:
+  // One walk: the camera path (generation 0) or a branch the lobe spawned (generation >= 1).
+  struct Walk {
+    Ray ray;
+    Rgb beta{1.0};
+    int depth = 0;         // scattering events before `ray`'s collision
+    double phase_pdf = 0;  // pdf of the phase sample that produced `ray` (depth > 0)
+    // The MIS weight of `ray`'s direction against the other technique, for all that follows a
+    // real collision along it (1 where there is no other technique).
+    double segment_mis = 1;
+    int generation = 0;
+    bool lobe_segment = false;  // `ray` came from the lobe: only its collisions are weighted
+  };
+
+  // Branches of branches stop here, so a walk's recursion stays shallow.
+  static constexpr int kMaxGeneration = 16;
+
+  void walk(Walk w, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
+    for (;; ++w.depth) {
+      const Collision c = deltaTrack(field_, lookup, extinction_, w.ray, 0, kInfinity, rng);
       if (!c.hit) {
-        if (depth == 0) {
-          out->background = sky_.radiance(ray.d);
-        } else if (!sky_.black()) {
-          const double w = powerHeuristic(phase_pdf, sky_.pdf(ray.d));
-          add(out, /*from_sun=*/false, depth, beta * sky_.radiance(ray.d) * w);
-        }
+        escape(w, out);
         return;
       }
-      if (depth == 0) out->alpha = 1.0;
-      if (depth >= max_depth_) return;
-      beta *= albedo_;
-      if (!(maxComponent(beta) > 0)) return;  // pure absorber: nothing scatters
-      const int order = depth + 1;
+      if (w.depth == 0) out->alpha = 1.0;
+      if (w.depth >= max_depth_) return;
+      w.beta *= albedo_ * w.segment_mis;
+      if (!(maxComponent(w.beta) > 0)) return;  // pure absorber: nothing scatters
+      const int order = w.depth + 1;
       // The path's travel direction (-wo): cos theta to a light is dot(travel, to-light).
-      const Vec3 travel = ray.d;
-
-      if (sun_on_) {
-        const Rgb f = phase_.eval(dot(travel, sun_dir_));
-        if (maxComponent(f) > 0) {
-          const double tr =
-              ratioTrack(field_, lookup, extinction_, {c.p, sun_dir_}, 0, kInfinity, rng);
-          if (tr > 0) add(out, true, order, beta * f * sun_e_ * tr);
-        }
-      }
-      if (!sky_.black()) {
-        const double u1 = rng.uniform(), u2 = rng.uniform();
-        const SkySample s = sky_.sample(u1, u2);
-        if (s.pdf > 0 && maxComponent(s.radiance) > 0) {
-          const double cos_theta = dot(travel, s.to_sky);
-          const Rgb f = phase_.eval(cos_theta);
-          if (maxComponent(f) > 0) {
-            const double tr =
-                ratioTrack(field_, lookup, extinction_, {c.p, s.to_sky}, 0, kInfinity, rng);
-            if (tr > 0) {
-              const double w = powerHeuristic(s.pdf, phase_.pdf(cos_theta));
-              add(out, false, order, beta * f * s.radiance * (tr * w / s.pdf));
-            }
-          }
-        }
+      const Vec3 travel = w.ray.d;
+      if (sun_on_) sunEvent(c.p, travel, w.beta, order, lookup, rng, out);
+      if (!sky_.black()) skyEvent(c.p, travel, w.beta, order, lookup, rng, out);
+      const double eps_t = w.generation < kMaxGeneration ? guide_.epsAt(travel) : 0.0;
+      if (eps_t > 0 && order < max_depth_ && rng.uniform() < eps_t) {
+        branch(w, c.p, eps_t, lookup, rng, out);
       }
 
       const double u1 = rng.uniform(), u2 = rng.uniform();
       const PhaseSample ps = phase_.sample(travel, u1, u2);
       if (!(ps.pdf > 0)) return;
-      beta *= ps.value / ps.pdf;
-      phase_pdf = ps.pdf;
-      ray = {c.p, ps.direction};
-      if (order >= kRouletteDepth) {
-        const double q = std::min(1.0, maxComponent(beta));
+      w.beta *= ps.value / ps.pdf;
+      w.phase_pdf = ps.pdf;
+      w.segment_mis = guide_.phaseWeight(travel, ps.direction, eps_t);
+      w.lobe_segment = false;
+      w.ray = {c.p, ps.direction};
+      if (order >= kRouletteDepth || w.generation > 0) {
+        // Decided on the walk's expected next contribution, not its throughput alone: a walk
+        // the MIS weight made faint but pointed along the sun's spike is worth continuing.
+        const double importance = guide_.eps() > 0 ? guide_.importance(ps.direction) : 1.0;
+        const double q = std::min(1.0, maxComponent(w.beta) * w.segment_mis * importance);
         if (q < 1.0) {
           if (!(rng.uniform() < q)) return;
-          beta /= q;
+          w.beta /= q;
         }
       }
     }
   }
 
- private:
+  // The sky seen along a walk's ray that left the medium: behind the cloud for a camera ray,
+  // else MIS-weighted against the sky's light sample. The lobe's directions only stand for
+  // what follows a collision, so a lobe segment that escapes adds nothing.
+  void escape(const Walk& w, PathSample* out) const {
+    if (w.depth == 0) {
+      out->background = sky_.radiance(w.ray.d);
+    } else if (!sky_.black() && !w.lobe_segment) {
+      const double mis = powerHeuristic(w.phase_pdf, sky_.pdf(w.ray.d));
+      add(out, /*from_sun=*/false, w.depth, w.beta * sky_.radiance(w.ray.d) * mis);
+    }
+  }
+
+  // The lobe technique at a collision at p of walk w (before its phase sample): a direction
+  // about the sun, walked on as a path of its own with the lobe's MIS weight.
+  void branch(const Walk& w, const Vec3& p, double eps_t, DensityField::Lookup& lookup, Rng& rng,
+              PathSample* out) const {
+    const double u1 = rng.uniform(), u2 = rng.uniform();
+    const SunGuide::LobeSample s = guide_.sampleLobe(w.ray.d, eps_t, u1, u2);
+    if (!(maxComponent(s.weight) > 0)) return;
+    Walk b;
+    b.ray = {p, s.direction};
+    b.beta = w.beta * s.weight;
+    b.depth = w.depth + 1;
+    b.generation = w.generation + 1;
+    b.lobe_segment = true;
+    walk(b, lookup, rng, out);
+  }
+
+  void sunEvent(const Vec3& p, const Vec3& travel, const Rgb& beta, int order,
+                DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
+    const Rgb f = phase_.eval(dot(travel, sun_dir_));
+    if (!(maxComponent(f) > 0)) return;
+    const Rgb l = beta * f * sun_e_;
+    const double predicted = 4 * kPi * maxComponent(beta * f);
+    const double u = split_max_ > 1 ? rng.uniform() : 0;
+    const ShadowRays rays = sunShadowRays(predicted, split_max_, u);
+    double tr = 0;
+    for (int k = 0; k < rays.count; ++k) {
+      tr += ratioTrack(field_, lookup, extinction_, {p, sun_dir_}, 0, kInfinity, rng);
+    }
+    if (tr > 0) add(out, true, order, l * (tr * rays.weight));
+  }
+
+  void skyEvent(const Vec3& p, const Vec3& travel, const Rgb& beta, int order,
+                DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
+    const double u1 = rng.uniform(), u2 = rng.uniform();
+    const SkySample s = sky_.sample(u1, u2);
+    if (!(s.pdf > 0 && maxComponent(s.radiance) > 0)) return;
+    const double cos_theta = dot(travel, s.to_sky);
+    const Rgb f = phase_.eval(cos_theta);
+    if (!(maxComponent(f) > 0)) return;
+    const double tr = ratioTrack(field_, lookup, extinction_, {p, s.to_sky}, 0, kInfinity, rng);
+    if (tr > 0) {
+      const double w = powerHeuristic(s.pdf, phase_.pdf(cos_theta));
+      add(out, false, order, beta * f * s.radiance * (tr * w / s.pdf));
+    }
+  }
+
   static void add(PathSample* out, bool from_sun, int order, const Rgb& l) {
     (from_sun ? out->sun : out->sky) += l;
     (order == 1 ? out->single : out->multiple) += l;
@@ -180,7 +250,9 @@ class Integrator {
   Rgb sun_e_;
   bool sun_on_;
   const SkyLight& sky_;
+  SunGuide guide_;
   int max_depth_;
+  int split_max_;
 };
 
 void store(Image& im, int x, int y, const Rgb& v, double scale) {
@@ -200,7 +272,9 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
   validateOptions(options);
   const CameraRays rays(camera);
   const SkyLight sky_light(sky);
-  const Integrator integrator(medium, sun_dir, sun.irradiance, sky_light, options.max_depth);
+  const double guiding =
+      options.sun_guiding >= 0 ? options.sun_guiding : autoSunGuiding(*medium.phase);
+  const Integrator integrator(medium, sun_dir, sun.irradiance, sky_light, options, guiding);
 
   const int w = camera.width_px, h = camera.height_px;
   const int spp = options.samples_per_pixel;

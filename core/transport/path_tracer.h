@@ -24,6 +24,13 @@ struct PathTracerOptions {
   /// tail is heavy, and the cap then loses a fraction ~ 1/sqrt(max_depth) of the multiply
   /// scattered light (< 1% at the default; see the Chandrasekhar test). Cost grows likewise.
   int max_depth = 100000;
+  /// Probability of drawing the next direction from the phase function about the sun instead of
+  /// about the travel direction (sun-directional importance sampling, core/transport/
+  /// sun_guiding.h), in [0, 1); 0 is plain phase sampling; negative: autoSunGuiding(phase).
+  double sun_guiding = -1;
+  /// Most shadow rays towards the sun at one collision (prediction-based splitting and
+  /// roulette, core/transport/shadow_splitting.h), 1..64; 1 turns both off.
+  int sun_split_max = 8;
   int threads = 0;     ///< 0: the caller's TBB arena / all hardware threads
   int tile_size = 16;  ///< pixels per tile side (work unit)
 };

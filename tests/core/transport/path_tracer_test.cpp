@@ -23,19 +23,8 @@
 namespace cloudbake {
 namespace {
 
+using testing_util::perspectiveCamera;
 using testing_util::Stats;
-
-Camera perspectiveCamera(int px) {
-  Camera cam;
-  cam.name = "test";
-  cam.type = Camera::Type::kPerspective;
-  cam.position = Vec3(0, -4, 0.5);
-  cam.look_at = Vec3(0, 0, 0.5);
-  cam.up = Vec3(0, 0, 1);
-  cam.fov_deg = 35;
-  cam.width_px = cam.height_px = px;
-  return cam;
-}
 
 Medium sphereMedium(double extinction, double albedo, std::shared_ptr<const PhaseFunction> phase) {
   Medium m;

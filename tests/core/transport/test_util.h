@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/io/image.h"
+#include "core/transport/scene.h"
 #include "core/volume/density_field.h"
 
 namespace cloudbake {
@@ -23,6 +24,20 @@ struct Stats {
   double variance() const { return n > 1 ? std::max(0.0, (sum2 - sum * sum / n) / (n - 1)) : 0; }
   double stderror() const { return std::sqrt(variance() / n); }
 };
+
+/// A px x px perspective camera 4 units in front of the test media (centred at z = 0.5),
+/// looking along +y with +z up.
+inline Camera perspectiveCamera(int px, double fov_deg = 35) {
+  Camera cam;
+  cam.name = "test";
+  cam.type = Camera::Type::kPerspective;
+  cam.position = Vec3(0, -4, 0.5);
+  cam.look_at = Vec3(0, 0, 0.5);
+  cam.up = Vec3(0, 0, 1);
+  cam.fov_deg = fov_deg;
+  cam.width_px = cam.height_px = px;
+  return cam;
+}
 
 /// Stats over one channel of every pixel of an image (pixels are independent estimates).
 inline Stats pixelStats(const Image& im, int channel, double scale = 1.0) {

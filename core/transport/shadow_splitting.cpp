@@ -1,0 +1,23 @@
+#include "core/transport/shadow_splitting.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace cloudbake {
+
+ShadowRays sunShadowRays(double predicted, int max_rays, double u) {
+  if (max_rays <= 1) return {};
+  if (!(predicted > 0)) return {0, 0};
+  if (predicted > 1) {
+    const int n = int(std::min<double>(max_rays, std::ceil(predicted)));
+    return {n, 1.0 / n};
+  }
+  if (predicted < kShadowRouletteBelow) {
+    const double survive = predicted / kShadowRouletteBelow;
+    if (u < survive) return {1, 1.0 / survive};
+    return {0, 0};
+  }
+  return {};
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,28 @@
+// How many shadow rays the sun's next event gets at one collision: split where its expected
+// contribution is large, roulette where it is small.
+#pragma once
+
+namespace cloudbake {
+
+/// Shadow rays to trace and the weight of each (count 0: rouletted away).
+struct ShadowRays {
+  int count = 1;
+  double weight = 1;
+};
+
+/// Below this predicted contribution the sun's next event is rouletted.
+constexpr double kShadowRouletteBelow = 0.02;
+
+/// Prediction-based splitting and Russian roulette of the sun's next event (in the spirit of the
+/// local-estimate splitting of Buras & Mayer 2011). `predicted` is the event's contribution
+/// before transmittance, relative to an isotropic scatter at unit throughput: max over channels
+/// of throughput * p(theta_sun) * 4 pi. Above 1 the event is split into min(ceil(predicted),
+/// max_rays) rays of weight 1/count, so the transmittance of the collisions that carry the
+/// image (the forward peak) is averaged; below kShadowRouletteBelow (0.02) it survives with
+/// probability predicted / kShadowRouletteBelow at weight 1/probability, so collisions that
+/// add little (backscatter at a forward-peaked phase) skip most of their ratio tracking. Both
+/// keep the estimator unbiased. max_rays <= 1 turns both off and leaves `u` unused; u is
+/// uniform in [0, 1) and only read for the roulette.
+ShadowRays sunShadowRays(double predicted, int max_rays, double u);
+
+}  // namespace cloudbake
