@@ -16,11 +16,11 @@ Usage: bench/precomputed_bench.py [--build build] [--threads 2] [--kmax 17] [--r
 import argparse
 import json
 import os
-import re
 import subprocess
 import sys
 
-from trade_bench import render as run  # a child render: (stderr, peak MiB, wall s)
+from trade_bench import render as run  # a child render: its --stats-json (docs/cli.md)
+from trade_bench import steps  # the stats' steps of some kinds
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -76,12 +76,12 @@ def main():
                              "sample_points": 2 ** k},
                     "views": [], "outputs": {"exr": False, "vdb": False}}
             print("precomputed_bench: %s K=2^%d..." % (name, k), file=sys.stderr)
-            err, peak, _ = run(cloudbake, shot, os.path.join(work, "pre_%d_%d" % (res, k)),
-                               a.threads)
-            m = re.search(r"precomputed 1 basic volume\(s\) in ([0-9.]+) s .*?; ([0-9.]+) MiB", err)
-            lit = re.search(r"lit in ([0-9.]+) s, (\d+) orders", err)
-            print("| %s | 2^%d | %s | %s | %.0f | %s | %s |" % (
-                name, k, m.group(1), m.group(2), peak, lit.group(1), lit.group(2)), flush=True)
+            stats = run(cloudbake, shot, os.path.join(work, "pre_%d_%d" % (res, k)), a.threads)
+            pre = steps(stats, "precompute")[0]
+            lit = steps(stats, "light")[0]
+            print("| %s | 2^%d | %.2f | %.1f | %.0f | %.2f | %d |" % (
+                name, k, pre["seconds"], pre["mib_per_basic_volume"], stats["peak_rss_mib"],
+                lit["seconds"], lit["orders"]), flush=True)
 
     # 2. A 640x480 frame of the largest lattice.
     name, size, res = lattices[-1]
@@ -92,13 +92,10 @@ def main():
             "bake": {"method": "precomputed", "light_resolution": res, "sample_points": 4096,
                      "frames": 3},
             "views": view(w, h), "outputs": {"exr": True, "vdb": False}}
-    err, peak, _ = run(cloudbake, shot, os.path.join(work, "frame"), a.threads)
-    # Progress lines repeat (with a percentage); one value per frame.
-    lit = list(dict(re.findall(r"frame (\d+) \(basic volumes [^)]*\): lit in ([0-9.]+) s",
-                               err)).values())
-    ren = list(dict(re.findall(r"frame (\d+), view 'side' \S+ rendered in ([0-9.]+) s",
-                               err)).values())
-    lit, ren = [float(x) for x in lit], [float(x) for x in ren]
+    stats = run(cloudbake, shot, os.path.join(work, "frame"), a.threads)
+    peak = stats["peak_rss_mib"]
+    lit = [st["seconds"] for st in steps(stats, "light")]  # one per frame
+    ren = [st["seconds"] for st in steps(stats, "view") if st["view"] == "side"]
     print("\n## One frame of the %s cloud at %dx%d, K 4096\n" % (name, w, h))
     print("light from the precompute: %.2f s per frame (mean of %d); render: %.2f s per view; "
           "peak %.0f MiB" % (sum(lit) / len(lit), len(lit), sum(ren) / len(ren), peak))

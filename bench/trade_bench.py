@@ -7,9 +7,10 @@ own) and prints a markdown table:
 
   scene | method | quality | bake s | render s/view | peak MiB | rel. RMSE
 
-- bake s: the bake's "light baked in X s" line (0 for pathtrace, which bakes nothing);
-- render s/view: mean of the views' "rendered in Y s" lines (the whole path trace for pathtrace);
-- peak MiB: the child's maximum resident set size (wait4 rusage);
+- bake s: the seconds of the run's bake, precompute and light steps (0 for pathtrace, which
+  bakes nothing), from the child's `--stats-json` (docs/cli.md);
+- render s/view: mean of its view steps' seconds (the whole path trace for pathtrace);
+- peak MiB: the child's peak resident set size (the stats' peak_rss_mib);
 - rel. RMSE: sqrt(mean over pixels and RGB of (x - r)^2) / mean(r) of the beauty image against the
   reference (pathtrace at --ref-spp), averaged over the scene's views (`cloudbake compare`).
 The reference's own noise is printed per scene: an independent render at ref_spp/4 differs from
@@ -22,10 +23,8 @@ Usage: bench/trade_bench.py [--build build] [--threads 2] [--ref-spp 1024] [--sc
 import argparse
 import json
 import os
-import re
 import subprocess
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "client", "python"))
@@ -61,36 +60,40 @@ def absolutise(shot, folder):
 
 
 def render(cloudbake, shot, out_dir, threads):
-    """Renders `shot` in a child `cloudbake render`; returns (stderr text, peak MiB, wall s)."""
+    """Renders `shot` in a child `cloudbake render`; returns its `--stats-json` (docs/cli.md:
+    seconds, peak_rss_mib, counters, steps, seconds_by_step)."""
     os.makedirs(out_dir, exist_ok=True)
     shot_path = os.path.join(out_dir, "shot.json")
+    stats_path = os.path.join(out_dir, "stats.json")
     with open(shot_path, "w") as f:
         json.dump(shot, f, indent=1)
-    t0 = time.time()
-    proc = subprocess.Popen([cloudbake, "render", shot_path, "--out", out_dir, "--threads",
-                             str(threads)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    err = proc.stderr.read().decode()
-    _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    wall = time.time() - t0
+    proc = subprocess.run([cloudbake, "render", shot_path, "--out", out_dir, "--threads",
+                           str(threads), "--quiet", "--stats-json", stats_path],
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if proc.returncode != 0:
-        raise RuntimeError("cloudbake render failed (%d):\n%s" % (proc.returncode, err[-2000:]))
-    return err, usage.ru_maxrss / 1024.0, wall
+        raise RuntimeError("cloudbake render failed (%d):\n%s"
+                           % (proc.returncode, proc.stderr[-2000:]))
+    with open(stats_path) as f:
+        return json.load(f)
+
+
+def steps(stats, *names):
+    """The run's steps of the kinds `names` ("bake", "precompute", "light", "view", ...), in
+    order."""
+    return [s for s in stats["steps"] if s["step"] in names]
 
 
 def run(cloudbake, shot, out_dir, threads):
-    """Renders `shot`; returns (bake_s, [view seconds], peak MiB, wall s)."""
-    err, peak, wall = render(cloudbake, shot, out_dir, threads)
-    bake = [float(x) for x in re.findall(r"light \S+ in ([0-9.]+) s", err)]
+    """Renders `shot`; returns (bake_s, [view seconds], peak MiB, run s)."""
+    stats = render(cloudbake, shot, out_dir, threads)
     # precomputed: the precompute, plus lighting its one frame from it (a static volume).
-    bake += [float(x) for x in re.findall(r"precomputed \d+ basic volume\(s\) in ([0-9.]+) s", err)]
-    bake += [float(x) for x in re.findall(r"lit in ([0-9.]+) s", err)]
-    views = [float(x) for x in re.findall(r"rendered in ([0-9.]+) s", err)]
+    bake = [s["seconds"] for s in steps(stats, "bake", "precompute", "light")]
+    views = [s["seconds"] for s in steps(stats, "view")]
     if shot["bake"]["method"] == "precomputed":
         for v in shot["views"]:  # frame 0 of its frame sequence is the view
             os.replace(os.path.join(out_dir, v["name"] + ".0000.exr"),
                        os.path.join(out_dir, v["name"] + ".exr"))
-    return sum(bake), views, peak, wall
+    return sum(bake), views, stats["peak_rss_mib"], stats["seconds"]
 
 
 def rel_rmse(cloudbake, test, ref):

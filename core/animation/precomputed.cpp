@@ -400,16 +400,8 @@ void addMultipleScattering(const PrecomputedDatabase& db, const std::vector<floa
               {kCheapIterationGrain});
 }
 
-}  // namespace
-
-size_t BasicVolumePrecompute::bytes() const {
-  return optical_depth_sh.size() * sizeof(ShCoefficients) + cuts.offsets.size() * 8 +
-         cuts.nodes.size() * 4 + cuts.values.size() * 4;
-}
-
-PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double extinction,
-                                           const PrecomputeOptions& options,
-                                           const std::function<bool(double)>& progress) {
+void checkPrecomputeInput(const BasicVolumeDatabase& volumes, double extinction,
+                          const PrecomputeOptions& options) {
   if (options.sample_points < 1 || options.sample_points > (1 << 20)) {
     throw InputError("sample_points: must be in [1, 2^20], got " +
                      std::to_string(options.sample_points));
@@ -422,22 +414,27 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
     throw InputError("extinction: must be in [0, 1e6], got " + std::to_string(extinction));
   }
   if (volumes.frames.empty()) throw InputError("basic volumes: the database is empty");
-  const BakeGrid& g = volumes.grid;
-  const size_t n = g.voxelCount();
+  const size_t n = volumes.grid.voxelCount();
   for (size_t f = 0; f < volumes.frames.size(); ++f) {
     if (volumes.frames[f].size() != n) {
       throw InputError("basic volumes: volume " + std::to_string(f) +
                        " does not match the lattice");
     }
   }
-  PrecomputedDatabase db;
-  db.extinction = extinction;
+}
+
+// What every basic volume shares: the receiver lattice and its mask, and the sample points,
+// both covering the union of the volumes' densities. Returns each volume's density box-filtered
+// onto the receivers, which its cuts march through.
+std::vector<std::vector<float>> placeReceiversAndSamples(const BasicVolumeDatabase& volumes,
+                                                         const PrecomputeOptions& options,
+                                                         PrecomputedDatabase& db) {
+  const BakeGrid& g = volumes.grid;
+  const size_t n = g.voxelCount();
   db.receivers = receiverLattice(g, options.transfer_resolution);
   const BakeGrid& rg = db.receivers;
   // 1 where any basic volume has density, on the lattice and on the receivers.
   std::vector<float> any(n, 0.f), near(rg.voxelCount(), 0.f);
-  db.basic.resize(volumes.frames.size());
-  // Each volume's density box-filtered onto the receivers: what its cuts march through.
   std::vector<std::vector<float>> receiver_density(volumes.frames.size());
   for (size_t f = 0; f < volumes.frames.size(); ++f) {
     for (size_t v = 0; v < n; ++v) {
@@ -454,10 +451,50 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
   db.receiver_mask = densitySupport(rg, near);
   const std::vector<uint8_t> spread = densitySupport(g, any);
   db.tree = buildSampleTree(g, spread, options.sample_points, options.seed);
+  return receiver_density;
+}
+
+// The SHEXP tables, fitted on up to 2000 voxels of one basic volume's cloud (the database
+// fits them on its first).
+ShExp fitShExp(const std::vector<float>& density,
+               const std::vector<ShCoefficients>& optical_depth_sh) {
+  std::vector<ShCoefficients> samples;
+  std::vector<size_t> inside;
+  for (size_t v = 0; v < density.size(); ++v) {
+    if (density[v] > 0) inside.push_back(v);
+  }
+  const size_t stride = std::max<size_t>(1, inside.size() / 2000);
+  for (size_t i = 0; i < inside.size(); i += stride) {
+    ShCoefficients c = optical_depth_sh[inside[i]];
+    for (float& x : c) x = -x;
+    samples.push_back(c);
+  }
+  while (samples.size() < 8) samples.push_back(ShCoefficients{});  // an all-empty volume
+  return ShExp::fit(samples);
+}
+
+}  // namespace
+
+size_t BasicVolumePrecompute::bytes() const {
+  return optical_depth_sh.size() * sizeof(ShCoefficients) + cuts.offsets.size() * 8 +
+         cuts.nodes.size() * 4 + cuts.values.size() * 4;
+}
+
+PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double extinction,
+                                           const PrecomputeOptions& options,
+                                           const std::function<bool(double)>& progress) {
+  checkPrecomputeInput(volumes, extinction, options);
+  PrecomputedDatabase db;
+  db.extinction = extinction;
+  const std::vector<std::vector<float>> receiver_density =
+      placeReceiversAndSamples(volumes, options, db);
+  const BakeGrid& g = volumes.grid;
+  const BakeGrid& rg = db.receivers;
 
   // Basic volumes in parallel (each also parallel inside: TBB shares the threads). Progress
   // is the mean of the volumes' fractions, reported under a lock since any task may report.
   const size_t nvol = volumes.frames.size();
+  db.basic.resize(nvol);
   std::vector<double> fraction(nvol, 0.0);
   std::mutex progress_mutex;
   auto report = [&](size_t f, double x) {
@@ -478,22 +515,7 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
                                  options.cuts, [&](double x) { return report(f, 0.3 + 0.7 * x); });
     b.seconds = secondsSince(t0);
   });
-  {
-    // The SHEXP tables, fitted on up to 2000 voxels of the first basic volume's cloud.
-    std::vector<ShCoefficients> samples;
-    std::vector<size_t> inside;
-    for (size_t v = 0; v < n; ++v) {
-      if (volumes.frames[0][v] > 0) inside.push_back(v);
-    }
-    const size_t stride = std::max<size_t>(1, inside.size() / 2000);
-    for (size_t i = 0; i < inside.size(); i += stride) {
-      ShCoefficients c = db.basic[0].optical_depth_sh[inside[i]];
-      for (float& x : c) x = -x;
-      samples.push_back(c);
-    }
-    while (samples.size() < 8) samples.push_back(ShCoefficients{});  // an all-empty volume
-    db.shexp = ShExp::fit(samples);
-  }
+  db.shexp = fitShExp(volumes.frames[0], db.basic[0].optical_depth_sh);
   db.volumes = std::move(volumes);
   return db;
 }

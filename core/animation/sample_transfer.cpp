@@ -120,6 +120,117 @@ SampleTree buildSampleTree(const BakeGrid& grid, const std::vector<uint8_t>& ins
   return tree;
 }
 
+namespace {
+
+// A node of a receiver's cut: its clustering error and its mean transfer.
+struct CutEntry {
+  double error;
+  int node;
+  double value;  // mean T~ over the node's samples
+  bool operator<(const CutEntry& o) const {
+    return error < o.error || (error == o.error && node > o.node);
+  }
+};
+
+// The sample tree as seen from one receiver at x.
+struct ReceiverTransfer {
+  const SampleTree& tree;
+  const BakeGrid& receivers;
+  const float* density;
+  double extinction;
+  Vec3 x;
+
+  // The transfer to a node's representative point: its sample for a leaf, else its centroid.
+  double transfer(int id) const {
+    const SampleTreeNode& nd = tree.nodes[size_t(id)];
+    const Vec3 p = nd.leaf() ? tree.points[size_t(nd.begin)] : nd.centroid;
+    return representativeGeometry(tree, id, x) *
+           std::exp(-opticalDepth(receivers, density, extinction, x, p));
+  }
+
+  // A node's entry from its children's representative transfers (`own`: a leaf's transfer).
+  // A receiver within the node's sphere (grown by a sample cell's radius) gives it an infinite
+  // error, so it is split before any other.
+  CutEntry entry(int id, double own) const {
+    const SampleTreeNode& nd = tree.nodes[size_t(id)];
+    if (nd.leaf()) return CutEntry{0.0, id, own};
+    const double vl = transfer(nd.left), vr = transfer(nd.right);
+    const double nl = tree.nodes[size_t(nd.left)].count(),
+                 nr = tree.nodes[size_t(nd.right)].count();
+    CutEntry e{std::sqrt(nl * nr) * std::abs(vl - vr), id, (nl * vl + nr * vr) / (nl + nr)};
+    if (length(x - nd.centroid) < nd.radius + tree.cell_radius) {
+      e.error = std::numeric_limits<double>::infinity();
+    }
+    return e;
+  }
+
+  CutEntry entryOf(int id) const {
+    return entry(id, tree.nodes[size_t(id)].leaf() ? transfer(id) : 0.0);
+  }
+};
+
+// One receiver's cut: from the root, the node of largest error is split until every error is
+// below cut_error of the cut's total or the cut holds max_cut nodes. The cut's nodes, in the
+// order of their samples, and their mean transfers go to `nodes` and `values`.
+void receiverCut(const ReceiverTransfer& at, const TransferCutOptions& options,
+                 std::vector<uint32_t>& nodes, std::vector<float>& values) {
+  const SampleTree& tree = at.tree;
+  std::priority_queue<CutEntry> open;
+  std::vector<CutEntry> closed;
+  double total = 0;  // sum over the cut of count * mean
+  auto push = [&](const CutEntry& e) {
+    total += tree.nodes[size_t(e.node)].count() * e.value;
+    if (tree.nodes[size_t(e.node)].leaf()) {
+      closed.push_back(e);
+    } else {
+      open.push(e);
+    }
+  };
+  push(at.entryOf(0));
+  while (!open.empty() && int(open.size() + closed.size()) < options.max_cut) {
+    const CutEntry top = open.top();
+    if (top.error <= options.cut_error * total) break;
+    open.pop();
+    const SampleTreeNode& nd = tree.nodes[size_t(top.node)];
+    total -= nd.count() * top.value;
+    // The children's own transfers were computed for top's estimate; recomputing them is
+    // cheaper than keeping them per open node.
+    push(at.entryOf(nd.left));
+    push(at.entryOf(nd.right));
+  }
+  while (!open.empty()) {
+    closed.push_back(open.top());
+    open.pop();
+  }
+  std::sort(closed.begin(), closed.end(), [&](const CutEntry& p, const CutEntry& q) {
+    return tree.nodes[size_t(p.node)].begin < tree.nodes[size_t(q.node)].begin;
+  });
+  nodes.reserve(closed.size());
+  values.reserve(closed.size());
+  for (const CutEntry& e : closed) {
+    nodes.push_back(uint32_t(e.node));
+    values.push_back(float(e.value));
+  }
+}
+
+// The receivers' cuts in one flat table (offsets, nodes, values).
+TransferCuts packCuts(const std::vector<std::vector<uint32_t>>& node_lists,
+                      const std::vector<std::vector<float>>& value_lists) {
+  const size_t n = node_lists.size();
+  TransferCuts cuts;
+  cuts.offsets.resize(n + 1, 0);
+  for (size_t r = 0; r < n; ++r) cuts.offsets[r + 1] = cuts.offsets[r] + node_lists[r].size();
+  cuts.nodes.reserve(cuts.offsets[n]);
+  cuts.values.reserve(cuts.offsets[n]);
+  for (size_t r = 0; r < n; ++r) {
+    cuts.nodes.insert(cuts.nodes.end(), node_lists[r].begin(), node_lists[r].end());
+    cuts.values.insert(cuts.values.end(), value_lists[r].begin(), value_lists[r].end());
+  }
+  return cuts;
+}
+
+}  // namespace
+
 TransferCuts computeTransferCuts(const SampleTree& tree, const BakeGrid& receivers,
                                  const std::vector<float>& density, double extinction,
                                  const std::vector<uint8_t>& receiver_mask,
@@ -138,16 +249,6 @@ TransferCuts computeTransferCuts(const SampleTree& tree, const BakeGrid& receive
   const size_t n = receivers.voxelCount();
   std::vector<std::vector<uint32_t>> node_lists(n);
   std::vector<std::vector<float>> value_lists(n);
-  const double a = tree.cell_radius;
-
-  struct Entry {
-    double error;
-    int node;
-    double value;  // mean T~ over the node's samples
-    bool operator<(const Entry& o) const {
-      return error < o.error || (error == o.error && node > o.node);
-    }
-  };
   // Receivers in parallel; progress is the cancellation poll.
   ParallelOptions per_receiver;
   if (progress) per_receiver.cancelled = [&](double f) { return !progress(f); };
@@ -158,77 +259,12 @@ TransferCuts computeTransferCuts(const SampleTree& tree, const BakeGrid& receive
         const int i = int(r % size_t(receivers.nx));
         const int j = int((r / size_t(receivers.nx)) % size_t(receivers.ny));
         const int k = int(r / (size_t(receivers.nx) * size_t(receivers.ny)));
-        const Vec3 x = receivers.center(i, j, k);
-        // The transfer to a node's representative point: its sample for a leaf, else its
-        // centroid.
-        auto transfer = [&](int id) {
-          const SampleTreeNode& nd = tree.nodes[size_t(id)];
-          const Vec3 p = nd.leaf() ? tree.points[size_t(nd.begin)] : nd.centroid;
-          return representativeGeometry(tree, id, x) *
-                 std::exp(-opticalDepth(receivers, density.data(), extinction, x, p));
-        };
-        // A node's entry from its children's representative transfers.
-        auto entry = [&](int id, double own) {
-          const SampleTreeNode& nd = tree.nodes[size_t(id)];
-          if (nd.leaf()) return Entry{0.0, id, own};
-          const double vl = transfer(nd.left), vr = transfer(nd.right);
-          const double nl = tree.nodes[size_t(nd.left)].count(),
-                       nr = tree.nodes[size_t(nd.right)].count();
-          Entry e{std::sqrt(nl * nr) * std::abs(vl - vr), id, (nl * vl + nr * vr) / (nl + nr)};
-          if (length(x - nd.centroid) < nd.radius + a)
-            e.error = std::numeric_limits<double>::infinity();
-          return e;
-        };
-        std::priority_queue<Entry> open;
-        std::vector<Entry> closed;
-        double total = 0;  // sum over the cut of count * mean
-        auto push = [&](const Entry& e) {
-          total += tree.nodes[size_t(e.node)].count() * e.value;
-          if (tree.nodes[size_t(e.node)].leaf()) {
-            closed.push_back(e);
-          } else {
-            open.push(e);
-          }
-        };
-        push(entry(0, tree.nodes[0].leaf() ? transfer(0) : 0.0));
-        while (!open.empty() && int(open.size() + closed.size()) < options.max_cut) {
-          const Entry top = open.top();
-          if (top.error <= options.cut_error * total) break;
-          open.pop();
-          const SampleTreeNode& nd = tree.nodes[size_t(top.node)];
-          total -= nd.count() * top.value;
-          // The children's own transfers were computed for top's estimate; recomputing them is
-          // cheaper than keeping them per open node.
-          push(entry(nd.left, tree.nodes[size_t(nd.left)].leaf() ? transfer(nd.left) : 0.0));
-          push(entry(nd.right, tree.nodes[size_t(nd.right)].leaf() ? transfer(nd.right) : 0.0));
-        }
-        while (!open.empty()) {
-          closed.push_back(open.top());
-          open.pop();
-        }
-        std::sort(closed.begin(), closed.end(), [&](const Entry& p, const Entry& q) {
-          return tree.nodes[size_t(p.node)].begin < tree.nodes[size_t(q.node)].begin;
-        });
-        auto& nodes = node_lists[r];
-        auto& values = value_lists[r];
-        nodes.reserve(closed.size());
-        values.reserve(closed.size());
-        for (const Entry& e : closed) {
-          nodes.push_back(uint32_t(e.node));
-          values.push_back(float(e.value));
-        }
+        const ReceiverTransfer at{tree, receivers, density.data(), extinction,
+                                  receivers.center(i, j, k)};
+        receiverCut(at, options, node_lists[r], value_lists[r]);
       },
       per_receiver);
-  TransferCuts cuts;
-  cuts.offsets.resize(n + 1, 0);
-  for (size_t r = 0; r < n; ++r) cuts.offsets[r + 1] = cuts.offsets[r] + node_lists[r].size();
-  cuts.nodes.reserve(cuts.offsets[n]);
-  cuts.values.reserve(cuts.offsets[n]);
-  for (size_t r = 0; r < n; ++r) {
-    cuts.nodes.insert(cuts.nodes.end(), node_lists[r].begin(), node_lists[r].end());
-    cuts.values.insert(cuts.values.end(), value_lists[r].begin(), value_lists[r].end());
-  }
-  return cuts;
+  return packCuts(node_lists, value_lists);
 }
 
 std::vector<float> illuminationTree(const SampleTree& tree, const std::vector<float>& leaf_values) {

@@ -91,10 +91,12 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
   writeVdbFileAtomically(path, grids, meta);
 }
 
-BakedLight readBakedLight(const std::string& path) {
-  VdbFileContents contents = readVdbFileChecked(path);
-  const openvdb::GridPtrVec& grids = contents.grids;
-  const std::map<std::string, std::string>& meta = contents.metadata;
+namespace {
+
+// The method, sun direction and lattice size from the file's metadata; the rest of the
+// metadata is the caller's (a bake's own keys are recomputed when it is written again).
+void readBakeMetadata(const std::string& path, const std::map<std::string, std::string>& meta,
+                      BakedLight* bake) {
   auto need = [&](const char* key) {
     auto it = meta.find(key);
     if (it == meta.end()) {
@@ -103,78 +105,99 @@ BakedLight readBakedLight(const std::string& path) {
     }
     return it->second;
   };
-  BakedLight bake;
-  bake.method = need("cloudbake:method");
-  {
-    std::istringstream s(need("cloudbake:sun_direction"));
-    if (!(s >> bake.sun_direction.x >> bake.sun_direction.y >> bake.sun_direction.z)) {
-      throw InputError(path + ": malformed cloudbake:sun_direction metadata");
-    }
-    std::istringstream l(need("cloudbake:lattice"));
-    BakeGrid& g = bake.grid;
-    if (!(l >> g.nx >> g.ny >> g.nz) || g.nx < 1 || g.ny < 1 || g.nz < 1 ||
-        uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) > (uint64_t(1) << 31)) {
-      throw InputError(path + ": malformed cloudbake:lattice metadata");
-    }
+  bake->method = need("cloudbake:method");
+  std::istringstream s(need("cloudbake:sun_direction"));
+  if (!(s >> bake->sun_direction.x >> bake->sun_direction.y >> bake->sun_direction.z)) {
+    throw InputError(path + ": malformed cloudbake:sun_direction metadata");
+  }
+  std::istringstream l(need("cloudbake:lattice"));
+  BakeGrid& g = bake->grid;
+  if (!(l >> g.nx >> g.ny >> g.nz) || g.nx < 1 || g.ny < 1 || g.nz < 1 ||
+      uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) > (uint64_t(1) << 31)) {
+    throw InputError(path + ": malformed cloudbake:lattice metadata");
   }
   for (const auto& [k, v] : meta) {
     if (k != "cloudbake:method" && k != "cloudbake:sun_direction" && k != "cloudbake:lattice" &&
         k != "cloudbake:units" && k != "cloudbake:version") {
-      bake.metadata[k] = v;
+      bake->metadata[k] = v;
     }
   }
+}
+
+// The density grid's transform, which places the lattice (voxel size and origin); every other
+// grid must share it.
+const openvdb::math::Transform& readLatticePlacement(const std::string& path,
+                                                     const openvdb::GridPtrVec& grids,
+                                                     BakeGrid* g) {
   openvdb::GridBase::Ptr density_grid;
   for (const auto& grid : grids) {
     if (grid->getName() == bake_grids::kDensity) density_grid = grid;
   }
   if (!density_grid) throw InputError(path + ": no 'density' grid");
-  BakeGrid& g = bake.grid;
   const openvdb::math::Transform& xform = density_grid->transform();
   if (!xform.isLinear() || !xform.hasUniformScale()) {
     throw InputError(path + ": grid 'density' does not have a uniform linear transform");
   }
-  g.voxel_size = xform.voxelSize()[0];
+  g->voxel_size = xform.voxelSize()[0];
   const openvdb::Vec3d o = xform.indexToWorld(openvdb::Coord(0, 0, 0));
-  g.origin = Vec3(o.x(), o.y(), o.z());
-  const size_t n = g.voxelCount();
-  bake.density.assign(n, 0.f);
-  auto place = [&](const std::string& name, const openvdb::Coord& c) -> long long {
+  g->origin = Vec3(o.x(), o.y(), o.z());
+  return xform;
+}
+
+// Copies one grid's active voxels into the bake's dense lattice: the density, or a 1- or
+// 3-component channel of the grid's name.
+void readGridVoxels(const std::string& path, const openvdb::GridBase::Ptr& grid, BakedLight* bake) {
+  const BakeGrid& g = bake->grid;
+  const std::string name = grid->getName();
+  auto place = [&](const openvdb::Coord& c) -> size_t {
     if (c.x() < 0 || c.y() < 0 || c.z() < 0 || c.x() >= g.nx || c.y() >= g.ny || c.z() >= g.nz) {
       throw InputError(path + ": grid '" + name + "' has a voxel outside the bake's lattice");
     }
-    return (long long)g.index(c.x(), c.y(), c.z());
+    return g.index(c.x(), c.y(), c.z());
   };
-  for (const auto& grid : grids) {
-    const std::string name = grid->getName();
+  auto noTiles = [&](const auto& it) {
+    if (!it.isVoxelValue()) {
+      throw InputError(path + ": grid '" + name + "' has tiles (bakes store voxels)");
+    }
+  };
+  if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(grid)) {
+    std::vector<float>* out = &bake->density;
+    if (name != bake_grids::kDensity) out = &bake->add(name, 1).data;
+    for (auto it = f->cbeginValueOn(); it; ++it) {
+      noTiles(it);
+      (*out)[place(it.getCoord())] = *it;
+    }
+  } else if (auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(grid)) {
+    if (name == bake_grids::kDensity) throw InputError(path + ": grid 'density' is not float");
+    std::vector<float>& out = bake->add(name, 3).data;
+    for (auto it = v->cbeginValueOn(); it; ++it) {
+      noTiles(it);
+      const size_t i = place(it.getCoord());
+      const openvdb::Vec3s x = *it;
+      out[3 * i] = x[0];
+      out[3 * i + 1] = x[1];
+      out[3 * i + 2] = x[2];
+    }
+  } else {
+    throw InputError(path + ": grid '" + name + "' has value type " + grid->valueType() +
+                     " (bakes hold float and vec3s grids)");
+  }
+}
+
+}  // namespace
+
+BakedLight readBakedLight(const std::string& path) {
+  VdbFileContents contents = readVdbFileChecked(path);
+  BakedLight bake;
+  readBakeMetadata(path, contents.metadata, &bake);
+  const openvdb::math::Transform& xform = readLatticePlacement(path, contents.grids, &bake.grid);
+  bake.density.assign(bake.grid.voxelCount(), 0.f);
+  for (const auto& grid : contents.grids) {
     if (grid->transform() != xform) {
-      throw InputError(path + ": grid '" + name + "' is not on the density grid's transform");
+      throw InputError(path + ": grid '" + grid->getName() +
+                       "' is not on the density grid's transform");
     }
-    if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(grid)) {
-      std::vector<float>* out = &bake.density;
-      if (name != bake_grids::kDensity) out = &bake.add(name, 1).data;
-      for (auto it = f->cbeginValueOn(); it; ++it) {
-        if (!it.isVoxelValue()) {
-          throw InputError(path + ": grid '" + name + "' has tiles (bakes store voxels)");
-        }
-        (*out)[size_t(place(name, it.getCoord()))] = *it;
-      }
-    } else if (auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(grid)) {
-      if (name == bake_grids::kDensity) throw InputError(path + ": grid 'density' is not float");
-      std::vector<float>& out = bake.add(name, 3).data;
-      for (auto it = v->cbeginValueOn(); it; ++it) {
-        if (!it.isVoxelValue()) {
-          throw InputError(path + ": grid '" + name + "' has tiles (bakes store voxels)");
-        }
-        const size_t i = size_t(place(name, it.getCoord()));
-        const openvdb::Vec3s x = *it;
-        out[3 * i] = x[0];
-        out[3 * i + 1] = x[1];
-        out[3 * i + 2] = x[2];
-      }
-    } else {
-      throw InputError(path + ": grid '" + name + "' has value type " + grid->valueType() +
-                       " (bakes hold float and vec3s grids)");
-    }
+    readGridVoxels(path, grid, &bake);
   }
   bake.validate(path);
   return bake;

@@ -29,60 +29,17 @@ BakeProgressFn subRange(const BakeProgressFn& progress, double from, double to) 
   };
 }
 
-}  // namespace
+// Wall-clock seconds of the stages bakePointcloud runs itself (runPointcloud times its own).
+struct StageSeconds {
+  double lattice = 0, sun = 0, sky = 0, splat = 0;
+};
 
-BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
-                          const PointcloudOptions& options, const BakeProgressFn& progress,
-                          PointcloudStats* stats) {
-  checkPointcloudInput(medium, options);
-  if (!isFinite(sun_dir_in) || !(length(sun_dir_in) > 0)) {
-    throw InputError("sun: direction: must be a finite nonzero vector");
-  }
-  const Vec3 sun_dir = normalize(sun_dir_in);
-  auto report = [&](double f, const std::string& stage) {
-    if (progress && !progress(f, stage)) throw Cancelled();
-  };
-  // Stage fractions of the whole bake.
-  constexpr double kLattice = 0.05, kSun = 0.15, kSky = 0.25, kPoints = 0.9;
-
-  auto t0 = Clock::now();
-  report(0.0, "lattice");
-  BakedLight bake = makeBakeLattice(*medium.density, options.light_resolution);
-  const double seconds_lattice = secondsSince(t0);
-
-  t0 = Clock::now();
-  report(kLattice, "sun transmittance");
-  computeSunTransmittance(bake, sun_dir, medium.extinction, subRange(progress, kLattice, kSun));
-  const double seconds_sun = secondsSince(t0);
-
-  // sky_visibility is also the escape probability the normalised rule conserves energy with.
-  t0 = Clock::now();
-  const bool need_sky = options.sky || options.rule == PointcloudOptions::Rule::kNormalized;
-  if (need_sky) {
-    report(kSun, "sky visibility");
-    computeSkyVisibility(bake, medium.extinction, subRange(progress, kSun, kSky));
-  }
-  const double seconds_sky = secondsSince(t0);
-
-  const BakeChannel* vis = bake.find(bake_grids::kSkyVisibility);
-  const PointCloudResult result =
-      runPointcloud(bake.grid, bake.density, vis ? vis->data : std::vector<float>(), medium,
-                    sun_dir, options, options.tail, subRange(progress, kSky, kPoints));
-  if (!options.sky) bake.channels.erase(bake_grids::kSkyVisibility);
-
-  t0 = Clock::now();
-  report(kPoints, "splat");
-  const double splat_radius = splatPoints(bake, result, [&](double f) {
-    return progress && !progress(kPoints + (1 - kPoints) * f, "splat");
-  });
-  bake.addMeanRadiance();
-  bake.trimToSupport();
-  const double seconds_splat = secondsSince(t0);
-
-  bake.method = "pointcloud";
-  bake.sun_direction = sun_dir;
+// The bake's metadata: every option and result a reader needs to tell how it was made, and
+// what it cost.
+void addPointcloudMetadata(const PointcloudOptions& options, const PointCloudResult& result,
+                           double splat_radius, const StageSeconds& seconds, BakedLight* bake) {
   const bool paper = options.rule == PointcloudOptions::Rule::kPaper;
-  auto& md = bake.metadata;
+  auto& md = bake->metadata;
   md["cloudbake:method"] = "pointcloud";
   md["cloudbake:points"] = str(result.cloud.size());
   md["cloudbake:passes"] = str(options.passes);
@@ -111,27 +68,87 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
         str(mean / double(result.transfer_scale.size()), kMetadataDigits);
   }
   md["cloudbake:sky"] = options.sky ? "true" : "false";
-  md["cloudbake:seconds_lattice"] = str(seconds_lattice, kMetadataDigits);
-  md["cloudbake:seconds_sun_transmittance"] = str(seconds_sun, kMetadataDigits);
-  md["cloudbake:seconds_sky_visibility"] = str(seconds_sky, kMetadataDigits);
+  md["cloudbake:seconds_lattice"] = str(seconds.lattice, kMetadataDigits);
+  md["cloudbake:seconds_sun_transmittance"] = str(seconds.sun, kMetadataDigits);
+  md["cloudbake:seconds_sky_visibility"] = str(seconds.sky, kMetadataDigits);
   md["cloudbake:seconds_points"] = str(result.seconds_points, kMetadataDigits);
   md["cloudbake:seconds_neighbours"] = str(result.seconds_neighbours, kMetadataDigits);
   md["cloudbake:seconds_passes"] = str(result.seconds_passes, kMetadataDigits);
-  md["cloudbake:seconds_splat"] = str(seconds_splat, kMetadataDigits);
+  md["cloudbake:seconds_splat"] = str(seconds.splat, kMetadataDigits);
+}
+
+PointcloudStats pointcloudStats(const PointCloudResult& result, double seconds_splat) {
+  PointcloudStats stats;
+  stats.points = int(result.cloud.size());
+  stats.passes_run = result.passes_run;
+  stats.radius = result.radius;
+  stats.mean_neighbours = result.mean_neighbours;
+  stats.pair_interactions = result.pair_interactions;
+  stats.last_relative_change = result.last_relative_change;
+  stats.seconds_points = result.seconds_points;
+  stats.seconds_neighbours = result.seconds_neighbours;
+  stats.seconds_passes = result.seconds_passes;
+  stats.seconds_splat = seconds_splat;
+  return stats;
+}
+
+}  // namespace
+
+BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
+                          const PointcloudOptions& options, const BakeProgressFn& progress,
+                          PointcloudStats* stats) {
+  checkPointcloudInput(medium, options);
+  if (!isFinite(sun_dir_in) || !(length(sun_dir_in) > 0)) {
+    throw InputError("sun: direction: must be a finite nonzero vector");
+  }
+  const Vec3 sun_dir = normalize(sun_dir_in);
+  auto report = [&](double f, const std::string& stage) {
+    if (progress && !progress(f, stage)) throw Cancelled();
+  };
+  // Stage fractions of the whole bake.
+  constexpr double kLattice = 0.05, kSun = 0.15, kSky = 0.25, kPoints = 0.9;
+
+  StageSeconds seconds;
+  auto t0 = Clock::now();
+  report(0.0, "lattice");
+  BakedLight bake = makeBakeLattice(*medium.density, options.light_resolution);
+  seconds.lattice = secondsSince(t0);
+
+  t0 = Clock::now();
+  report(kLattice, "sun transmittance");
+  computeSunTransmittance(bake, sun_dir, medium.extinction, subRange(progress, kLattice, kSun));
+  seconds.sun = secondsSince(t0);
+
+  // sky_visibility is also the escape probability the normalised rule conserves energy with.
+  t0 = Clock::now();
+  const bool need_sky = options.sky || options.rule == PointcloudOptions::Rule::kNormalized;
+  if (need_sky) {
+    report(kSun, "sky visibility");
+    computeSkyVisibility(bake, medium.extinction, subRange(progress, kSun, kSky));
+  }
+  seconds.sky = secondsSince(t0);
+
+  const BakeChannel* vis = bake.find(bake_grids::kSkyVisibility);
+  const PointCloudResult result =
+      runPointcloud(bake.grid, bake.density, vis ? vis->data : std::vector<float>(), medium,
+                    sun_dir, options, options.tail, subRange(progress, kSky, kPoints));
+  if (!options.sky) bake.channels.erase(bake_grids::kSkyVisibility);
+
+  t0 = Clock::now();
+  report(kPoints, "splat");
+  const double splat_radius = splatPoints(bake, result, [&](double f) {
+    return progress && !progress(kPoints + (1 - kPoints) * f, "splat");
+  });
+  bake.addMeanRadiance();
+  bake.trimToSupport();
+  seconds.splat = secondsSince(t0);
+
+  bake.method = "pointcloud";
+  bake.sun_direction = sun_dir;
+  addPointcloudMetadata(options, result, splat_radius, seconds, &bake);
   report(1.0, "done");
 
-  if (stats) {
-    stats->points = int(result.cloud.size());
-    stats->passes_run = result.passes_run;
-    stats->radius = result.radius;
-    stats->mean_neighbours = result.mean_neighbours;
-    stats->pair_interactions = result.pair_interactions;
-    stats->last_relative_change = result.last_relative_change;
-    stats->seconds_points = result.seconds_points;
-    stats->seconds_neighbours = result.seconds_neighbours;
-    stats->seconds_passes = result.seconds_passes;
-    stats->seconds_splat = seconds_splat;
-  }
+  if (stats) *stats = pointcloudStats(result, seconds.splat);
   return bake;
 }
 

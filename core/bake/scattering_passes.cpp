@@ -418,6 +418,96 @@ void runPaper(const PassInputs& in, PointCloudResult& out) {
   }
 }
 
+// Pair weights of the normalised rule: the source's mass times the transmittance along the
+// pair (Simpson's rule over the two ends and the midpoint) over the squared distance, clamped to
+// the source's own sphere so that near pairs stay finite.
+NeighbourPairs normalisedPairs(const PointGrid& point_grid, const PointCloud& pc,
+                               const BakeGrid& grid, const std::vector<float>& density, double ext,
+                               double radius, uint64_t reserve,
+                               const std::function<bool(double)>& cancelled) {
+  const size_t n = pc.size();
+  std::vector<float> clamp_r2(n);  // r_i^2: a source's own sphere
+  for (size_t i = 0; i < n; ++i) {
+    const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[i]));
+    clamp_r2[i] = float(r * r);
+  }
+  const double em = ext * pc.mass;
+  auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
+    const double ends = double(pc.density[src]) + double(pc.density[dst]);
+    if (ext * d * ends / 6 > 16.2) return 0.f;  // T < 1e-7 whatever the midpoint holds
+    const double mid =
+        sampleTrilinear(grid, density.data(), (pc.position[src] + pc.position[dst]) * 0.5);
+    const double tau = ext * d * (ends + 4 * mid) / 6;
+    if (tau > 16.2) return 0.f;
+    return float(em * std::exp(-tau) / std::max(d * d, double(clamp_r2[src])));
+  };
+  return buildNeighbourPairs(point_grid, pc.position, radius, weight, reserve, cancelled);
+}
+
+// Pair weights of the paper rule: the transmittance from the densities at the two ends.
+NeighbourPairs paperPairs(const PointGrid& point_grid, const PointCloud& pc, double ext,
+                          double radius, uint64_t reserve,
+                          const std::function<bool(double)>& cancelled) {
+  auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
+    const double tau = d * 0.5 * (double(pc.density[src]) + double(pc.density[dst])) * ext;
+    return tau > 16.2 ? 0.f : float(std::exp(-tau));  // Eq. 3; below 1e-7 negligible
+  };
+  return buildNeighbourPairs(point_grid, pc.position, radius, weight, reserve, cancelled);
+}
+
+// The neighbour stage: the cut-off (the option, or 3x the mean point spacing), refused while it
+// is wider than the volume or its pairs would not fit in memory, then the weighted pairs of the
+// rule. Sets out.radius, out.pairs and out.mean_neighbours.
+NeighbourPairs findNeighbours(const BakeGrid& grid, const std::vector<float>& density,
+                              const PointcloudOptions& options, double ext,
+                              const BakeProgressFn& progress, PointCloudResult& out) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  const double diagonal = length(grid.bounds().extent());
+  out.radius = options.radius > 0 ? options.radius : 3 * pc.spacing;
+  if (out.radius > diagonal) {
+    throw InputError("radius: " + str(out.radius) + " is larger than the volume (lattice " +
+                     "diagonal " + str(diagonal) + " world units)");
+  }
+  const PointGrid point_grid(pc.position, out.radius);
+  const double max_mean = kMaxNeighbourPairs / double(n);
+  const double mean_estimate =
+      estimateMeanNeighbours(point_grid, pc.position, out.radius, 256, max_mean);
+  if (mean_estimate > max_mean) {
+    throw InputError("radius: " + str(out.radius) + " gives about " +
+                     str(uint64_t(mean_estimate * double(n))) + " neighbour pairs for " + str(n) +
+                     " points, more than the " + str(kMaxNeighbourPairs) +
+                     " that fit in memory; use a smaller radius or fewer points");
+  }
+  const uint64_t reserve = uint64_t(std::min(mean_estimate * 1.1 + 8, max_mean) * double(n));
+  auto cancelled_build = [&](double f) {
+    return progress && !progress(0.1 + 0.2 * f, "neighbours");
+  };
+  NeighbourPairs pairs =
+      options.rule == PointcloudOptions::Rule::kNormalized
+          ? normalisedPairs(point_grid, pc, grid, density, ext, out.radius, reserve,
+                            cancelled_build)
+          : paperPairs(point_grid, pc, ext, out.radius, reserve, cancelled_build);
+  out.pairs = pairs.size();
+  out.mean_neighbours = double(pairs.within_radius) / double(n);
+  return pairs;
+}
+
+// The escape probability of the reduced medium, whose extinction is `ext`: the caller's sky
+// visibility serves only when there is one and no reduction (s = 1); else it is computed into
+// `computed`.
+const std::vector<float>* escapeVisibility(const BakeGrid& grid, const std::vector<float>& density,
+                                           const std::vector<float>& sky_visibility, double s,
+                                           double ext, std::vector<float>* computed) {
+  if (sky_visibility.size() == grid.voxelCount() && s == 1) return &sky_visibility;
+  BakedLight tmp;
+  tmp.grid = grid;
+  tmp.density = density;
+  computeSkyVisibility(tmp, ext);
+  *computed = std::move(tmp.channels.at(bake_grids::kSkyVisibility).data);
+  return computed;
+}
+
 }  // namespace
 
 void checkPointcloudInput(const Medium& medium, const PointcloudOptions& o) {
@@ -477,60 +567,10 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
 
   t0 = Clock::now();
   report(0.1, "neighbours");
-  const PointCloud& pc = out.cloud;
-  const size_t n = pc.size();
-  const double diagonal = length(grid.bounds().extent());
-  out.radius = options.radius > 0 ? options.radius : 3 * pc.spacing;
-  if (out.radius > diagonal) {
-    throw InputError("radius: " + str(out.radius) + " is larger than the volume (lattice " +
-                     "diagonal " + str(diagonal) + " world units)");
-  }
-  const PointGrid point_grid(pc.position, out.radius);
-  const double max_mean = kMaxNeighbourPairs / double(n);
-  const double mean_estimate =
-      estimateMeanNeighbours(point_grid, pc.position, out.radius, 256, max_mean);
-  if (mean_estimate > max_mean) {
-    throw InputError("radius: " + str(out.radius) + " gives about " +
-                     str(uint64_t(mean_estimate * double(n))) + " neighbour pairs for " + str(n) +
-                     " points, more than the " + str(kMaxNeighbourPairs) +
-                     " that fit in memory; use a smaller radius or fewer points");
-  }
-  const uint64_t reserve = uint64_t(std::min(mean_estimate * 1.1 + 8, max_mean) * double(n));
-  auto cancelled_build = [&](double f) {
-    return progress && !progress(0.1 + 0.2 * f, "neighbours");
-  };
   const bool normalised = options.rule == PointcloudOptions::Rule::kNormalized;
   const TransportScaling ts = normalised ? transportScaling(medium) : TransportScaling{};
   const double ext = medium.extinction * ts.s;
-  NeighbourPairs pairs;
-  if (normalised) {
-    std::vector<float> clamp_r2(n);  // r_i^2: a source's own sphere
-    for (size_t i = 0; i < n; ++i) {
-      const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[i]));
-      clamp_r2[i] = float(r * r);
-    }
-    const double em = ext * pc.mass;
-    auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
-      const double ends = double(pc.density[src]) + double(pc.density[dst]);
-      if (ext * d * ends / 6 > 16.2) return 0.f;  // T < 1e-7 whatever the midpoint holds
-      const double mid =
-          sampleTrilinear(grid, density.data(), (pc.position[src] + pc.position[dst]) * 0.5);
-      const double tau = ext * d * (ends + 4 * mid) / 6;
-      if (tau > 16.2) return 0.f;
-      return float(em * std::exp(-tau) / std::max(d * d, double(clamp_r2[src])));
-    };
-    pairs =
-        buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve, cancelled_build);
-  } else {
-    auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
-      const double tau = d * 0.5 * (double(pc.density[src]) + double(pc.density[dst])) * ext;
-      return tau > 16.2 ? 0.f : float(std::exp(-tau));  // Eq. 3; below 1e-7 negligible
-    };
-    pairs =
-        buildNeighbourPairs(point_grid, pc.position, out.radius, weight, reserve, cancelled_build);
-  }
-  out.pairs = pairs.size();
-  out.mean_neighbours = double(pairs.within_radius) / double(n);
+  const NeighbourPairs pairs = findNeighbours(grid, density, options, ext, progress, out);
   out.seconds_neighbours = secondsSince(t0);
 
   t0 = Clock::now();
@@ -542,18 +582,10 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
       return !progress(0.3 + 0.7 * (pass + f) / passes, stage);
     };
   }
-  if (options.rule == PointcloudOptions::Rule::kNormalized) {
+  if (normalised) {
     std::vector<float> computed;
-    const std::vector<float>* vis = &sky_visibility;
-    // The escape probability of the reduced medium (its own extinction).
-    if (sky_visibility.size() != grid.voxelCount() || ts.s != 1) {
-      BakedLight tmp;
-      tmp.grid = grid;
-      tmp.density = density;
-      computeSkyVisibility(tmp, ext);
-      computed = std::move(tmp.channels.at(bake_grids::kSkyVisibility).data);
-      vis = &computed;
-    }
+    const std::vector<float>* vis =
+        escapeVisibility(grid, density, sky_visibility, ts.s, ext, &computed);
     const bool sky = options.sky && sky_visibility.size() == grid.voxelCount();
     in.grid = &grid;
     in.escape_visibility = vis;

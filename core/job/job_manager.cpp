@@ -493,6 +493,28 @@ void JobManager::runnerLoop() {
   }
 }
 
+// How a run ended, as the job's record and last event report it.
+struct JobManager::Outcome {
+  JobState state = JobState::kSucceeded;
+  std::string error;
+  bool error_is_input = false;
+};
+
+namespace {
+
+// The last event's line of a succeeded job: what was computed and what came from the cache.
+std::string successMessage(const RunResult& result) {
+  const std::string parts =
+      result.bakes_computed + result.bakes_cached > 0
+          ? std::string(result.bakes_computed ? "light baked, " : "bake from cache, ") +
+                std::to_string(result.views_from_bake) + " view(s) rendered from the bake)"
+          : std::to_string(result.views_rendered) + " view(s) rendered, " +
+                std::to_string(result.views_cached) + " from cache)";
+  return fmt::format("succeeded in {:.2f} s (", result.seconds) + parts;
+}
+
+}  // namespace
+
 void JobManager::runJob(const std::shared_ptr<Job>& job) {
   const std::string& id = job->record.id;
   {
@@ -506,13 +528,33 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   }
   spdlog::info("job {}: started ('{}', {} view(s))", id, job->record.shot_name,
                job->record.views.size());
+  const RunOptions ro = runOptions(job);
+  Outcome outcome;
+  RunResult result = runInArena(*job, ro, &outcome);
+  scatter_computations_ += uint64_t(result.views_rendered) + uint64_t(result.bakes_computed);
+  views_from_cache_ += uint64_t(result.views_cached);
+  bakes_from_cache_ += uint64_t(result.bakes_cached);
+  if (outcome.state != JobState::kSucceeded) {
+    // A failed or cancelled job keeps no partial outputs.
+    std::error_code ec;
+    fs::remove_all(ro.out_dir, ec);
+    result.files.clear();
+  }
+  finishJob(*job, result, outcome);
+  spdlog::info("job {}: {}{}", id, jobStateName(outcome.state),
+               outcome.error.empty() ? "" : ": " + outcome.error);
+}
+
+RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {
   RunOptions ro;
-  ro.out_dir = store_->outputDir(id);
+  ro.out_dir = store_->outputDir(job->record.id);
   ro.cache = cache_.get();
   ro.volumes = &volumes_;
   ro.directions = directions_.get();
   ro.sun_tolerance_deg = job->sun_tolerance_deg;
   ro.max_voxels = options_.limits.max_voxels;
+  // An event per new message or per percent of progress, so a long run does not flood the
+  // event log; the answer is whether the run may go on.
   ro.progress = [this, job](const RunProgress& p) {
     std::lock_guard<std::mutex> lock(mutex_);
     job->record.stage = p.stage;
@@ -524,65 +566,54 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
     }
     return !job->cancel.load();
   };
+  return ro;
+}
+
+RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcome) {
   RunResult result;
-  JobState final_state = JobState::kSucceeded;
-  std::string error;
-  bool error_is_input = false;
   try {
     const int threads =
         options_.worker_threads > 0 ? int(options_.worker_threads) : tbb::task_arena::automatic;
     tbb::task_arena arena(threads);
-    arena.execute([&] { result = runShot(job->shot, ro); });
+    arena.execute([&] { result = runShot(job.shot, ro); });
   } catch (const Cancelled&) {
-    final_state = job->shutdown ? JobState::kFailed : JobState::kCancelled;
-    error = job->shutdown ? "interrupted by server shutdown; resubmit" : "cancelled";
+    outcome->state = job.shutdown ? JobState::kFailed : JobState::kCancelled;
+    outcome->error = job.shutdown ? "interrupted by server shutdown; resubmit" : "cancelled";
   } catch (const InputError& e) {
-    final_state = JobState::kFailed;
-    error = clientPaths(e.what(), store_->inputDir(id));
-    error_is_input = true;
+    outcome->state = JobState::kFailed;
+    outcome->error = clientPaths(e.what(), store_->inputDir(job.record.id));
+    outcome->error_is_input = true;
   } catch (const std::exception& e) {
-    final_state = JobState::kFailed;
-    error = "internal error while running the job (details in the server log, job " + id + ")";
-    spdlog::error("job {}: {}", id, e.what());
+    // Internal details stay in the server log; the client learns where to look.
+    outcome->state = JobState::kFailed;
+    outcome->error = "internal error while running the job (details in the server log, job " +
+                     job.record.id + ")";
+    spdlog::error("job {}: {}", job.record.id, e.what());
   }
-  scatter_computations_ += uint64_t(result.views_rendered) + uint64_t(result.bakes_computed);
-  views_from_cache_ += uint64_t(result.views_cached);
-  bakes_from_cache_ += uint64_t(result.bakes_cached);
-  if (final_state != JobState::kSucceeded) {
-    std::error_code ec;
-    fs::remove_all(ro.out_dir, ec);
-    result.files.clear();
-  }
+  return result;
+}
+
+void JobManager::finishJob(Job& job, const RunResult& result, const Outcome& outcome) {
   std::lock_guard<std::mutex> lock(mutex_);
-  JobRecord& r = job->record;
-  r.state = final_state;
+  JobRecord& r = job.record;
+  r.state = outcome.state;
   r.finished = unixNow();
-  r.error = error;
-  r.error_is_input = error_is_input;
+  r.error = outcome.error;
+  r.error_is_input = outcome.error_is_input;
   r.views_rendered = result.views_rendered;
   r.views_cached = result.views_cached;
   r.bakes_computed = result.bakes_computed;
   r.bakes_cached = result.bakes_cached;
   r.views_from_bake = result.views_from_bake;
-  r.stage = jobStateName(final_state);
-  if (final_state == JobState::kSucceeded) r.fraction = 1;
+  r.stage = jobStateName(outcome.state);
+  if (outcome.state == JobState::kSucceeded) r.fraction = 1;
   for (OutputFile f : result.files) {
-    f.path.clear();
+    f.path.clear();  // clients fetch outputs by name, never by a server path
     r.outputs.push_back(f);
   }
-  saveLocked(*job);
-  pushEventLocked(
-      *job, "done", r.fraction,
-      final_state == JobState::kSucceeded
-          ? fmt::format("succeeded in {:.2f} s (", result.seconds) +
-                (result.bakes_computed + result.bakes_cached > 0
-                     ? std::string(result.bakes_computed ? "light baked, " : "bake from cache, ") +
-                           std::to_string(result.views_from_bake) +
-                           " view(s) rendered from the bake)"
-                     : std::to_string(result.views_rendered) + " view(s) rendered, " +
-                           std::to_string(result.views_cached) + " from cache)")
-          : error);
-  spdlog::info("job {}: {}{}", id, jobStateName(final_state), error.empty() ? "" : ": " + error);
+  saveLocked(job);
+  pushEventLocked(job, "done", r.fraction,
+                  outcome.state == JobState::kSucceeded ? successMessage(result) : outcome.error);
 }
 
 }  // namespace cloudbake

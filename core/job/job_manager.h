@@ -22,6 +22,7 @@
 #include "core/job/cache_key.h"
 #include "core/job/direction_index.h"
 #include "core/job/job_record.h"
+#include "core/job/run_shot.h"
 #include "core/job/volume_cache.h"
 #include "core/shot/shot.h"
 
@@ -144,6 +145,7 @@ class JobManager {
  private:
   struct Job;
   struct Prepared;
+  struct Outcome;
   Prepared prepare(const SubmitInput& input, const std::string& dir);
   std::shared_ptr<Job> find(const std::string& id) const;
   void pushEventLocked(Job& job, const std::string& stage, double fraction,
@@ -151,6 +153,9 @@ class JobManager {
   void saveLocked(const Job& job);
   void runnerLoop();
   void runJob(const std::shared_ptr<Job>& job);
+  RunOptions runOptions(const std::shared_ptr<Job>& job);
+  RunResult runInArena(Job& job, const RunOptions& ro, Outcome* outcome);
+  void finishJob(Job& job, const RunResult& result, const Outcome& outcome);
   JobRecord enqueue(Prepared prepared, const std::string& dir, const std::string& id);
 
   JobManagerOptions options_;

@@ -77,6 +77,11 @@ class ShotRun final : public MethodRun {
   }
 
   const Scene& scene() override;
+  DensityFieldPtr sequenceFrame(int frame) override {
+    const auto* sequence = std::get_if<SequenceVolumeSpec>(&shot_.volume);
+    if (!sequence) throw InternalError("sequenceFrame: the shot's volume is not a sequence");
+    return buildSequenceFrame(*sequence, frame, opt_.source);
+  }
 
   void report(const std::string& stage, double fraction, const std::string& message,
               const std::string& view = "") override {

@@ -17,6 +17,7 @@
 #include "core/methods/run_types.h"
 #include "core/shot/shot.h"
 #include "core/transport/scene.h"
+#include "core/volume/density_field.h"
 
 namespace cloudbake {
 
@@ -68,6 +69,9 @@ class MethodRun {
   /// The whole scene; its density field is built on the first call (or comes from the volume
   /// cache), since that is the expensive part.
   virtual const Scene& scene() = 0;
+  /// Frame `frame` of the shot's `sequence` volume, built anew on each call (methods that
+  /// animate resample frame by frame rather than hold every frame's field).
+  virtual DensityFieldPtr sequenceFrame(int frame) = 0;
 
   /// Progress of the method: `stage` ("bake", "render", "vdb"), `fraction` of its work in
   /// [0, 1], a line for logs and, while a view renders, its name. Throws Cancelled when the

@@ -57,6 +57,25 @@ std::vector<Knob> precomputedKnobs() {
   };
 }
 
+// The shot's sequence as the database reads it: the run builds each frame (core/job turns a shot
+// into volumes), and errors name the frame's field in the shot.
+VolumeFrames sequenceFrames(MethodRun& run, const SequenceVolumeSpec& seq) {
+  if (seq.frames < 2) {
+    throw InputError(run.source() +
+                     ": /volume/sequence/frames: an endless animation needs at least 2 basic "
+                     "volumes, got " +
+                     std::to_string(seq.frames));
+  }
+  VolumeFrames frames;
+  frames.count = seq.frames;
+  frames.build = [&run](int i) { return run.sequenceFrame(i); };
+  frames.same_voxel_size = !seq.paths.empty();
+  frames.name = [source = run.source()](int i) {
+    return source + ": /volume/sequence/paths/" + std::to_string(i);
+  };
+  return frames;
+}
+
 // The database's precompute: from the cache when it holds it, else built and committed.
 PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions& o) {
   const ShotSpec& shot = run.shot();
@@ -65,7 +84,7 @@ PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions&
     run.report("bake", 0, "building " + std::to_string(o.basic_volumes) + " basic volume(s)");
     BasicVolumeDatabase vols;
     if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
-      vols = buildBasicVolumes(*seq, o.light_resolution, run.source(), [&](double f) {
+      vols = buildBasicVolumes(sequenceFrames(run, *seq), o.light_resolution, [&](double f) {
         return run.pollMessage(0.1 * f, "building basic volumes");
       });
     } else {

@@ -135,6 +135,78 @@ Vec3 applyAffine(const openvdb::Mat4d& m, double x, double y, double z) {
   return {w.x(), w.y(), w.z()};
 }
 
+// The majorants of an axis-aligned grid: one world cell per index cell. Cell c spans index
+// [8s - 1/2, 8e - 1/2] (blocks s..e-1): its lookups read voxels 8s-1 .. 8e, exactly the dilated
+// blocks s..e-1. Mirrored axes reverse the cell order.
+MajorantGrid alignedMajorants(const CellMaxima& cm, const openvdb::Mat4d& i2w) {
+  const int* n = cm.n;
+  const openvdb::Vec3d clo = cm.b0.asVec3d() * 8.0 - openvdb::Vec3d(0.5);
+  const openvdb::Vec3d chi =
+      (cm.b0.asVec3d() + openvdb::Vec3d(n[0], n[1], n[2]) * cm.m) * 8.0 - openvdb::Vec3d(0.5);
+  Bounds3 mbounds;
+  mbounds.expand(applyAffine(i2w, clo.x(), clo.y(), clo.z()));
+  mbounds.expand(applyAffine(i2w, chi.x(), chi.y(), chi.z()));
+  bool flip[3];
+  for (int a = 0; a < 3; ++a) flip[a] = i2w(a, a) < 0;
+  std::vector<float> maxima(cm.v.size());
+  for (int cz = 0; cz < n[2]; ++cz)
+    for (int cy = 0; cy < n[1]; ++cy)
+      for (int cx = 0; cx < n[0]; ++cx) {
+        const int wx = flip[0] ? n[0] - 1 - cx : cx, wy = flip[1] ? n[1] - 1 - cy : cy,
+                  wz = flip[2] ? n[2] - 1 - cz : cz;
+        maxima[(static_cast<size_t>(wz) * n[1] + wy) * n[0] + wx] = cm.get(cx, cy, cz);
+      }
+  return MajorantGrid(mbounds, n[0], n[1], n[2], std::move(maxima));
+}
+
+// The majorants of a rotated grid: world-aligned cells of the same size; each takes the maxima
+// of all index cells its index-space bounding box (plus the trilinear footprint) touches.
+MajorantGrid rotatedMajorants(const CellMaxima& cm, const openvdb::Mat4d& w2i,
+                              const Bounds3& bounds, double voxel_size) {
+  const int* n = cm.n;
+  const double cell = voxel_size * 8 * cm.m;
+  Bounds3 mbounds;
+  mbounds.min = bounds.min;
+  int nw[3];
+  for (int a = 0; a < 3; ++a) {
+    nw[a] = std::max(1, static_cast<int>(std::ceil(bounds.extent()[a] / cell)));
+  }
+  while (static_cast<int64_t>(nw[0]) * nw[1] * nw[2] > GridVolume::kMaxMajorantCells) {
+    for (int a = 0; a < 3; ++a) nw[a] = (nw[a] + 1) / 2;
+  }
+  for (int a = 0; a < 3; ++a) {
+    mbounds.max[a] = bounds.max[a];
+  }
+  const Vec3 csize = mbounds.extent() / Vec3(nw[0], nw[1], nw[2]);
+  std::vector<float> maxima(static_cast<size_t>(nw[0]) * nw[1] * nw[2], 0.f);
+  parallelFor(0, nw[2], [&](int cz) {
+    for (int cy = 0; cy < nw[1]; ++cy)
+      for (int cx = 0; cx < nw[0]; ++cx) {
+        openvdb::Vec3d lo(1e300), hi(-1e300);
+        for (int c = 0; c < 8; ++c) {
+          const Vec3 wp =
+              mbounds.min + csize * Vec3(cx + (c & 1), cy + ((c >> 1) & 1), cz + ((c >> 2) & 1));
+          const openvdb::Vec3d ip = w2i.transform(openvdb::Vec3d(wp.x, wp.y, wp.z));
+          lo = openvdb::math::minComponent(lo, ip);
+          hi = openvdb::math::maxComponent(hi, ip);
+        }
+        int c0[3], c1[3];
+        for (int a = 0; a < 3; ++a) {
+          const double l = std::max(lo[a], -2e9), h = std::min(hi[a], 2e9);
+          c0[a] = std::max(cm.cellOfBlock(a, blockOf(static_cast<int>(std::floor(l)) - 1)), 0);
+          c1[a] =
+              std::min(cm.cellOfBlock(a, blockOf(static_cast<int>(std::floor(h)) + 2)), n[a] - 1);
+        }
+        float value = 0.f;
+        for (int z = c0[2]; z <= c1[2]; ++z)
+          for (int y = c0[1]; y <= c1[1]; ++y)
+            for (int x = c0[0]; x <= c1[0]; ++x) value = std::max(value, cm.get(x, y, z));
+        maxima[(static_cast<size_t>(cz) * nw[1] + cy) * nw[0] + cx] = value;
+      }
+  });
+  return MajorantGrid(mbounds, nw[0], nw[1], nw[2], std::move(maxima));
+}
+
 }  // namespace
 
 std::shared_ptr<const GridVolume> makeGridVolume(openvdb::FloatGrid::Ptr grid,
@@ -180,77 +252,12 @@ std::shared_ptr<const GridVolume> makeGridVolume(openvdb::FloatGrid::Ptr grid,
   for (float v : cm.v) max_value = std::max(max_value, v);
   impl->max_density = max_value;
   impl->majorant_block = 8 * cm.m;
-  const int* n = cm.n;
   bool axis_aligned = true;
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j)
       if (i != j && std::abs(i2w(i, j)) > 1e-9 * impl->voxel_size) axis_aligned = false;
-
-  if (axis_aligned) {
-    // Cell c spans index [8s - 1/2, 8e - 1/2] (blocks s..e-1): its lookups read voxels
-    // 8s-1 .. 8e, exactly the dilated blocks s..e-1. Mirrored axes reverse the cell order.
-    const openvdb::Vec3d clo = cm.b0.asVec3d() * 8.0 - openvdb::Vec3d(0.5);
-    const openvdb::Vec3d chi =
-        (cm.b0.asVec3d() + openvdb::Vec3d(n[0], n[1], n[2]) * cm.m) * 8.0 - openvdb::Vec3d(0.5);
-    Bounds3 mbounds;
-    mbounds.expand(applyAffine(i2w, clo.x(), clo.y(), clo.z()));
-    mbounds.expand(applyAffine(i2w, chi.x(), chi.y(), chi.z()));
-    bool flip[3];
-    for (int a = 0; a < 3; ++a) flip[a] = i2w(a, a) < 0;
-    std::vector<float> maxima(cm.v.size());
-    for (int cz = 0; cz < n[2]; ++cz)
-      for (int cy = 0; cy < n[1]; ++cy)
-        for (int cx = 0; cx < n[0]; ++cx) {
-          const int wx = flip[0] ? n[0] - 1 - cx : cx, wy = flip[1] ? n[1] - 1 - cy : cy,
-                    wz = flip[2] ? n[2] - 1 - cz : cz;
-          maxima[(static_cast<size_t>(wz) * n[1] + wy) * n[0] + wx] = cm.get(cx, cy, cz);
-        }
-    impl->majorants = MajorantGrid(mbounds, n[0], n[1], n[2], std::move(maxima));
-  } else {
-    // Rotated grid: world-aligned cells of the same size; each takes the maxima of all index
-    // cells its index-space bounding box (plus the trilinear footprint) touches.
-    const double cell = impl->voxel_size * 8 * cm.m;
-    Bounds3 mbounds;
-    mbounds.min = impl->bounds.min;
-    int nw[3];
-    for (int a = 0; a < 3; ++a) {
-      nw[a] = std::max(1, static_cast<int>(std::ceil(impl->bounds.extent()[a] / cell)));
-    }
-    while (static_cast<int64_t>(nw[0]) * nw[1] * nw[2] > GridVolume::kMaxMajorantCells) {
-      for (int a = 0; a < 3; ++a) nw[a] = (nw[a] + 1) / 2;
-    }
-    for (int a = 0; a < 3; ++a) {
-      mbounds.max[a] = impl->bounds.max[a];
-    }
-    const Vec3 csize = mbounds.extent() / Vec3(nw[0], nw[1], nw[2]);
-    std::vector<float> maxima(static_cast<size_t>(nw[0]) * nw[1] * nw[2], 0.f);
-    parallelFor(0, nw[2], [&](int cz) {
-      for (int cy = 0; cy < nw[1]; ++cy)
-        for (int cx = 0; cx < nw[0]; ++cx) {
-          openvdb::Vec3d lo(1e300), hi(-1e300);
-          for (int c = 0; c < 8; ++c) {
-            const Vec3 wp =
-                mbounds.min + csize * Vec3(cx + (c & 1), cy + ((c >> 1) & 1), cz + ((c >> 2) & 1));
-            const openvdb::Vec3d ip = w2i.transform(openvdb::Vec3d(wp.x, wp.y, wp.z));
-            lo = openvdb::math::minComponent(lo, ip);
-            hi = openvdb::math::maxComponent(hi, ip);
-          }
-          int c0[3], c1[3];
-          for (int a = 0; a < 3; ++a) {
-            const double l = std::max(lo[a], -2e9), h = std::min(hi[a], 2e9);
-            c0[a] = std::max(cm.cellOfBlock(a, blockOf(static_cast<int>(std::floor(l)) - 1)), 0);
-            c1[a] =
-                std::min(cm.cellOfBlock(a, blockOf(static_cast<int>(std::floor(h)) + 2)), n[a] - 1);
-          }
-          float value = 0.f;
-          for (int z = c0[2]; z <= c1[2]; ++z)
-            for (int y = c0[1]; y <= c1[1]; ++y)
-              for (int x = c0[0]; x <= c1[0]; ++x) value = std::max(value, cm.get(x, y, z));
-          maxima[(static_cast<size_t>(cz) * nw[1] + cy) * nw[0] + cx] = value;
-        }
-    });
-    impl->majorants = MajorantGrid(mbounds, nw[0], nw[1], nw[2], std::move(maxima));
-  }
+  impl->majorants = axis_aligned ? alignedMajorants(cm, i2w)
+                                 : rotatedMajorants(cm, w2i, impl->bounds, impl->voxel_size);
   impl->grid = grid;
   return std::make_shared<GridVolume>(std::move(impl));
 }

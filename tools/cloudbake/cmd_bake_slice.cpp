@@ -32,14 +32,132 @@ Rgb colourMap(double t) {
   return stops[i] * (1 - f) + stops[i + 1] * f;
 }
 
+struct SliceOptions {
+  std::string bake, grid, axis = "y", png, range;
+  double at = std::nan("");
+};
+
+// The slice of one grid: which voxel a pixel of the slice shows, and its value (a 3-component
+// grid by its luminance).
+struct Slice {
+  const BakedLight& bake;
+  const std::vector<float>* data = nullptr;
+  int components = 1;
+  int a = 1, u = 0, v = 2;  // slice normal, image right and up
+  int n[3] = {0, 0, 0};
+  int index = 0;  // along the normal
+
+  size_t voxel(int iu, int iv) const {
+    int ijk[3];
+    ijk[a] = index;
+    ijk[u] = iu;
+    ijk[v] = iv;
+    return bake.grid.index(ijk[0], ijk[1], ijk[2]);
+  }
+  double value(size_t voxel) const {
+    const float* x = data->data() + voxel * size_t(components);
+    return components == 3 ? luminance(Rgb(x[0], x[1], x[2])) : double(x[0]);
+  }
+};
+
+// The slice --grid, --axis and --at ask for; InputError naming the flag when the bake has no
+// such grid or the coordinate is outside it.
+Slice findSlice(const BakedLight& bake, const SliceOptions& opt) {
+  Slice s{bake};
+  s.data = &bake.density;
+  if (opt.grid != "density") {
+    const BakeChannel* c = bake.find(opt.grid);
+    if (!c) {
+      std::string known = "density";
+      for (const auto& [name, ch] : bake.channels) known += ", " + name;
+      throw InputError("--grid: '" + opt.grid + "' is not in " + opt.bake + " (it has " + known +
+                       ")");
+    }
+    s.data = &c->data;
+    s.components = c->components;
+  }
+  const BakeGrid& g = bake.grid;
+  s.a = opt.axis[0] - 'x';
+  s.u = s.a == 0 ? 1 : 0;
+  s.v = s.a == 2 ? 1 : 2;
+  s.n[0] = g.nx;
+  s.n[1] = g.ny;
+  s.n[2] = g.nz;
+  s.index = s.n[s.a] / 2;
+  if (!std::isnan(opt.at)) {
+    const double index = (opt.at - g.origin[s.a]) / g.voxel_size;
+    if (!(index > -0.5 && index < s.n[s.a] - 0.5)) {
+      throw InputError("--at: " + std::to_string(opt.at) + " is outside the bake along " +
+                       opt.axis);
+    }
+    s.index = int(std::lround(index));
+  }
+  return s;
+}
+
+// The colour map's ends: --range, else the range of the slice's voxels inside the cloud (lo >
+// hi when there are none).
+void sliceRange(const Slice& s, const std::string& range, double* lo, double* hi) {
+  *lo = 1e300;
+  *hi = -1e300;
+  for (int iv = 0; iv < s.n[s.v]; ++iv)
+    for (int iu = 0; iu < s.n[s.u]; ++iu) {
+      const size_t voxel = s.voxel(iu, iv);
+      if (!(s.bake.density[voxel] > 0)) continue;
+      *lo = std::min(*lo, s.value(voxel));
+      *hi = std::max(*hi, s.value(voxel));
+    }
+  if (!range.empty()) {
+    if (std::sscanf(range.c_str(), "%lf,%lf", lo, hi) != 2 || !(*hi > *lo)) {
+      throw InputError("--range: expected LO,HI with HI > LO, got '" + range + "'");
+    }
+  }
+}
+
+// Writes the slice as a PNG, enlarged (nearest neighbour) so that small lattices are visible:
+// at least 256 pixels across.
+void writeSlicePng(const Slice& s, double lo, double hi, const std::string& png) {
+  const int nu = s.n[s.u], nv = s.n[s.v];
+  const int scale = std::max(1, 256 / std::max(nu, nv));
+  const int w = nu * scale, h = nv * scale;
+  std::vector<uint8_t> px(size_t(w) * size_t(h) * 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const size_t voxel = s.voxel(x / scale, nv - 1 - y / scale);  // up is +v
+      Rgb c(0.12);                                                  // outside the cloud
+      if (s.bake.density[voxel] > 0) {
+        c = colourMap(hi > lo ? (s.value(voxel) - lo) / (hi - lo) : 0.5);
+      }
+      uint8_t* p = &px[(size_t(y) * size_t(w) + size_t(x)) * 3];
+      for (int k = 0; k < 3; ++k) p[k] = uint8_t(std::lround(255 * std::clamp(c[k], 0.0, 1.0)));
+    }
+  writePng(png, w, h, 3, px);
+}
+
+void runBakeSlice(const SliceOptions& opt) {
+  if (opt.axis != "x" && opt.axis != "y" && opt.axis != "z") {
+    throw InputError("--axis: must be x, y or z, got '" + opt.axis + "'");
+  }
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(opt.bake, ec)) {
+    throw MissingFileError(opt.bake + ": bake file not found");
+  }
+  const BakedLight bake = readBakedLight(opt.bake);
+  const Slice slice = findSlice(bake, opt);
+  double lo, hi;
+  sliceRange(slice, opt.range, &lo, &hi);
+  writeSlicePng(slice, lo, hi, opt.png);
+  std::cout << nlohmann::json{{"grid", opt.grid},           {"axis", opt.axis},
+                              {"index", slice.index},       {"min", lo <= hi ? lo : 0.0},
+                              {"max", lo <= hi ? hi : 0.0}, {"png", opt.png}}
+                   .dump()
+            << std::endl;
+}
+
 }  // namespace
 
 void addBakeSliceCommand(CLI::App& app, int* exit_code) {
-  struct Options {
-    std::string bake, grid, axis = "y", png, range;
-    double at = std::nan("");
-  };
-  auto opt = std::make_shared<Options>();
+  auto opt = std::make_shared<SliceOptions>();
   CLI::App* cmd = app.add_subcommand(
       "bake-slice",
       "Write a colour-mapped PNG of one slice through a grid of a bake (bake.vdb of methods "
@@ -56,87 +174,7 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code) {
                   "LO,HI mapped to the ends of the colour map (default: "
                   "the slice's own range)");
   cmd->callback([opt, exit_code] {
-    if (opt->axis != "x" && opt->axis != "y" && opt->axis != "z") {
-      throw InputError("--axis: must be x, y or z, got '" + opt->axis + "'");
-    }
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(opt->bake, ec)) {
-      throw MissingFileError(opt->bake + ": bake file not found");
-    }
-    const BakedLight bake = readBakedLight(opt->bake);
-    const std::vector<float>* data = &bake.density;
-    int components = 1;
-    if (opt->grid != "density") {
-      const BakeChannel* c = bake.find(opt->grid);
-      if (!c) {
-        std::string known = "density";
-        for (const auto& [name, ch] : bake.channels) known += ", " + name;
-        throw InputError("--grid: '" + opt->grid + "' is not in " + opt->bake + " (it has " +
-                         known + ")");
-      }
-      data = &c->data;
-      components = c->components;
-    }
-    const BakeGrid& g = bake.grid;
-    const int a = opt->axis[0] - 'x';                  // slice normal
-    const int u = a == 0 ? 1 : 0, v = a == 2 ? 1 : 2;  // image right and up
-    const int n[3] = {g.nx, g.ny, g.nz};
-    int slice = n[a] / 2;
-    if (!std::isnan(opt->at)) {
-      const double index = (opt->at - g.origin[a]) / g.voxel_size;
-      if (!(index > -0.5 && index < n[a] - 0.5)) {
-        throw InputError("--at: " + std::to_string(opt->at) + " is outside the bake along " +
-                         opt->axis);
-      }
-      slice = int(std::lround(index));
-    }
-    auto at = [&](int iu, int iv) {
-      int ijk[3];
-      ijk[a] = slice;
-      ijk[u] = iu;
-      ijk[v] = iv;
-      return g.index(ijk[0], ijk[1], ijk[2]);
-    };
-    auto value = [&](size_t voxel) {
-      const float* x = data->data() + voxel * size_t(components);
-      return components == 3 ? luminance(Rgb(x[0], x[1], x[2])) : double(x[0]);
-    };
-    double lo = 1e300, hi = -1e300;
-    for (int iv = 0; iv < n[v]; ++iv)
-      for (int iu = 0; iu < n[u]; ++iu) {
-        const size_t voxel = at(iu, iv);
-        if (!(bake.density[voxel] > 0)) continue;
-        lo = std::min(lo, value(voxel));
-        hi = std::max(hi, value(voxel));
-      }
-    if (!opt->range.empty()) {
-      if (std::sscanf(opt->range.c_str(), "%lf,%lf", &lo, &hi) != 2 || !(hi > lo)) {
-        throw InputError("--range: expected LO,HI with HI > LO, got '" + opt->range + "'");
-      }
-    }
-    // Nearest-neighbour enlargement so small lattices are visible: at least 256 pixels across.
-    const int scale = std::max(1, 256 / std::max(n[u], n[v]));
-    const int w = n[u] * scale, h = n[v] * scale;
-    std::vector<uint8_t> px(size_t(w) * size_t(h) * 3);
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        const size_t voxel = at(x / scale, n[v] - 1 - y / scale);  // up is +v
-        Rgb c(0.12);                                               // outside the cloud
-        if (bake.density[voxel] > 0) {
-          c = colourMap(hi > lo ? (value(voxel) - lo) / (hi - lo) : 0.5);
-        }
-        uint8_t* p = &px[(size_t(y) * size_t(w) + size_t(x)) * 3];
-        for (int k = 0; k < 3; ++k) p[k] = uint8_t(std::lround(255 * std::clamp(c[k], 0.0, 1.0)));
-      }
-    writePng(opt->png, w, h, 3, px);
-    std::cout << nlohmann::json{{"grid", opt->grid},
-                                {"axis", opt->axis},
-                                {"index", slice},
-                                {"min", lo <= hi ? lo : 0.0},
-                                {"max", lo <= hi ? hi : 0.0},
-                                {"png", opt->png}}
-                     .dump()
-              << std::endl;
+    runBakeSlice(*opt);
     *exit_code = kOk;
   });
 }

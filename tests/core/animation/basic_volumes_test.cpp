@@ -7,25 +7,45 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <string>
+#include <vector>
 
 #include "core/error.h"
 #include "core/io/vdb_io.h"
-#include "core/shot/shot_parser.h"
 #include "core/volume/analytic.h"
+#include "core/volume/sources.h"
 
 namespace cloudbake {
 namespace {
 
-SequenceVolumeSpec proceduralSequence(int frames, double step) {
-  const std::string shot = R"({"version": 1, "name": "anim",
-    "volume": {"sequence": {"frames": )" +
-                           std::to_string(frames) + R"(, "time_step": )" + std::to_string(step) +
-                           R"(,
-      "procedural": {"type": "perlin_cloud", "resolution": 24, "seed": 3, "cover": 0.4}}},
-    "medium": {"extinction": 1, "albedo": 0.9, "phase": {"type": "isotropic"}},
-    "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]}},
-    "views": [], "outputs": {"exr": false}})";
-  return std::get<SequenceVolumeSpec>(parseShot(shot, "").volume);
+// The procedural cloud at successive times, as a shot's procedural `sequence` builds it.
+VolumeFrames proceduralSequence(int frames, double step) {
+  PerlinCloudOptions cloud;
+  cloud.resolution = 24;
+  cloud.seed = 3;
+  cloud.cover = 0.4;
+  VolumeFrames f;
+  f.count = frames;
+  f.build = [cloud, step](int i) {
+    PerlinCloudOptions at = cloud;
+    at.time += i * step;
+    return makePerlinCloud(at);
+  };
+  return f;
+}
+
+// VDB files as frames, named as a shot's `paths` are in errors.
+VolumeFrames vdbSequence(const std::vector<std::string>& paths) {
+  VolumeFrames f;
+  f.count = int(paths.size());
+  f.build = [paths](int i) {
+    VdbSourceOptions options;
+    options.path = paths[size_t(i)];
+    return loadVdbVolume(options);
+  };
+  f.same_voxel_size = true;
+  f.name = [](int i) { return "shot.json: /volume/sequence/paths/" + std::to_string(i); };
+  return f;
 }
 
 TEST(BasicVolumes, ThirtyProceduralFramesOnOneLatticeAndAnEndlessWalk) {
@@ -57,17 +77,14 @@ TEST(BasicVolumes, VdbFramesMustShareOneTransform) {
   writeVdb((dir / "a.vdb").string(), box, fine);
   writeVdb((dir / "b.vdb").string(), moved, fine);
   writeVdb((dir / "c.vdb").string(), box, coarse);
-  SequenceVolumeSpec seq;
-  seq.paths = {(dir / "a.vdb").string(), (dir / "b.vdb").string()};
-  seq.frames = 2;
-  const BasicVolumeDatabase db = buildBasicVolumes(seq, 16);
+  std::vector<std::string> paths = {(dir / "a.vdb").string(), (dir / "b.vdb").string()};
+  const BasicVolumeDatabase db = buildBasicVolumes(vdbSequence(paths), 16);
   ASSERT_EQ(db.frames.size(), 2u);
   EXPECT_EQ(db.frames[0].size(), db.frames[1].size());  // one lattice over both
   EXPECT_NE(db.frames[0], db.frames[1]);
-  seq.paths.push_back((dir / "c.vdb").string());
-  seq.frames = 3;
+  paths.push_back((dir / "c.vdb").string());
   try {
-    buildBasicVolumes(seq, 16);
+    buildBasicVolumes(vdbSequence(paths), 16);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("/volume/sequence/paths/2: voxel size"), std::string::npos)
@@ -79,9 +96,8 @@ TEST(BasicVolumes, VdbFramesMustShareOneTransform) {
 TEST(BasicVolumes, BadDatabasesAreRefused) {
   EXPECT_THROW(buildBasicVolumes(proceduralSequence(1, 0.1), 24), InputError);
   EXPECT_THROW(buildBasicVolumes(proceduralSequence(3, 0.1), 4), InputError);  // resolution
-  EXPECT_THROW(
-      buildBasicVolumes(proceduralSequence(3, 0.1), 24, "shot.json", [](double) { return false; }),
-      Cancelled);
+  EXPECT_THROW(buildBasicVolumes(proceduralSequence(3, 0.1), 24, [](double) { return false; }),
+               Cancelled);
 }
 
 }  // namespace

@@ -22,7 +22,7 @@
 #include "core/job/volume_cache.h"
 #include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
-#include "tests/server/job_test_util.h"
+#include "tests/core/job/job_test_util.h"
 
 namespace cloudbake {
 namespace {

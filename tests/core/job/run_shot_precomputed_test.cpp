@@ -19,7 +19,7 @@
 #include "core/methods/precomputed.h"
 #include "core/methods/single.h"
 #include "core/shot/shot_parser.h"
-#include "tests/server/job_test_util.h"
+#include "tests/core/job/job_test_util.h"
 
 namespace cloudbake {
 namespace {
