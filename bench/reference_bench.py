@@ -32,7 +32,8 @@ CLOUDBAKE=PATH picks the cloudbake binary (default: BUILD/tools/cloudbake/cloudb
 that a rebuild cannot replace mid-run.
 
 Usage: bench/reference_bench.py [--build build] [--threads 2] [--res 256] [--spp 16]
-                                [--scenes a,b] [--configs off,guide,split,all] [--work DIR]
+                                [--scenes a,b] [--configs off,guide,split,all,default]
+                                [--work DIR]
                                 [--trade-floor SPP]
 """
 import argparse
@@ -54,12 +55,14 @@ SCENES = {
     "bunny": ("bunny_cloud.json", None),
     "perlin": ("perlin_cloud.json", None),
 }
-# Knob settings of `pathtrace` per configuration; an absent knob takes its default (on).
+# Knob settings of `pathtrace` per configuration; an absent knob takes its default, so "guide"
+# is the lobe at its default probability and "default" is what a shot gets without knobs.
 CONFIGS = {
     "off": {"sun_guiding": 0, "sun_split_max": 1},
     "guide": {"sun_split_max": 1},
-    "split": {"sun_guiding": 0},
-    "all": {},
+    "split": {"sun_guiding": 0, "sun_split_max": 8},
+    "all": {"sun_split_max": 8},
+    "default": {},
 }
 
 
@@ -170,7 +173,7 @@ def main():
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--cloud-alpha", type=float, default=0.05)
     ap.add_argument("--scenes", default=",".join(SCENES))
-    ap.add_argument("--configs", default=",".join(CONFIGS))
+    ap.add_argument("--configs", default="off,guide,split,all")
     ap.add_argument("--work", default=None)
     ap.add_argument("--trade-floor", type=int, default=0)
     args = ap.parse_args()

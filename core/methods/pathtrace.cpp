@@ -112,10 +112,11 @@ class PathtraceMethod final : public BakeMethod {
                      "0 turns it off",
                      /*exclusive_min=*/false)
             .derivedDefault("0.5 V / (V + 40), V = 4 pi integral(p^2) - 1 of the phase"),
-        Knob::integer("sun_split_max", 1, 64, PathTracerOptions{}.sun_split_max,
+        Knob::integer("sun_split_max", 1, 64, std::nullopt,
                       "most shadow rays towards the sun at one collision (split where the "
                       "predicted contribution is large, rouletted where small); 1 turns both "
-                      "off"),
+                      "off")
+            .derivedDefault("8 where V > 100 (droplet Mie tables), else 1"),
     };
   }
   const MethodInfo& info() const override { return info_; }
@@ -202,7 +203,7 @@ PathTracerOptions pathTracerOptions(const ShotSpec& shot, int threads) {
   pt.seed = shot.bake.seed;
   pt.max_depth = int(shot.bake.knobs.integer("max_depth"));
   pt.sun_guiding = shot.bake.knobs.optionalNumber("sun_guiding").value_or(-1.0);
-  pt.sun_split_max = int(shot.bake.knobs.integer("sun_split_max"));
+  pt.sun_split_max = int(shot.bake.knobs.optionalInteger("sun_split_max").value_or(-1));
   pt.threads = threads;
   return pt;
 }

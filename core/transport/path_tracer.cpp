@@ -70,8 +70,9 @@ void validateOptions(const PathTracerOptions& o) {
     throw InputError("sun_guiding: must be < 1 (negative: chosen from the phase), got " +
                      str(o.sun_guiding));
   }
-  if (o.sun_split_max < 1 || o.sun_split_max > 64) {
-    throw InputError("sun_split_max: must be in 1..64, got " + str(o.sun_split_max));
+  if (o.sun_split_max == 0 || o.sun_split_max > 64) {
+    throw InputError("sun_split_max: must be in 1..64 (negative: chosen from the phase), got " +
+                     str(o.sun_split_max));
   }
   if (o.threads < 0 || o.threads > 4096) {
     throw InputError("threads: must be in 0..4096 (0 = all), got " + str(o.threads));
@@ -103,7 +104,7 @@ struct PathSample {
 class Integrator {
  public:
   Integrator(const Medium& medium, const Vec3& sun_dir, const Rgb& sun_e, const SkyLight& sky,
-             const PathTracerOptions& options, double sun_guiding)
+             const PathTracerOptions& options, double sun_guiding, int sun_split_max)
       : field_(*medium.density),
         phase_(*medium.phase),
         extinction_(medium.extinction),
@@ -114,7 +115,7 @@ class Integrator {
         sky_(sky),
         guide_(*medium.phase, sun_dir, sun_on_ ? sun_guiding : 0.0),
         max_depth_(options.max_depth),
-        split_max_(options.sun_split_max) {}
+        split_max_(sun_split_max) {}
 
   void trace(const Ray& ray, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
     walk(Walk{ray}, lookup, rng, out);
@@ -274,7 +275,10 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
   const SkyLight sky_light(sky);
   const double guiding =
       options.sun_guiding >= 0 ? options.sun_guiding : autoSunGuiding(*medium.phase);
-  const Integrator integrator(medium, sun_dir, sun.irradiance, sky_light, options, guiding);
+  const int split_max =
+      options.sun_split_max > 0 ? options.sun_split_max : autoSunSplitMax(*medium.phase);
+  const Integrator integrator(medium, sun_dir, sun.irradiance, sky_light, options, guiding,
+                              split_max);
 
   const int w = camera.width_px, h = camera.height_px;
   const int spp = options.samples_per_pixel;

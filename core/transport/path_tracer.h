@@ -29,8 +29,9 @@ struct PathTracerOptions {
   /// sun_guiding.h), in [0, 1); 0 is plain phase sampling; negative: autoSunGuiding(phase).
   double sun_guiding = -1;
   /// Most shadow rays towards the sun at one collision (prediction-based splitting and
-  /// roulette, core/transport/shadow_splitting.h), 1..64; 1 turns both off.
-  int sun_split_max = 8;
+  /// roulette, core/transport/shadow_splitting.h), 1..64; 1 turns both off; negative:
+  /// autoSunSplitMax(phase).
+  int sun_split_max = -1;
   int threads = 0;     ///< 0: the caller's TBB arena / all hardware threads
   int tile_size = 16;  ///< pixels per tile side (work unit)
 };

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/transport/sun_guiding.h"
+
 namespace cloudbake {
 
 ShadowRays sunShadowRays(double predicted, int max_rays, double u) {
@@ -19,5 +21,7 @@ ShadowRays sunShadowRays(double predicted, int max_rays, double u) {
   }
   return {};
 }
+
+int autoSunSplitMax(const PhaseFunction& phase) { return phaseSpikiness(phase) > 100 ? 8 : 1; }
 
 }  // namespace cloudbake

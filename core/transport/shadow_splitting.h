@@ -2,6 +2,8 @@
 // contribution is large, roulette where it is small.
 #pragma once
 
+#include "core/phase/phase_function.h"
+
 namespace cloudbake {
 
 /// Shadow rays to trace and the weight of each (count 0: rouletted away).
@@ -24,5 +26,12 @@ constexpr double kShadowRouletteBelow = 0.02;
 /// keep the estimator unbiased. max_rays <= 1 turns both off and leaves `u` unused; u is
 /// uniform in [0, 1) and only read for the roulette.
 ShadowRays sunShadowRays(double predicted, int max_rays, double u);
+
+/// The most shadow rays chosen when a shot does not set it: 8 for phases whose spikiness
+/// (phaseSpikiness, core/transport/sun_guiding.h) exceeds 100, like droplets' Mie tables, else 1
+/// (off). Measured by bench/reference_bench.py (docs/methods.md): with the sun-guided lobe,
+/// splitting raises the efficiency of the Mie scenes (Disney's cloud: 34x -> 42x side-lit,
+/// 4.3x -> 6.0x backlit) but costs HG 0.85 views more than it removes (backlit 1.16x -> 0.93x).
+int autoSunSplitMax(const PhaseFunction& phase);
 
 }  // namespace cloudbake

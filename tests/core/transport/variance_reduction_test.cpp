@@ -168,6 +168,9 @@ TEST(ShadowSplitting, ExpectedWeightIsOneAndOffIsOneRay) {
   EXPECT_EQ(sunShadowRays(100, 8, 0.5).count, 8);
   EXPECT_EQ(sunShadowRays(2.5, 8, 0.5).count, 3);
   EXPECT_EQ(sunShadowRays(0, 8, 0.5).count, 0);
+  EXPECT_EQ(autoSunSplitMax(HenyeyGreensteinPhase(0.85)), 1);
+  EXPECT_EQ(autoSunSplitMax(IsotropicPhase()), 1);
+  EXPECT_EQ(autoSunSplitMax(HenyeyGreensteinPhase(0.97)), 8);  // V about 555
 }
 
 // ---------------------------------------------------------------------------------------------
