@@ -7,6 +7,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/volume/grid_volume.h"
 
@@ -24,6 +25,12 @@ struct GridVolume::Impl {
   openvdb::CoordBBox active_box;
   /// World -> index affine map, row-vector convention: idx_j = sum_i w_i * m[i][j] + m[3][j].
   double world_to_index[4][3] = {};
+  /// The grid's values over the active box grown by one voxel, x fastest (empty when that box
+  /// exceeds kMaxDenseVoxels): lookups read it instead of walking the tree.
+  std::vector<float> dense;
+  openvdb::Coord dense_min;
+  int dense_n[3] = {0, 0, 0};
+  static constexpr int64_t kMaxDenseVoxels = int64_t(1) << 24;  // 64 MiB of floats
 };
 
 /// Wraps `grid` (ownership passes to the volume; it must not be modified afterwards). Inactive

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Interpolation.h>
 
 #include <cmath>
 
@@ -121,6 +122,47 @@ TEST(GridVolume, MajorantsBoundTrilinearLookupsForAllTransforms) {
     EXPECT_EQ(vol->majorantBlockSize(), 8);
     EXPECT_NEAR(vol->featureSize(), xform == rotated ? 0.2 : 0.1, 1e-12);
   }
+}
+
+// Lookups read a dense copy of small grids; they must return the tree's own trilinear value, bit
+// for bit, everywhere in the bounds (the copy's edges included), for every transform.
+TEST(GridVolume, DenseLookupsAreTheTreesOwnBits) {
+  openvdb::initialize();
+  auto aligned = openvdb::math::Transform::createLinearTransform(0.1);
+  aligned->postTranslate(openvdb::Vec3d(1.0, -2.0, 0.5));
+  auto rotated = openvdb::math::Transform::createLinearTransform(0.2);
+  rotated->postRotate(0.5, openvdb::math::Y_AXIS);
+  for (const auto& xform : {aligned, rotated}) {
+    const auto vol = makeGridVolume(randomGrid(xform), "test");
+    ASSERT_FALSE(vol->impl().dense.empty());
+    const auto grid = openvdbGrid(*vol);
+    const auto acc = grid->getConstAccessor();
+    auto lookup = vol->lookup();
+    const Bounds3 b = vol->bounds();
+    Rng rng(17);
+    int nonzero = 0;
+    for (int i = 0; i < 200000; ++i) {
+      const Vec3 p(b.min.x + rng.uniform() * (b.max.x - b.min.x),
+                   b.min.y + rng.uniform() * (b.max.y - b.min.y),
+                   b.min.z + rng.uniform() * (b.max.z - b.min.z));
+      const auto& m = vol->impl().world_to_index;  // the lookup's own map, so idx is the same
+      const openvdb::Vec3d idx(p.x * m[0][0] + p.y * m[1][0] + p.z * m[2][0] + m[3][0],
+                               p.x * m[0][1] + p.y * m[1][1] + p.z * m[2][1] + m[3][1],
+                               p.x * m[0][2] + p.y * m[1][2] + p.z * m[2][2] + m[3][2]);
+      const float tree = openvdb::tools::BoxSampler::sample(acc, idx);
+      const double d = lookup->density(p);
+      ASSERT_EQ(d, tree > 0.f ? double(tree) : 0.0) << p.x << " " << p.y << " " << p.z;
+      nonzero += d > 0;
+    }
+    EXPECT_GT(nonzero, 1000);
+  }
+  // A grid whose active box is too large for a dense copy keeps reading the tree.
+  auto sparse = openvdb::FloatGrid::create(0.f);
+  sparse->getAccessor().setValue(openvdb::Coord(0), 1.f);
+  sparse->getAccessor().setValue(openvdb::Coord(400), 2.f);
+  const auto far = makeGridVolume(sparse, "test");
+  EXPECT_TRUE(far->impl().dense.empty());
+  EXPECT_FLOAT_EQ(static_cast<float>(far->lookup()->density(Vec3(400))), 2.f);
 }
 
 TEST(GridVolume, RejectsNonUniformScaleAndNonZeroBackground) {
