@@ -164,14 +164,15 @@ class Integrator {
       if (!(ps.pdf > 0)) return;
       w.beta *= ps.value / ps.pdf;
       w.phase_pdf = ps.pdf;
-      w.segment_mis = guide_.phaseWeight(travel, ps.direction, eps_t);
+      const SunGuide::PhaseSampleWeights pw =
+          guide_.phaseSampleWeights(ps.pdf, ps.direction, eps_t);
+      w.segment_mis = pw.mis;
       w.lobe_segment = false;
       w.ray = {c.p, ps.direction};
       if (order >= kRouletteDepth || w.generation > 0) {
         // Decided on the walk's expected next contribution, not its throughput alone: a walk
         // the MIS weight made faint but pointed along the sun's spike is worth continuing.
-        const double importance = guide_.eps() > 0 ? guide_.importance(ps.direction) : 1.0;
-        const double q = std::min(1.0, maxComponent(w.beta) * w.segment_mis * importance);
+        const double q = std::min(1.0, maxComponent(w.beta) * w.segment_mis * pw.importance);
         if (q < 1.0) {
           if (!(rng.uniform() < q)) return;
           w.beta /= q;

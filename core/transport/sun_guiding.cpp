@@ -38,16 +38,17 @@ double SunGuide::epsAt(const Vec3& travel) const {
   return p_sun > 1 ? eps_ / p_sun : eps_;
 }
 
-double SunGuide::phaseWeight(const Vec3& travel, const Vec3& direction, double eps_t) const {
-  if (eps_t == 0) return 1;
-  const double p = phase_.pdf(std::clamp(dot(travel, direction), -1.0, 1.0));
+SunGuide::PhaseSampleWeights SunGuide::phaseSampleWeights(double p_phase, const Vec3& direction,
+                                                          double eps_t) const {
+  PhaseSampleWeights w;
+  if (eps_ == 0) return w;
   const double p_sun = phase_.pdf(std::clamp(dot(to_sun_, direction), -1.0, 1.0));
-  const double sum = p + eps_t * p_sun;
-  return sum > 0 ? p / sum : 0;
-}
-
-double SunGuide::importance(const Vec3& direction) const {
-  return std::max(1.0, 4 * kPi * phase_.pdf(std::clamp(dot(to_sun_, direction), -1.0, 1.0)));
+  w.importance = std::max(1.0, 4 * kPi * p_sun);
+  if (eps_t > 0) {
+    const double sum = p_phase + eps_t * p_sun;
+    w.mis = sum > 0 ? p_phase / sum : 0;
+  }
+  return w;
 }
 
 SunGuide::LobeSample SunGuide::sampleLobe(const Vec3& travel, double eps_t, double u1,

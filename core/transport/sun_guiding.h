@@ -46,14 +46,18 @@ class SunGuide {
   /// The lobe probability at a collision reached travelling along `travel`.
   double epsAt(const Vec3& travel) const;
 
-  /// Phase sampling's weight for `direction` drawn after travelling along `travel`, at a
-  /// collision whose lobe probability is eps_t: p(t.d) / (p(t.d) + eps_t p(s.d)).
-  double phaseWeight(const Vec3& travel, const Vec3& direction, double eps_t) const;
-
-  /// How much more a walk travelling along `direction` is expected to bring than one whose
-  /// direction is random: max(1, 4 pi p(dot(direction, to_sun))), the relative size of the
-  /// sun's event at its next collision (for Russian roulette).
-  double importance(const Vec3& direction) const;
+  /// What a direction drawn by phase sampling (with density p_phase, sr^-1) carries, at a
+  /// collision of lobe probability eps_t; both from one evaluation of p_sun = p(s.d).
+  struct PhaseSampleWeights {
+    /// Balance-heuristic weight against the lobe: p_phase / (p_phase + eps_t p_sun); 1 if
+    /// eps_t = 0.
+    double mis = 1;
+    /// How much more a walk along the direction is expected to bring than one whose direction
+    /// is random: max(1, 4 pi p_sun), the relative size of the sun's event at its next
+    /// collision (for Russian roulette); 1 when guiding is off.
+    double importance = 1;
+  };
+  PhaseSampleWeights phaseSampleWeights(double p_phase, const Vec3& direction, double eps_t) const;
 
   struct LobeSample {
     Vec3 direction;  ///< unit; density p(dot(to_sun, direction)) sr^-1

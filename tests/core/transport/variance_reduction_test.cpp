@@ -75,8 +75,10 @@ TEST(SunGuiding, LobeProbabilityFallsInsideTheSpike) {
   EXPECT_EQ(guide.epsAt(Vec3(0, 0, -1)), 0.4);
   EXPECT_EQ(guide.epsAt(Vec3(1, 0, 0)), 0.4);
   EXPECT_NEAR(guide.epsAt(to_sun), 0.4 / (4 * kPi * hgEval(0.9, 1.0)), 1e-12);
-  EXPECT_NEAR(guide.importance(to_sun), 4 * kPi * hgEval(0.9, 1.0), 1e-9);
-  EXPECT_EQ(guide.importance(Vec3(0, 0, -1)), 1.0);
+  EXPECT_NEAR(guide.phaseSampleWeights(1.0, to_sun, 0.4).importance, 4 * kPi * hgEval(0.9, 1.0),
+              1e-9);
+  EXPECT_EQ(guide.phaseSampleWeights(1.0, Vec3(0, 0, -1), 0.4).importance, 1.0);
+  EXPECT_EQ(SunGuide(hg, to_sun, 0.0).phaseSampleWeights(1.0, to_sun, 0.0).importance, 1.0);
 }
 
 // The two techniques' weights partition unity for every direction: phase sampling's weight plus
@@ -96,9 +98,9 @@ TEST(SunGuiding, WeightsPartitionUnity) {
     const SunGuide::LobeSample s = guide.sampleLobe(travel, eps_t, rng.uniform(), rng.uniform());
     const double f = hg.pdf(dot(travel, s.direction));
     const double lobe_weight = eps_t * hg.pdf(dot(to_sun, s.direction)) * s.weight.x / f;
-    EXPECT_NEAR(guide.phaseWeight(travel, s.direction, eps_t) + lobe_weight, 1.0, 1e-9);
+    EXPECT_NEAR(guide.phaseSampleWeights(f, s.direction, eps_t).mis + lobe_weight, 1.0, 1e-9);
     EXPECT_EQ(off.epsAt(travel), 0.0);
-    EXPECT_EQ(off.phaseWeight(travel, s.direction, off.epsAt(travel)), 1.0);
+    EXPECT_EQ(off.phaseSampleWeights(f, s.direction, off.epsAt(travel)).mis, 1.0);
   }
 }
 
