@@ -57,11 +57,15 @@ SCENES = {
 }
 # Knob settings of `pathtrace` per configuration; an absent knob takes its default, so "guide"
 # is the lobe at its default probability and "default" is what a shot gets without knobs.
+# "off" is the version 1 tracer (every technique off), "v2" version 2's defaults (delta and
+# ratio tracking on the density's 8^3-voxel majorants), "decomp" decomposition tracking alone.
 CONFIGS = {
-    "off": {"sun_guiding": 0, "sun_split_max": 1},
-    "guide": {"sun_split_max": 1},
-    "split": {"sun_guiding": 0, "sun_split_max": 8},
-    "all": {"sun_split_max": 8},
+    "off": {"sun_guiding": 0, "sun_split_max": 1, "tracking": "delta"},
+    "guide": {"sun_split_max": 1, "tracking": "delta"},
+    "split": {"sun_guiding": 0, "sun_split_max": 8, "tracking": "delta"},
+    "all": {"sun_split_max": 8, "tracking": "delta"},
+    "v2": {"tracking": "delta"},
+    "decomp": {"sun_guiding": 0, "sun_split_max": 1},
     "default": {},
 }
 

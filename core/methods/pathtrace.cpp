@@ -101,7 +101,8 @@ class PathtraceMethod final : public BakeMethod {
         "variance reduction techniques for Monte Carlo simulations of radiative transfer in "
         "cloudy atmospheres: the solution\" (JQSRT 112)";
     // 2: sun-directional importance sampling and shadow-ray splitting/roulette by default.
-    info_.version = 2;
+    // 3: decomposition and residual ratio tracking on a tracking grid chosen for the density.
+    info_.version = 3;
     info_.default_samples = 64;
     info_.knobs = {
         Knob::integer("max_depth", 1, 1000000, PathTracerOptions{}.max_depth,
@@ -117,9 +118,31 @@ class PathtraceMethod final : public BakeMethod {
                       "predicted contribution is large, rouletted where small); 1 turns both "
                       "off")
             .derivedDefault("8 where V > 100 (droplet Mie tables), else 1"),
+        Knob::choice("tracking", {"decomposition", "delta"}, "decomposition",
+                     "free paths and shadow-ray transmittance: 'decomposition' splits each "
+                     "tracking cell's density into a minorant handled analytically and a "
+                     "residual (decomposition tracking, Kutz et al. 2017; residual ratio "
+                     "tracking, Novak et al. 2014); 'delta' is delta and ratio tracking "
+                     "against majorants alone (version 2)"),
+        Knob::integer("majorant_cell", 1, 64, std::nullopt,
+                      "voxels per tracking-grid cell edge for VDB, mesh and procedural "
+                      "volumes (a power of two): fine cells bound the density tightly (fewer "
+                      "lookups), coarse ones are crossed less often")
+            .derivedDefault("chosen per medium by a cost model of lookups and cell crossings; with "
+                            "tracking 'delta', the density's own 8^3-voxel blocks"),
     };
   }
   const MethodInfo& info() const override { return info_; }
+
+  void validate(const ShotSpec& shot, const std::string& source) const override {
+    const auto cell = shot.bake.knobs.optionalInteger("majorant_cell");
+    if (cell && (*cell & (*cell - 1)) != 0) {
+      throw InputError(source +
+                       ": /bake/majorant_cell: must be a power of two (1, 2, 4, ... 64), "
+                       "got " +
+                       std::to_string(*cell));
+    }
+  }
 
   MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,
                   const std::function<bool(const std::string&)>& lookup) const override {
@@ -204,6 +227,8 @@ PathTracerOptions pathTracerOptions(const ShotSpec& shot, int threads) {
   pt.max_depth = int(shot.bake.knobs.integer("max_depth"));
   pt.sun_guiding = shot.bake.knobs.optionalNumber("sun_guiding").value_or(-1.0);
   pt.sun_split_max = int(shot.bake.knobs.optionalInteger("sun_split_max").value_or(-1));
+  pt.decomposition_tracking = shot.bake.knobs.choice("tracking") == "decomposition";
+  pt.majorant_cell = int(shot.bake.knobs.optionalInteger("majorant_cell").value_or(0));
   pt.threads = threads;
   return pt;
 }

@@ -14,6 +14,7 @@
 #include "core/transport/sun_guiding.h"
 #include "core/transport/tiled_render.h"
 #include "core/transport/tracking.h"
+#include "core/transport/transmittance_predictor.h"
 
 namespace cloudbake {
 namespace {
@@ -74,6 +75,11 @@ void validateOptions(const PathTracerOptions& o) {
     throw InputError("sun_split_max: must be in 1..64 (negative: chosen from the phase), got " +
                      str(o.sun_split_max));
   }
+  if (o.majorant_cell < 0 || o.majorant_cell > 64 ||
+      (o.majorant_cell & (o.majorant_cell - 1)) != 0) {
+    throw InputError("majorant_cell: must be 0 (chosen) or a power of two in 1..64, got " +
+                     str(o.majorant_cell));
+  }
   if (o.threads < 0 || o.threads > 4096) {
     throw InputError("threads: must be in 0..4096 (0 = all), got " + str(o.threads));
   }
@@ -105,8 +111,7 @@ class Integrator {
  public:
   Integrator(const Medium& medium, const Vec3& sun_dir, const Rgb& sun_e, const SkyLight& sky,
              const PathTracerOptions& options, double sun_guiding, int sun_split_max)
-      : field_(*medium.density),
-        phase_(*medium.phase),
+      : phase_(*medium.phase),
         extinction_(medium.extinction),
         albedo_(medium.albedo),
         sun_dir_(sun_dir),
@@ -115,7 +120,12 @@ class Integrator {
         sky_(sky),
         guide_(*medium.phase, sun_dir, sun_on_ ? sun_guiding : 0.0),
         max_depth_(options.max_depth),
-        split_max_(sun_split_max) {}
+        split_max_(sun_split_max),
+        decomposition_(options.decomposition_tracking),
+        grid_(trackingGridFor(medium, options)),
+        predictor_(*predictorGrid(medium, options), extinction_, sun_on_ ? &sun_dir_ : nullptr,
+                   !sky_.black()),
+        sky_scale_(sky_.black() ? 1.0 : std::max(1e-300, maxComponent(sky_.meanRadiance()))) {}
 
   void trace(const Ray& ray, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
     walk(Walk{ray}, lookup, rng, out);
@@ -138,9 +148,35 @@ class Integrator {
   // Branches of branches stop here, so a walk's recursion stays shallow.
   static constexpr int kMaxGeneration = 16;
 
+  static std::shared_ptr<const MajorantGrid> trackingGridFor(const Medium& medium,
+                                                             const PathTracerOptions& o) {
+    if (!o.decomposition_tracking && o.majorant_cell == 0) {
+      return DensityField::nonOwning(medium.density->majorants());
+    }
+    return medium.density->trackingGrid({medium.extinction, o.majorant_cell});
+  }
+
+  // The predictor integrates minorants, so it wants the tightest: cells of 2 voxels (1 would
+  // cost 8x the cell crossings for a few percent more of the density).
+  static std::shared_ptr<const MajorantGrid> predictorGrid(const Medium& medium,
+                                                           const PathTracerOptions& o) {
+    if (!o.decomposition_tracking) return std::make_shared<const MajorantGrid>();
+    return medium.density->trackingGrid({medium.extinction, 2});
+  }
+
+  Collision track(const Ray& ray, DensityField::Lookup& lookup, Rng& rng) const {
+    return decomposition_ ? decompositionTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng)
+                          : deltaTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng);
+  }
+
+  double transmittance(const Ray& ray, DensityField::Lookup& lookup, Rng& rng) const {
+    return decomposition_ ? residualRatioTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng)
+                          : ratioTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng);
+  }
+
   void walk(Walk w, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
     for (;; ++w.depth) {
-      const Collision c = deltaTrack(field_, lookup, extinction_, w.ray, 0, kInfinity, rng);
+      const Collision c = track(w.ray, lookup, rng);
       if (!c.hit) {
         escape(w, out);
         return;
@@ -214,12 +250,13 @@ class Integrator {
     const Rgb f = phase_.eval(dot(travel, sun_dir_));
     if (!(maxComponent(f) > 0)) return;
     const Rgb l = beta * f * sun_e_;
-    const double predicted = 4 * kPi * maxComponent(beta * f);
-    const double u = split_max_ > 1 ? rng.uniform() : 0;
-    const ShadowRays rays = sunShadowRays(predicted, split_max_, u);
+    const bool roulette = predictor_.active();
+    const double predicted = 4 * kPi * maxComponent(beta * f) * predictor_.sun(p);
+    const double u = split_max_ > 1 || roulette ? rng.uniform() : 0;
+    const ShadowRays rays = sunShadowRays(predicted, split_max_, u, roulette);
     double tr = 0;
     for (int k = 0; k < rays.count; ++k) {
-      tr += ratioTrack(field_, lookup, extinction_, {p, sun_dir_}, 0, kInfinity, rng);
+      tr += transmittance({p, sun_dir_}, lookup, rng);
     }
     if (tr > 0) add(out, true, order, l * (tr * rays.weight));
   }
@@ -232,11 +269,15 @@ class Integrator {
     const double cos_theta = dot(travel, s.to_sky);
     const Rgb f = phase_.eval(cos_theta);
     if (!(maxComponent(f) > 0)) return;
-    const double tr = ratioTrack(field_, lookup, extinction_, {p, s.to_sky}, 0, kInfinity, rng);
-    if (tr > 0) {
-      const double w = powerHeuristic(s.pdf, phase_.pdf(cos_theta));
-      add(out, false, order, beta * f * s.radiance * (tr * w / s.pdf));
+    const double w = powerHeuristic(s.pdf, phase_.pdf(cos_theta));
+    const Rgb l = beta * f * s.radiance * (w / s.pdf);
+    double keep = 1;
+    if (predictor_.active()) {  // roulette the events the sky cannot reach
+      keep = shadowSurvival(maxComponent(l) / sky_scale_ * predictor_.sky(p));
+      if (!(rng.uniform() < keep)) return;
     }
+    const double tr = transmittance({p, s.to_sky}, lookup, rng);
+    if (tr > 0) add(out, false, order, l * (tr / keep));
   }
 
   static void add(PathSample* out, bool from_sun, int order, const Rgb& l) {
@@ -244,7 +285,6 @@ class Integrator {
     (order == 1 ? out->single : out->multiple) += l;
   }
 
-  const DensityField& field_;
   const PhaseFunction& phase_;
   double extinction_;
   Rgb albedo_;
@@ -255,6 +295,10 @@ class Integrator {
   SunGuide guide_;
   int max_depth_;
   int split_max_;
+  bool decomposition_;
+  std::shared_ptr<const MajorantGrid> grid_;
+  TransmittancePredictor predictor_;
+  double sky_scale_;  // what an isotropic scatter of the sky at unit throughput brings
 };
 
 void store(Image& im, int x, int y, const Rgb& v, double scale) {

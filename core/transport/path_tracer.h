@@ -32,6 +32,14 @@ struct PathTracerOptions {
   /// roulette, core/transport/shadow_splitting.h), 1..64; 1 turns both off; negative:
   /// autoSunSplitMax(phase).
   int sun_split_max = -1;
+  /// Decomposition tracking for free paths and residual ratio tracking for shadow rays, against
+  /// the tracking grid's per-cell minorants (core/transport/tracking.h); false: delta and ratio
+  /// tracking, as version 2.
+  bool decomposition_tracking = true;
+  /// Voxels per tracking-grid cell edge for grid volumes: a power of two in 1..64; 0: chosen
+  /// for the medium's extinction by the cost model of core/volume/tracking_grid.h, except that
+  /// with decomposition_tracking off 0 keeps the density's own majorants (8^3-voxel blocks).
+  int majorant_cell = 0;
   int threads = 0;     ///< 0: the caller's TBB arena / all hardware threads
   int tile_size = 16;  ///< pixels per tile side (work unit)
 };

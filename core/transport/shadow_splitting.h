@@ -23,9 +23,20 @@ constexpr double kShadowRouletteBelow = 0.02;
 /// image (the forward peak) is averaged; below kShadowRouletteBelow (0.02) it survives with
 /// probability predicted / kShadowRouletteBelow at weight 1/probability, so collisions that
 /// add little (backscatter at a forward-peaked phase) skip most of their ratio tracking. Both
-/// keep the estimator unbiased. max_rays <= 1 turns both off and leaves `u` unused; u is
-/// uniform in [0, 1) and only read for the roulette.
-ShadowRays sunShadowRays(double predicted, int max_rays, double u);
+/// keep the estimator unbiased. max_rays <= 1 turns splitting off, and the roulette too unless
+/// `roulette` (then `predicted` includes a predicted transmittance, so that only collisions the
+/// sun cannot reach are rouletted); with both off `u` is unused. u is uniform in [0, 1) and
+/// only read for the roulette.
+ShadowRays sunShadowRays(double predicted, int max_rays, double u, bool roulette = false);
+
+/// The probability of keeping a next event whose predicted contribution (relative to an
+/// isotropic scatter at unit throughput) is `predicted`: 1 at or above kShadowRouletteBelow,
+/// else predicted / kShadowRouletteBelow (0 for nothing predicted).
+inline double shadowSurvival(double predicted) {
+  return predicted >= kShadowRouletteBelow ? 1.0
+         : predicted > 0                   ? predicted / kShadowRouletteBelow
+                                           : 0.0;
+}
 
 /// The most shadow rays chosen when a shot does not set it: 8 for phases whose spikiness
 /// (phaseSpikiness, core/transport/sun_guiding.h) exceeds 100, like droplets' Mie tables, else 1

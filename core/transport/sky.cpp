@@ -146,4 +146,17 @@ double SkyLight::pdf(const Vec3& w) const {
   return distribution_->pdf(u, v) / (2 * kPi * kPi * sin_theta);
 }
 
+Rgb SkyLight::meanRadiance(int n) const {
+  if (black_ || n < 1) return Rgb(0.0);
+  const double golden = kPi * (3.0 - std::sqrt(5.0));
+  Rgb sum(0.0);
+  for (int i = 0; i < n; ++i) {
+    const double z = 1.0 - (2.0 * i + 1.0) / n;
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    const double phi = golden * i;
+    sum += radiance(Vec3(r * std::cos(phi), r * std::sin(phi), z));
+  }
+  return sum / double(n);
+}
+
 }  // namespace cloudbake

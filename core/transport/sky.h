@@ -43,6 +43,9 @@ class SkyLight {
   SkySample sample(double u1, double u2) const;
   /// Solid-angle density with which sample() produces `w`.
   double pdf(const Vec3& w) const;
+  /// Mean radiance over the sphere, from n directions of a spherical Fibonacci lattice: the scale
+  /// of what an isotropic scatter of the sky brings (for deciding how many rays it is worth).
+  Rgb meanRadiance(int n = 512) const;
   /// True when the sky is zero in every direction (callers skip sky work).
   bool black() const { return black_; }
 

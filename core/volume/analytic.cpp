@@ -52,6 +52,9 @@ BoxDensity::BoxDensity(const Vec3& min, const Vec3& max, double density) : densi
   box_.min = min;
   box_.max = max;
   majorants_ = MajorantGrid::uniform(box_, static_cast<float>(density));
+  tracking_ = std::make_shared<const MajorantGrid>(box_, 1, 1, 1,
+                                                   std::vector<float>{static_cast<float>(density)},
+                                                   std::vector<float>{static_cast<float>(density)});
 }
 
 std::unique_ptr<DensityField::Lookup> BoxDensity::lookup() const {

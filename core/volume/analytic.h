@@ -7,7 +7,8 @@ namespace cloudbake {
 
 /// Homogeneous axis-aligned box (a slab when wide and thin). Parameters: min, max corners in
 /// world units (min < max on every axis), density >= 0. Exact: no voxelisation blur, so a slab's
-/// direct transmittance is exactly exp(-extinction * density * thickness).
+/// direct transmittance is exactly exp(-extinction * density * thickness). Its tracking grid's
+/// minorant equals its majorant, so decomposition tracking needs no lookups inside it.
 class BoxDensity final : public DensityField {
  public:
   BoxDensity(const Vec3& min, const Vec3& max, double density);
@@ -15,6 +16,10 @@ class BoxDensity final : public DensityField {
   double maxDensity() const override { return density_; }
   std::unique_ptr<Lookup> lookup() const override;
   const MajorantGrid& majorants() const override { return majorants_; }
+  std::shared_ptr<const MajorantGrid> trackingGrid(
+      const TrackingGridRequest& /*request*/) const override {
+    return tracking_;
+  }
   double featureSize() const override;
   std::string describe() const override;
 
@@ -22,6 +27,7 @@ class BoxDensity final : public DensityField {
   Bounds3 box_;
   double density_;
   MajorantGrid majorants_;
+  std::shared_ptr<const MajorantGrid> tracking_;
 };
 
 /// Homogeneous sphere. Parameters: center (world), radius > 0 (world units), density >= 0.

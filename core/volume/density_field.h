@@ -9,6 +9,15 @@
 
 namespace cloudbake {
 
+/// What DensityField::trackingGrid() is asked for.
+struct TrackingGridRequest {
+  /// sigma_t per unit density per world unit: a thick medium favours fine cells (fewer density
+  /// lookups), a thin one coarse cells (fewer cell crossings).
+  double extinction = 1;
+  /// Voxels per cell edge (grids); 0: chosen by the cost model (core/volume/tracking_grid.h).
+  int cell_voxels = 0;
+};
+
 /// A scalar density field in world space (unitless density; the medium's `extinction` turns it
 /// into sigma_t per world unit). Zero outside bounds(). Implementations: analytic box/sphere
 /// (exact, for verification) and GridVolume (sparse OpenVDB FloatGrid, trilinear lookups).
@@ -35,6 +44,15 @@ class DensityField {
   virtual std::unique_ptr<Lookup> lookup() const = 0;
   /// Per-region density upper bounds for tracking and empty-space skipping.
   virtual const MajorantGrid& majorants() const = 0;
+  /// Bounds for tracking a medium of the requested extinction, with per-cell minorants where the
+  /// field can give them (decomposition and residual ratio tracking). The default is
+  /// majorants() (no minorants), owned by the field: the pointer must not outlive it.
+  virtual std::shared_ptr<const MajorantGrid> trackingGrid(
+      const TrackingGridRequest& request) const;
+  /// A non-owning shared pointer to `grid` (which must outlive it).
+  static std::shared_ptr<const MajorantGrid> nonOwning(const MajorantGrid& grid) {
+    return std::shared_ptr<const MajorantGrid>(std::shared_ptr<const MajorantGrid>(), &grid);
+  }
   /// Characteristic feature size in world units (voxel size for grids; for analytic shapes a
   /// small fraction of their extent). Ray marchers use it to choose step lengths.
   virtual double featureSize() const = 0;

@@ -254,6 +254,36 @@ void fillDense(const openvdb::FloatGrid& grid, GridVolume::Impl* impl) {
   });
 }
 
+// A tracking grid from cell bounds over the dense copy: cell c spans index
+// [dense_min + m c, dense_min + m (c + 1)] (voxel centres as corners). Mirrored axes reverse the
+// cell order, as in alignedMajorants.
+MajorantGrid gridFromCellBounds(const CellBounds& b, const GridVolume::Impl& impl) {
+  const openvdb::Vec3d lo = impl.dense_min.asVec3d();
+  const openvdb::Vec3d hi = lo + openvdb::Vec3d(b.n[0], b.n[1], b.n[2]) * double(b.m);
+  const openvdb::Mat4d& i2w = impl.index_to_world;
+  Bounds3 wb;
+  wb.expand(applyAffine(i2w, lo.x(), lo.y(), lo.z()));
+  wb.expand(applyAffine(i2w, hi.x(), hi.y(), hi.z()));
+  bool flip[3];
+  for (int a = 0; a < 3; ++a) flip[a] = i2w(a, a) < 0;
+  const int* n = b.n;
+  if (!flip[0] && !flip[1] && !flip[2]) {
+    return MajorantGrid(wb, n[0], n[1], n[2], b.maxima, b.minima);
+  }
+  std::vector<float> maxima(b.size()), minima(b.size());
+  for (int cz = 0; cz < n[2]; ++cz)
+    for (int cy = 0; cy < n[1]; ++cy)
+      for (int cx = 0; cx < n[0]; ++cx) {
+        const int wx = flip[0] ? n[0] - 1 - cx : cx, wy = flip[1] ? n[1] - 1 - cy : cy,
+                  wz = flip[2] ? n[2] - 1 - cz : cz;
+        const size_t from = (size_t(cz) * n[1] + cy) * n[0] + cx;
+        const size_t to = (size_t(wz) * n[1] + wy) * n[0] + wx;
+        maxima[to] = b.maxima[from];
+        minima[to] = b.minima[from];
+      }
+  return MajorantGrid(wb, n[0], n[1], n[2], std::move(maxima), std::move(minima));
+}
+
 }  // namespace
 
 std::shared_ptr<const GridVolume> makeGridVolume(openvdb::FloatGrid::Ptr grid,
@@ -303,6 +333,8 @@ std::shared_ptr<const GridVolume> makeGridVolume(openvdb::FloatGrid::Ptr grid,
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j)
       if (i != j && std::abs(i2w(i, j)) > 1e-9 * impl->voxel_size) axis_aligned = false;
+  impl->index_to_world = i2w;
+  impl->axis_aligned = axis_aligned;
   impl->majorants = axis_aligned ? alignedMajorants(cm, i2w)
                                  : rotatedMajorants(cm, w2i, impl->bounds, impl->voxel_size);
   fillDense(*grid, impl.get());
@@ -321,6 +353,30 @@ std::unique_ptr<DensityField::Lookup> GridVolume::lookup() const {
   return std::make_unique<GridLookup>(*impl_);
 }
 const MajorantGrid& GridVolume::majorants() const { return impl_->majorants; }
+
+std::shared_ptr<const MajorantGrid> GridVolume::trackingGrid(
+    const TrackingGridRequest& request) const {
+  const Impl& im = *impl_;
+  if (im.dense.empty() || !im.axis_aligned) return DensityField::trackingGrid(request);
+  std::lock_guard<std::mutex> lock(im.tracking_mutex);
+  if (im.tracking_levels.empty()) {
+    DenseView view;
+    view.values = im.dense.data();
+    for (int a = 0; a < 3; ++a) view.n[a] = im.dense_n[a];
+    im.tracking_levels = cellBoundsLevels(view, kMaxMajorantCells);
+  }
+  const std::vector<CellBounds>& levels = im.tracking_levels;
+  size_t level = 0;
+  if (request.cell_voxels > 0) {  // the finest level no finer than asked
+    while (level + 1 < levels.size() && levels[level + 1].m <= request.cell_voxels) ++level;
+  } else {
+    level = cheapestLevel(levels, request.extinction * im.voxel_size);
+  }
+  const int m = levels[level].m;
+  auto& cached = im.tracking_grids[m];
+  if (!cached) cached = std::make_shared<const MajorantGrid>(gridFromCellBounds(levels[level], im));
+  return cached;
+}
 double GridVolume::voxelSize() const { return impl_->voxel_size; }
 uint64_t GridVolume::activeVoxelCount() const { return impl_->active_voxels; }
 const std::string& GridVolume::gridName() const { return impl_->name; }

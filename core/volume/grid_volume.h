@@ -33,6 +33,13 @@ class GridVolume final : public DensityField {
   double maxDensity() const override;
   std::unique_ptr<Lookup> lookup() const override;
   const MajorantGrid& majorants() const override;
+  /// For grids with a dense copy and no rotation: cells of 1, 2, 4, ... 64 voxels aligned with
+  /// the voxel centres, each with the exact maximum and minimum of trilinear lookups inside it
+  /// (core/volume/tracking_grid.h), the cell size the requested one (rounded to a power of two,
+  /// at most kMaxMajorantCells cells) or the cheapest by the cost model for the extinction.
+  /// Other grids: majorants(), without minorants.
+  std::shared_ptr<const MajorantGrid> trackingGrid(
+      const TrackingGridRequest& request) const override;
   double featureSize() const override { return voxelSize(); }
   std::string describe() const override;
 

@@ -14,12 +14,18 @@ namespace cloudbake {
 /// majorant per cell instead of one global majorant keeps the number of null collisions low in
 /// clouds whose density varies a lot (Kutz et al. 2017; pbrt-v4's DDAMajorantIterator).
 ///
+/// A grid may also carry a lower bound (minorant) per cell: decomposition and residual ratio
+/// tracking (core/transport/tracking.h) treat the minorant part of the density analytically and
+/// look the density up only for the residual, max - min.
+///
 /// Parameters: `bounds` (world units), `res` cells per axis (>= 1 each), `maxima` in x-fastest
-/// order (size res.x*res.y*res.z), density units (multiply by extinction for sigma_t_maj).
+/// order (size res.x*res.y*res.z), density units (multiply by extinction for sigma_t_maj);
+/// `minima` empty (no minorants: 0 everywhere) or of the same size, 0 <= min <= max per cell.
 class MajorantGrid {
  public:
   MajorantGrid() = default;
-  MajorantGrid(const Bounds3& bounds, int nx, int ny, int nz, std::vector<float> maxima);
+  MajorantGrid(const Bounds3& bounds, int nx, int ny, int nz, std::vector<float> maxima,
+               std::vector<float> minima = {});
   /// A single cell covering `bounds` with the given bound (analytic media).
   static MajorantGrid uniform(const Bounds3& bounds, float majorant);
 
@@ -29,23 +35,43 @@ class MajorantGrid {
   int nz() const { return nz_; }
   float cell(int x, int y, int z) const { return maxima_[index(x, y, z)]; }
   float maxValue() const { return max_value_; }
+  bool hasMinorants() const { return !minima_.empty(); }
+  float minorant(int x, int y, int z) const {
+    return minima_.empty() ? 0.f : minima_[index(x, y, z)];
+  }
 
   /// Walks the cells that `ray` (unit direction) crosses within [tmin, tmax], in order, calling
   /// fn(t0, t1, majorant) for each non-empty overlap; stops early when fn returns false.
   /// Returns false if fn stopped the walk.
   template <typename Fn>
-  bool traverse(const Ray& ray, double tmin, double tmax, Fn&& fn) const;
+  bool traverse(const Ray& ray, double tmin, double tmax, Fn&& fn) const {
+    return walkCells(ray, tmin, tmax,
+                     [&](double t0, double t1, size_t i) { return fn(t0, t1, maxima_[i]); });
+  }
+
+  /// As traverse(), calling fn(t0, t1, majorant, minorant) (minorant 0 without minorants).
+  template <typename Fn>
+  bool traverseBounds(const Ray& ray, double tmin, double tmax, Fn&& fn) const {
+    return walkCells(ray, tmin, tmax, [&](double t0, double t1, size_t i) {
+      return fn(t0, t1, maxima_[i], minima_.empty() ? 0.f : minima_[i]);
+    });
+  }
 
  private:
+  // The 3D DDA (Amanatides & Woo 1987) behind both traversals: fn(t0, t1, cell index).
+  template <typename Fn>
+  bool walkCells(const Ray& ray, double tmin, double tmax, Fn&& fn) const;
+
   size_t index(int x, int y, int z) const { return (static_cast<size_t>(z) * ny_ + y) * nx_ + x; }
   Bounds3 bounds_;
   int nx_ = 0, ny_ = 0, nz_ = 0;
   std::vector<float> maxima_;
+  std::vector<float> minima_;
   float max_value_ = 0;
 };
 
 template <typename Fn>
-bool MajorantGrid::traverse(const Ray& ray, double tmin, double tmax, Fn&& fn) const {
+bool MajorantGrid::walkCells(const Ray& ray, double tmin, double tmax, Fn&& fn) const {
   if (maxima_.empty()) return true;
   double t0, t1;
   if (!intersectBounds(bounds_, ray, tmin, tmax, &t0, &t1)) return true;
@@ -85,7 +111,7 @@ bool MajorantGrid::traverse(const Ray& ray, double tmin, double tmax, Fn&& fn) c
     if (t_next[2] < t_next[axis]) axis = 2;
     const double t_end = t_next[axis] < t1 ? t_next[axis] : t1;
     if (t_end > t) {
-      if (!fn(t, t_end, maxima_[index(ic[0], ic[1], ic[2])])) return false;
+      if (!fn(t, t_end, index(ic[0], ic[1], ic[2]))) return false;
     }
     t = t_end;
     ic[axis] += step[axis];

@@ -5,11 +5,14 @@
 #include <openvdb/openvdb.h>
 
 #include <functional>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
 #include "core/volume/grid_volume.h"
+#include "core/volume/tracking_grid.h"
 
 namespace cloudbake {
 
@@ -31,6 +34,14 @@ struct GridVolume::Impl {
   openvdb::Coord dense_min;
   int dense_n[3] = {0, 0, 0};
   static constexpr int64_t kMaxDenseVoxels = int64_t(1) << 24;  // 64 MiB of floats
+  /// Index -> world affine map; axis_aligned: no rotation (mirrored axes allowed).
+  openvdb::Mat4d index_to_world;
+  bool axis_aligned = true;
+  /// Tracking grids (trackingGrid()), built from the dense copy on first request: the cell
+  /// bounds of every level, and the grids made of them so far, by voxels per cell.
+  mutable std::mutex tracking_mutex;
+  mutable std::vector<CellBounds> tracking_levels;
+  mutable std::map<int, std::shared_ptr<const MajorantGrid>> tracking_grids;
 };
 
 /// Wraps `grid` (ownership passes to the volume; it must not be modified afterwards). Inactive

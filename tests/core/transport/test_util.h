@@ -62,6 +62,16 @@ class LinearSlab final : public DensityField {
       m[i] = static_cast<float>(std::max(a + b * z0, a + b * z1)) * 1.0001f;
     }
     grid_ = MajorantGrid(box_, 1, 1, cells, m);
+    std::vector<float> lo(cells);
+    for (int i = 0; i < cells; ++i) {
+      const double z0 = double(i) / cells, z1 = double(i + 1) / cells;
+      lo[i] = static_cast<float>(std::min(a + b * z0, a + b * z1)) * 0.9999f;
+    }
+    tracking_ = std::make_shared<const MajorantGrid>(box_, 1, 1, cells, m, lo);
+  }
+  /// With minorants: the density's exact minimum per cell (less 0.01 %).
+  std::shared_ptr<const MajorantGrid> trackingGrid(const TrackingGridRequest&) const override {
+    return tracking_;
   }
   Bounds3 bounds() const override { return box_; }
   double maxDensity() const override { return grid_.maxValue(); }
@@ -86,6 +96,7 @@ class LinearSlab final : public DensityField {
   double a_, b_;
   Bounds3 box_;
   MajorantGrid grid_;
+  std::shared_ptr<const MajorantGrid> tracking_;
 };
 
 }  // namespace testing_util

@@ -91,5 +91,65 @@ TEST(Tracking, IntervalLimitsAndEmptyMedium) {
   }
 }
 
+// Decomposition tracking and residual ratio tracking against the same exact answers as above,
+// on the linear slab whose tracking grid carries minorants.
+TEST(Tracking, DecompositionAndResidualRatioTrackingAreUnbiased) {
+  const LinearSlab slab(0.2, 3.0, 5);
+  const auto grid = slab.trackingGrid({});
+  ASSERT_TRUE(grid->hasMinorants());
+  auto lookup = slab.lookup();
+  const double extinction = 1.5;
+  const double exact = std::exp(-extinction * slab.depth(1.0));
+  const int n = 400000;
+  Rng rng(13, 5);
+  Stats residual, ratio, decomposition;
+  const double probes[] = {0.9, 0.6, 0.3};
+  Stats above[3];
+  for (int i = 0; i < n; ++i) {
+    residual.add(residualRatioTrack(*grid, *lookup, extinction, kDown, 0, kInf, rng));
+    ratio.add(ratioTrack(slab, *lookup, extinction, kDown, 0, kInf, rng));
+    const Collision c = decompositionTrack(*grid, *lookup, extinction, kDown, 0, kInf, rng);
+    decomposition.add(c.hit ? 0.0 : 1.0);
+    if (c.hit) {
+      ASSERT_GE(c.p.z, 0.0);
+      ASSERT_LE(c.p.z, 1.0);
+    }
+    for (int k = 0; k < 3; ++k) above[k].add(c.hit && c.p.z > probes[k] ? 1.0 : 0.0);
+  }
+  EXPECT_NEAR(residual.mean(), exact, 4 * residual.stderror());
+  EXPECT_NEAR(decomposition.mean(), exact, 4 * decomposition.stderror());
+  // The control part is exact, so the residual estimate is less noisy than plain ratio tracking.
+  EXPECT_LT(residual.variance(), 0.5 * ratio.variance());
+  for (int k = 0; k < 3; ++k) {
+    const double p = 1 - std::exp(-extinction * (slab.depth(1.0) - slab.depth(probes[k])));
+    EXPECT_NEAR(above[k].mean(), p, 4 * above[k].stderror()) << "z > " << probes[k];
+  }
+}
+
+// In a homogeneous box the minorant is the density: transmittance needs no random numbers above
+// the roulette threshold, and free paths are exactly exponential.
+TEST(Tracking, DecompositionInAHomogeneousBoxIsAnalytic) {
+  const BoxDensity slab(Vec3(-1e4, -1e4, 0), Vec3(1e4, 1e4, 1), 1.0);
+  const auto grid = slab.trackingGrid({});
+  auto lookup = slab.lookup();
+  Rng rng(17, 2);
+  EXPECT_NEAR(residualRatioTrack(*grid, *lookup, 2.0, kDown, 0, kInf, rng), std::exp(-2.0), 1e-12);
+  Stats deep, below;
+  for (int i = 0; i < 400000; ++i) {
+    deep.add(residualRatioTrack(*grid, *lookup, 10.0, kDown, 0, kInf, rng));
+    const Collision c = decompositionTrack(*grid, *lookup, 2.0, kDown, 0, kInf, rng);
+    below.add(c.hit && c.p.z < 0.5 ? 1.0 : 0.0);
+  }
+  EXPECT_NEAR(deep.mean(), std::exp(-10.0), 4 * deep.stderror());
+  EXPECT_GT(deep.stderror(), 0);
+  EXPECT_NEAR(below.mean(), std::exp(-1.0) - std::exp(-2.0), 4 * below.stderror());
+  // Missing the medium, or no extinction: transparent.
+  const Ray miss{Vec3(5e4, 5, 5), Vec3(0, 0, 1)};
+  EXPECT_EQ(residualRatioTrack(*grid, *lookup, 1e6, miss, 0, kInf, rng), 1.0);
+  EXPECT_FALSE(decompositionTrack(*grid, *lookup, 1e6, miss, 0, kInf, rng).hit);
+  EXPECT_EQ(residualRatioTrack(*grid, *lookup, 0.0, kDown, 0, kInf, rng), 1.0);
+  EXPECT_FALSE(decompositionTrack(*grid, *lookup, 0.0, kDown, 0, kInf, rng).hit);
+}
+
 }  // namespace
 }  // namespace cloudbake

@@ -21,6 +21,7 @@
 #include "core/transport/shadow_splitting.h"
 #include "core/transport/sun_guiding.h"
 #include "core/volume/analytic.h"
+#include "core/volume/sources.h"
 #include "tests/chi_square_util.h"
 #include "tests/core/transport/test_util.h"
 
@@ -154,14 +155,20 @@ TEST(SamplerChiSquare, SunLobeMatchesThePhaseAboutTheSun) {
 TEST(ShadowSplitting, ExpectedWeightIsOneAndOffIsOneRay) {
   for (double predicted : {1e-4, 0.01, 0.019, 0.021, 0.05, 0.1, 0.5, 1.0, 1.5, 7.2, 1e3}) {
     // E[count x weight] over u, integrated exactly on a fine grid of u.
-    double expect = 0;
+    double expect = 0, expect_roulette = 0;
     constexpr int kU = 100000;
     for (int i = 0; i < kU; ++i) {
       const ShadowRays r = sunShadowRays(predicted, 8, (i + 0.5) / kU);
       expect += r.count * r.weight / kU;
       EXPECT_LE(r.count, 8);
+      // Roulette alone (the transmittance predictor's): never more than one ray.
+      const ShadowRays q = sunShadowRays(predicted, 1, (i + 0.5) / kU, /*roulette=*/true);
+      expect_roulette += q.count * q.weight / kU;
+      EXPECT_LE(q.count, 1);
     }
     EXPECT_NEAR(expect, 1.0, 1e-3) << predicted;
+    EXPECT_NEAR(expect_roulette, 1.0, 1e-3) << predicted;
+    EXPECT_NEAR(shadowSurvival(predicted), std::min(1.0, predicted / kShadowRouletteBelow), 1e-12);
     const ShadowRays off = sunShadowRays(predicted, 1, 0.999);
     EXPECT_EQ(off.count, 1);
     EXPECT_EQ(off.weight, 1.0);
@@ -231,7 +238,8 @@ std::vector<Case> cases() {
 }
 
 // Every technique together against none, in every case; each technique alone in the first
-// (splitting alone leaves the Mie spike's variance too high for a test of power: HG only).
+// (splitting or decomposition tracking alone leave the Mie spike's variance too high for a test
+// of power: HG only).
 // Without the techniques the forward spike gives the estimate a heavy tail, whose sample mean
 // is low more often than high: the reference without them gets four times the samples.
 void expectTechniquesUnbiased(const Medium& m, int spp, int renders, const char* phase,
@@ -243,14 +251,18 @@ void expectTechniquesUnbiased(const Medium& m, int spp, int renders, const char*
     off.max_depth = c.max_depth;
     off.sun_guiding = 0;
     off.sun_split_max = 1;
-    PathTracerOptions guide = off, split = off, all = off;
+    off.decomposition_tracking = false;
+    PathTracerOptions guide = off, split = off, all = off, decomposition = off;
     guide.sun_guiding = -1;
     split.sun_split_max = 8;
     all.sun_guiding = 0.5;
     all.sun_split_max = 8;
+    all.decomposition_tracking = true;
+    decomposition.decomposition_tracking = true;
     std::vector<std::pair<const char*, PathTracerOptions>> configs{{"all", all}};
     if (first) configs.emplace_back("guide", guide);
     if (first && split_alone) configs.emplace_back("split", split);
+    if (first && split_alone) configs.emplace_back("decomposition", decomposition);
     first = false;
     PathTracerOptions off_long = off;
     off_long.samples_per_pixel = 4 * spp;
@@ -277,6 +289,16 @@ TEST(VarianceReduction, UnbiasedWithForwardPeakedHg) {
   expectTechniquesUnbiased(sphere(std::make_shared<HenyeyGreensteinPhase>(0.9)), 128, 32, "HG 0.9");
 }
 
+// The sphere voxelised: a grid volume, whose tracking grid has minorants (decomposition and
+// residual ratio tracking, and the transmittance predictor's roulette of shadow rays, at work)
+// and a trilinear edge.
+TEST(VarianceReduction, UnbiasedOnAGridWithMinorants) {
+  Medium m = sphere(std::make_shared<HenyeyGreensteinPhase>(0.9));
+  m.density = voxelize(*m.density, 0.05);
+  ASSERT_TRUE(m.density->trackingGrid({m.extinction, 0})->hasMinorants());
+  expectTechniquesUnbiased(m, 128, 32, "HG 0.9, grid");
+}
+
 TEST(VarianceReduction, UnbiasedWithMieTable) {
   PhaseSpec spec;
   spec.type = PhaseSpec::Type::kMie;
@@ -300,6 +322,12 @@ TEST(VarianceReduction, OptionsAreValidated) {
   EXPECT_THROW(renderPathTraced(m, sun, Sky{}, perspectiveCamera(4, 30), opt), InputError);
   opt.sun_split_max = 65;
   EXPECT_THROW(renderPathTraced(m, sun, Sky{}, perspectiveCamera(4, 30), opt), InputError);
+  opt.sun_split_max = -1;
+  for (int cell : {-1, 3, 128}) {
+    opt.majorant_cell = cell;
+    EXPECT_THROW(renderPathTraced(m, sun, Sky{}, perspectiveCamera(4, 30), opt), InputError)
+        << cell;
+  }
 }
 
 }  // namespace
