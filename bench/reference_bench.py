@@ -66,6 +66,7 @@ CONFIGS = {
     "all": {"sun_split_max": 8, "tracking": "delta"},
     "v2": {"tracking": "delta"},
     "decomp": {"sun_guiding": 0, "sun_split_max": 1},
+    "split8": {"sun_split_max": 8},
     "default": {},
 }
 

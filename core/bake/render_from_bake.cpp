@@ -72,11 +72,13 @@
 #include <vector>
 
 #include "core/bake/phase_lut.h"
+#include "core/bake/photon_bake.h"
 #include "core/bake/sky_sh_scatter.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/math/parallel.h"
 #include "core/math/rng.h"
+#include "core/math/sh_basis.h"
 #include "core/transport/camera.h"
 #include "core/transport/sky.h"
 #include "core/transport/tiled_render.h"
@@ -245,6 +247,7 @@ class BakeMarcher {
       sky_sh_.emplace(projectSkyRadiance(sky), lut_);
       albedo_ = medium.albedo;
     }
+    if (angularModel(bake) == "sh") loadPhotonTallies(bake, medium, sky);
     co_ = channel(bake, bake_grids::kMultipleFluence, 3, false, "");
     if (co_) {
       ldir_ = channel(bake, bake_grids::kLightDir, 3, false, "");
@@ -266,6 +269,15 @@ class BakeMarcher {
   void trace(const Ray& ray, PixelSum* sum) const {
     RayState s;
     s.d = ray.d;
+    if (sh_order_ > 0) {
+      // Funk-Hecke: the light travelling along w' scatters towards the camera (-d) with
+      // p(w' . -d), so J(-d) = sum over l, m of p_l L_lm Y_lm(-d).
+      double y[shCount(kMaxShDegree)];
+      shBasisUpTo(sh_order_, -ray.d, y);
+      for (int l = 0; l <= sh_order_; ++l) {
+        for (int i = l * l; i < (l + 1) * (l + 1); ++i) s.shw[i] = phase_l_[size_t(l)] * y[i];
+      }
+    }
     // Block space: w = index + 1, so the support of the trilinear field, index in (-1, n),
     // is w in (0, n + 1).
     s.w0 = (ray.o - grid_.origin) * inv_h_ + Vec3(1.0);
@@ -310,8 +322,47 @@ class BakeMarcher {
     Rgb ms;                               // integral of T_v sigma_t J_ms, scaled
     Rgb sky_ms;                           // integral of T_v sigma_t Co_sky / (4 pi)
     double sky_sh[kShCoefficients] = {};  // integrals of T_v sigma_t T_sky,i (Eq. 5)
+    Rgb shw[shCount(kMaxShDegree)];       // photon tallies: p_l Y_lm(-d) per coefficient
     bool done = false;
   };
+
+  // Method photon's tallies (angular model "sh"): radiance coefficients of scattered sun and
+  // sky light, and the phase's Legendre coefficients for the Funk-Hecke convolution.
+  void loadPhotonTallies(const BakedLight& bake, const Medium& medium, const SkyLight& sky) {
+    const auto it = bake.metadata.find("cloudbake:photon_order");
+    int order = 0;
+    try {
+      order = it == bake.metadata.end() ? 0 : std::stoi(it->second);
+    } catch (const std::exception&) {
+      order = 0;
+    }
+    if (order < 1 || order > kMaxShDegree) {
+      throw InputError("bake: metadata cloudbake:photon_order must be in 1.." + str(kMaxShDegree) +
+                       " for angular model 'sh'");
+    }
+    sh_order_ = order;
+    for (int i = 0; i < shCount(order); ++i) {
+      msh_.push_back(channel(bake, bake_grids::photonSh(i).c_str(), 3, true, ""));
+    }
+    if (!sky.black() && bake.find(bake_grids::photonSkySh(0))) {
+      for (int i = 0; i < shCount(order); ++i) {
+        msky_sh_.push_back(channel(bake, bake_grids::photonSkySh(i).c_str(), 3, true, ""));
+      }
+    }
+    phase_l_ = phaseLegendreCoefficients(*medium.phase, order);
+  }
+
+  // Sum over coefficients of w_i L_i(x) per channel, clamped at 0: a truncated expansion can
+  // dip below zero where the true in-scattered radiance is small.
+  Rgb shSource(const std::vector<const float*>& grids, const Cell& c, const Rgb* w) const {
+    Rgb sum(0.0);
+    for (size_t i = 0; i < grids.size(); ++i) {
+      float v[3];
+      read3(grids[i], c, v);
+      sum += w[i] * Rgb(v[0], v[1], v[2]);
+    }
+    return Rgb(std::max(0.0, sum.x), std::max(0.0, sum.y), std::max(0.0, sum.z));
+  }
 
   void buildBlockMax() {
     nbx_ = (nx_ + 1 + kBlock - 1) / kBlock;
@@ -453,8 +504,10 @@ class BakeMarcher {
     float tsh[kShCoefficients] = {};
   };
 
-  void source(const Cell& c, const Vec3& d, Source* s) const {
+  void source(const Cell& c, const Vec3& d, const Rgb* shw, Source* s) const {
     s->tsun = read(tsun_, c);
+    if (!msh_.empty()) s->ms = shSource(msh_, c, shw);
+    if (!msky_sh_.empty()) s->csky = shSource(msky_sh_, c, shw);
     if (sky_sh_) {
       for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = float(read(sh_[size_t(i)], c));
     } else if (vsky_) {
@@ -552,15 +605,15 @@ class BakeMarcher {
       const double sigma = extinction_ * read(density_, *cur);
       const double delta = 0.5 * (sigma_prev + sigma) * dt;
       if (delta > 0) {
-        if (!have_prev) source(*prev, s->d, &src_prev);
-        source(*cur, s->d, &src_cur);
+        if (!have_prev) source(*prev, s->d, s->shw, &src_prev);
+        source(*cur, s->d, s->shw, &src_cur);
         double e, w0, w1;
         stepWeights(delta, &e, &w0, &w1);
         const double a0 = transmittance * w0, a1 = transmittance * w1;
         s->ss += a0 * src_prev.tsun + a1 * src_cur.tsun;
         s->sky += a0 * src_prev.vsky + a1 * src_cur.vsky;
-        if (co_) s->ms += (src_prev.ms * a0 + src_cur.ms * a1) * scale_ms_;
-        if (csky_) s->sky_ms += src_prev.csky * a0 + src_cur.csky * a1;
+        if (co_ || !msh_.empty()) s->ms += (src_prev.ms * a0 + src_cur.ms * a1) * scale_ms_;
+        if (csky_ || !msky_sh_.empty()) s->sky_ms += src_prev.csky * a0 + src_cur.csky * a1;
         if (sky_sh_) {
           for (int q = 0; q < kShCoefficients; ++q) {
             s->sky_sh[q] += a0 * src_prev.tsh[q] + a1 * src_cur.tsh[q];
@@ -593,6 +646,9 @@ class BakeMarcher {
   const float* mie_ = nullptr;
   std::array<const float*, kShCoefficients> sh_{};
   std::optional<SkyShScatter> sky_sh_;
+  int sh_order_ = 0;  // photon tallies' degree (0: none)
+  std::vector<const float*> msh_, msky_sh_;
+  std::vector<Rgb> phase_l_;
   Rgb albedo_;
   const SkyLight& sky_;
   PhaseLut lut_;

@@ -92,16 +92,21 @@ class PathtraceMethod final : public BakeMethod {
   PathtraceMethod() {
     info_.name = "pathtrace";
     info_.summary =
-        "the unbiased reference: volumetric path tracing with delta tracking and next-event "
-        "estimation (Novak et al. 2018), sun-directional importance sampling and shadow-ray "
-        "splitting (Buras & Mayer 2011)";
+        "the unbiased reference: volumetric path tracing with decomposition tracking (Kutz et "
+        "al. 2017), residual ratio tracking (Novak et al. 2014) and next-event estimation "
+        "(Novak et al. 2018), sun-directional importance sampling and shadow-ray splitting "
+        "(Buras & Mayer 2011)";
     info_.citation =
         "Novak, Georgiev, Hanika and Jarosz 2018, \"Monte Carlo methods for volumetric light "
-        "transport simulation\" (Eurographics STAR); Buras and Mayer 2011, \"Efficient unbiased "
+        "transport simulation\" (Eurographics STAR); Kutz, Habel, Li and Novak 2017, "
+        "\"Spectral and decomposition tracking for rendering heterogeneous volumes\" (SIGGRAPH); "
+        "Novak, Selle and Jarosz 2014, \"Residual ratio tracking for estimating attenuation in "
+        "participating media\" (SIGGRAPH Asia); Buras and Mayer 2011, \"Efficient unbiased "
         "variance reduction techniques for Monte Carlo simulations of radiative transfer in "
         "cloudy atmospheres: the solution\" (JQSRT 112)";
     // 2: sun-directional importance sampling and shadow-ray splitting/roulette by default.
-    // 3: decomposition and residual ratio tracking on a tracking grid chosen for the density.
+    // 3: decomposition and residual ratio tracking on a tracking grid chosen for the density,
+    //    shadow rays rouletted and split by a transmittance predictor.
     info_.version = 3;
     info_.default_samples = 64;
     info_.knobs = {
@@ -117,7 +122,9 @@ class PathtraceMethod final : public BakeMethod {
                       "most shadow rays towards the sun at one collision (split where the "
                       "predicted contribution is large, rouletted where small); 1 turns both "
                       "off")
-            .derivedDefault("8 where V > 100 (droplet Mie tables), else 1"),
+            .derivedDefault(
+                "8 where shadow rays are predicted (decomposition tracking through a VDB, mesh "
+                "or procedural volume) or V > 100 (droplet Mie tables), else 1"),
         Knob::choice("tracking", {"decomposition", "delta"}, "decomposition",
                      "free paths and shadow-ray transmittance: 'decomposition' splits each "
                      "tracking cell's density into a minorant handled analytically and a "

@@ -3,6 +3,7 @@
 #include "core/error.h"
 #include "core/methods/auto.h"
 #include "core/methods/pathtrace.h"
+#include "core/methods/photon.h"
 #include "core/methods/pointcloud.h"
 #include "core/methods/precomputed.h"
 #include "core/methods/single.h"
@@ -11,9 +12,9 @@ namespace cloudbake {
 
 const std::vector<const BakeMethod*>& bakeMethods() {
   // Constant data built once: the methods are stateless, so sharing them is safe.
-  static const std::vector<const BakeMethod*> kMethods = {&pathtraceMethod(), &singleMethod(),
+  static const std::vector<const BakeMethod*> kMethods = {&pathtraceMethod(),  &singleMethod(),
                                                           &pointcloudMethod(), &precomputedMethod(),
-                                                          &autoMethod()};
+                                                          &photonMethod(),     &autoMethod()};
   return kMethods;
 }
 

@@ -125,7 +125,11 @@ class Integrator {
         grid_(trackingGridFor(medium, options)),
         predictor_(*predictorGrid(medium, options), extinction_, sun_on_ ? &sun_dir_ : nullptr,
                    !sky_.black()),
-        sky_scale_(sky_.black() ? 1.0 : std::max(1e-300, maxComponent(sky_.meanRadiance()))) {}
+        sky_scale_(sky_.black() ? 1.0 : std::max(1e-300, maxComponent(sky_.meanRadiance()))) {
+    // Where the predictor knows how much sun reaches a collision, splitting goes to the
+    // collisions it reaches: measured to pay for HG too (bench/reference_bench.py, docs).
+    if (split_max_ <= 0) split_max_ = predictor_.active() ? 8 : autoSunSplitMax(*medium.phase);
+  }
 
   void trace(const Ray& ray, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
     walk(Walk{ray}, lookup, rng, out);
@@ -320,8 +324,7 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
   const SkyLight sky_light(sky);
   const double guiding =
       options.sun_guiding >= 0 ? options.sun_guiding : autoSunGuiding(*medium.phase);
-  const int split_max =
-      options.sun_split_max > 0 ? options.sun_split_max : autoSunSplitMax(*medium.phase);
+  const int split_max = options.sun_split_max;  // negative: the integrator chooses
   const Integrator integrator(medium, sun_dir, sun.irradiance, sky_light, options, guiding,
                               split_max);
 

@@ -29,7 +29,9 @@ struct PathTracerOptions {
   /// sun_guiding.h), in [0, 1); 0 is plain phase sampling; negative: autoSunGuiding(phase).
   double sun_guiding = -1;
   /// Most shadow rays towards the sun at one collision (prediction-based splitting and
-  /// roulette, core/transport/shadow_splitting.h), 1..64; 1 turns both off; negative:
+  /// roulette, core/transport/shadow_splitting.h), 1..64; 1 turns splitting off (and the
+  /// roulette, unless the transmittance predictor is on); negative: 8 where the transmittance
+  /// predictor is on (decomposition tracking through a field with minorants), else
   /// autoSunSplitMax(phase).
   int sun_split_max = -1;
   /// Decomposition tracking for free paths and residual ratio tracking for shadow rays, against

@@ -1,0 +1,150 @@
+#!/usr/bin/env python3
+"""Method `photon` against the reference: its error as photons, order and lattice grow (issue 12).
+
+For each scene (bench/scenes/*.json, both views, --res x 3/4 --res pixels) it renders a
+reference with `pathtrace` twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/) and
+each photon configuration once, and prints
+
+  scene | photons | order | lattice | bake s | s/view | peak MiB | rel. RMSE | bias | ref. noise
+
+- rel. RMSE: of the cloud's own light (`scattered` = sun + sky layers) over the cloud's pixels
+  (reference alpha >= --cloud-alpha), against the mean of the two references, averaged over the
+  views (`cloudbake compare --json`);
+- bias: (mean - reference mean) / reference mean of the same, averaged over the views;
+- ref. noise: the references' own relative noise there, RMS difference / sqrt(2) of the two
+  seeds, divided by sqrt(2) again for their mean (the floor under every rel. RMSE);
+- bake s, s/view, peak MiB: from each child's `cloudbake render --stats-json`.
+
+Scenes: perlin, bunny, disney (Disney's cloud, Walt Disney Animation Studios, CC-BY-SA 3.0; HG
+0.85 as in bench/scenes). The bunny and Disney scenes need ../shared/data and are skipped without.
+
+Usage: bench/photon_bench.py [--build build] [--threads 2] [--res 160] [--ref-spp 1024]
+                             [--scenes perlin,bunny,disney] [--sweep default|order|quick]
+                             [--work DIR]
+"""
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "client", "python"))
+from cloudbake_shot_paths import path_slots  # noqa: E402  (the keys of a shot that name files)
+
+SCENES = {"perlin": "perlin_cloud.json", "bunny": "bunny_cloud.json",
+          "disney": "disney_cloud.json"}
+# (photons, order, lattice) per sweep: the knobs grow together along "default", one at a time
+# along "order".
+SWEEPS = {
+    "default": [(1 << 16, 2, 48), (1 << 18, 3, 64), (1 << 20, 4, 80), (1 << 21, 6, 96)],
+    "order": [(1 << 20, 1, 64), (1 << 20, 2, 64), (1 << 20, 3, 64), (1 << 20, 5, 64),
+              (1 << 20, 8, 64)],
+    "quick": [(1 << 15, 2, 32), (1 << 17, 4, 48)],
+}
+
+
+def load_scene(name, res):
+    folder = os.path.join(ROOT, "bench", "scenes")
+    with open(os.path.join(folder, SCENES[name])) as f:
+        shot = json.load(f)
+    for container, key in path_slots(shot):
+        if not os.path.isabs(container[key]):
+            container[key] = os.path.normpath(os.path.join(folder, container[key]))
+            if not os.path.exists(container[key]):
+                print("skipping %s: %s not found" % (name, container[key]), file=sys.stderr)
+                return None
+    for view in shot["views"]:
+        view["resolution"] = [res, res * 3 // 4]
+    shot["outputs"] = {"exr": True, "vdb": False}
+    return shot
+
+
+def render(cloudbake, shot, out_dir, threads):
+    """Renders `shot` into out_dir unless its stats are there already; returns the stats."""
+    stats_path = os.path.join(out_dir, "stats.json")
+    if not os.path.exists(stats_path):
+        os.makedirs(out_dir, exist_ok=True)
+        shot_path = os.path.join(out_dir, "shot.json")
+        with open(shot_path, "w") as f:
+            json.dump(shot, f)
+        subprocess.run([cloudbake, "render", shot_path, "--out", out_dir, "--threads",
+                        str(threads), "--quiet", "--stats-json", stats_path], check=True,
+                       stdout=subprocess.DEVNULL)
+    with open(stats_path) as f:
+        return json.load(f)
+
+
+def compare(cloudbake, a, b, alpha_from, cloud_alpha):
+    """`scattered` of a against b over the pixels where alpha_from's alpha >= cloud_alpha."""
+    out = subprocess.run([cloudbake, "compare", a, b, "--json", "--cloud-alpha", str(cloud_alpha),
+                          "--mask-from", alpha_from], check=True, capture_output=True,
+                         text=True).stdout
+    return json.loads(out)["scattered"]
+
+
+def steps(stats, kind):
+    return [s["seconds"] for s in stats["steps"] if s["step"] == kind]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--res", type=int, default=160)
+    ap.add_argument("--ref-spp", type=int, default=1024)
+    ap.add_argument("--cloud-alpha", type=float, default=0.05)
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--sweep", default="default", choices=sorted(SWEEPS))
+    ap.add_argument("--work", default=None)
+    args = ap.parse_args()
+    args.work = args.work or tempfile.mkdtemp(prefix="photon_bench.")
+    cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
+                                                            "cloudbake")
+    print("| scene | photons | order | lattice | bake s | s/view | peak MiB | rel. RMSE | bias | "
+          "ref. noise |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for scene in args.scenes.split(","):
+        shot = load_scene(scene, args.res)
+        if shot is None:
+            continue
+        views = [v["name"] for v in shot["views"]]
+        refs = []
+        for seed in (1, 2):
+            s = json.loads(json.dumps(shot))
+            s["bake"] = {"method": "pathtrace", "samples": args.ref_spp, "seed": seed}
+            out = os.path.join(args.work, "ref", "%s-%d-%d-%d" % (scene, args.res, args.ref_spp,
+                                                                 seed))
+            render(cloudbake, s, out, args.threads)
+            refs.append(out)
+        ref_noise = []
+        for v in views:
+            a, b = (os.path.join(r, v + ".exr") for r in refs)
+            ref_noise.append(compare(cloudbake, a, b, a, args.cloud_alpha)["rel_rmse"] / 2)
+        for photons, order, lattice in SWEEPS[args.sweep]:
+            s = json.loads(json.dumps(shot))
+            s["bake"] = {"method": "photon", "photons": photons, "order": order,
+                         "light_resolution": lattice}
+            out = os.path.join(args.work, scene, "%d-%d-%d" % (photons, order, lattice))
+            stats = render(cloudbake, s, out, args.threads)
+            errs, biases = [], []
+            for v in views:
+                # Against each reference, then the mean: the two differ only by their noise.
+                rows = [compare(cloudbake, os.path.join(out, v + ".exr"),
+                                os.path.join(r, v + ".exr"), os.path.join(r, v + ".exr"),
+                                args.cloud_alpha) for r in refs]
+                errs.append(sum(r["rel_rmse"] for r in rows) / 2)
+                biases.append(sum(r["mean"] / r["reference_mean"] - 1 for r in rows) / 2)
+            view_s = steps(stats, "view")
+            print("| %s | %d | %d | %d | %.2f | %.3f | %.0f | %.4f | %+.4f | %.4f |" %
+                  (scene, photons, order, lattice, sum(steps(stats, "bake")),
+                   sum(view_s) / max(1, len(view_s)), stats["peak_rss_mib"],
+                   sum(errs) / len(errs), sum(biases) / len(biases),
+                   sum(ref_noise) / len(ref_noise)), flush=True)
+    print("work folder: %s" % args.work, file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,363 @@
+#include "core/bake/photon_bake.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "core/bake/bake_lattice.h"
+#include "core/bake/sky_visibility.h"
+#include "core/bake/sun_transmittance.h"
+#include "core/error.h"
+#include "core/format.h"
+#include "core/math/parallel.h"
+#include "core/math/rng.h"
+#include "core/math/sampling.h"
+#include "core/math/sh_basis.h"
+#include "core/math/spherical_harmonics.h"
+#include "core/transport/tracking.h"
+
+namespace cloudbake {
+
+namespace bake_grids {
+std::string photonSh(int i) { return "ms_sh_" + std::to_string(i); }
+std::string photonSkySh(int i) { return "ms_sky_sh_" + std::to_string(i); }
+}  // namespace bake_grids
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr int64_t kBatch = 1024;         // photons per parallel work unit
+constexpr int kRouletteOrder = 3;        // scatterings before the throughput is rouletted
+constexpr int kMaxScatterings = 100000;  // as pathtrace's max_depth: bounds every walk
+// Counts per unit of (weight / photon weight) x (length / voxel size) x Y_i: fixed point with 32
+// fractional bits, so integer sums are exact and their order (the thread schedule) is moot.
+constexpr double kFixedScale = 4294967296.0;
+
+void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions& o) {
+  if (!medium.density) throw InputError("medium: no density field");
+  if (!medium.phase) throw InputError("medium.phase: no phase function given");
+  if (!std::isfinite(medium.extinction) || medium.extinction < 0) {
+    throw InputError("medium.extinction: must be finite and >= 0, got " + str(medium.extinction));
+  }
+  for (int c = 0; c < 3; ++c) {
+    if (!(medium.albedo[c] >= 0 && medium.albedo[c] <= 1)) {
+      throw InputError("medium.albedo: each channel must be in [0, 1], got " + str(medium.albedo));
+    }
+  }
+  if (!isFinite(sun_dir) || std::abs(length(sun_dir) - 1) > 1e-6) {
+    throw InputError("lighting.sun.direction: must be a unit vector");
+  }
+  if (o.photons < 1 || o.photons >= (int64_t(1) << 31)) {
+    throw InputError("photons: must be in 1..2147483647, got " + str(o.photons));
+  }
+  if (o.order < 1 || o.order > kMaxShDegree) {
+    throw InputError("order: must be in 1.." + str(kMaxShDegree) + ", got " + str(o.order));
+  }
+  if (!(o.step >= 0) || !std::isfinite(o.step)) {
+    throw InputError("step: must be finite and >= 0 (0: half a lattice voxel), got " + str(o.step));
+  }
+}
+
+/// Per-voxel SH moments of a radiance field, summed as fixed-point integers.
+class PhotonTally {
+ public:
+  PhotonTally(const BakeGrid& grid, int order, double photon_weight)
+      : grid_(grid),
+        ncoef_(shCount(order)),
+        order_(order),
+        photon_weight_(photon_weight),
+        counts_(grid.voxelCount() * size_t(ncoef_) * 3, 0) {}
+
+  int order() const { return order_; }
+
+  /// Adds the segment p + t d, t in [0, len], carrying weight `beta`, to the voxels it crosses.
+  void addSegment(const Vec3& p, const Vec3& d, double len, const Rgb& beta) {
+    double y[shCount(kMaxShDegree)];
+    shBasisUpTo(order_, d, y);
+    const double h = grid_.voxel_size;
+    Rgb b = beta / photon_weight_ * (kFixedScale / h);
+    walkVoxels(p, d, len, [&](size_t voxel, double l) {
+      int64_t* out = &counts_[voxel * size_t(ncoef_) * 3];
+      for (int i = 0; i < ncoef_; ++i) {
+        for (int c = 0; c < 3; ++c) {
+          const double v = std::clamp(b[c] * l * y[i], -4e18, 4e18);
+          const int64_t q = std::llround(v);
+          if (q != 0) __atomic_fetch_add(&out[i * 3 + c], q, __ATOMIC_RELAXED);
+        }
+      }
+    });
+  }
+
+  /// Writes the radiance coefficients (sum of weight x length x Y_i / voxel volume / photons'
+  /// normalisation already in photon_weight) to channels name(i).
+  void store(BakedLight* bake, std::string (*name)(int)) const {
+    const double h = grid_.voxel_size;
+    const double unit = photon_weight_ * h / kFixedScale / (h * h * h);
+    for (int i = 0; i < ncoef_; ++i) {
+      BakeChannel& ch = bake->add(name(i), 3);
+      for (size_t v = 0; v < grid_.voxelCount(); ++v) {
+        for (int c = 0; c < 3; ++c) {
+          ch.data[v * 3 + c] = float(double(counts_[(v * size_t(ncoef_) + i) * 3 + c]) * unit);
+        }
+      }
+    }
+  }
+
+ private:
+  // Calls fn(voxel index, length) for every lattice voxel the segment crosses (3D DDA).
+  template <typename Fn>
+  void walkVoxels(const Vec3& p, const Vec3& d, double len, Fn&& fn) const {
+    const Bounds3 b = grid_.bounds();
+    double t0, t1;
+    if (!intersectBounds(b, Ray{p, d}, 0, len, &t0, &t1) || !(t1 > t0)) return;
+    const double h = grid_.voxel_size;
+    const int n[3] = {grid_.nx, grid_.ny, grid_.nz};
+    const Vec3 q = (p + d * t0 - b.min) / h;
+    int i[3], step[3];
+    double t_next[3], dt[3];
+    for (int a = 0; a < 3; ++a) {
+      i[a] = std::clamp(int(std::floor(q[a])), 0, n[a] - 1);
+      if (d[a] > 0) {
+        step[a] = 1;
+        t_next[a] = t0 + ((i[a] + 1) - q[a]) * h / d[a];
+        dt[a] = h / d[a];
+      } else if (d[a] < 0) {
+        step[a] = -1;
+        t_next[a] = t0 + (i[a] - q[a]) * h / d[a];
+        dt[a] = -h / d[a];
+      } else {
+        step[a] = 0;
+        t_next[a] = kInf;
+        dt[a] = kInf;
+      }
+    }
+    double t = t0;
+    while (t < t1) {
+      const int a =
+          t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+      const double te = std::min(t_next[a], t1);
+      if (te > t) fn(grid_.index(i[0], i[1], i[2]), te - t);
+      t = te;
+      i[a] += step[a];
+      if (i[a] < 0 || i[a] >= n[a]) break;
+      t_next[a] += dt[a];
+    }
+  }
+
+  const BakeGrid& grid_;
+  int ncoef_;
+  int order_;
+  double photon_weight_;
+  std::vector<int64_t> counts_;
+};
+
+/// Where photons come from: a start ray and its weight (flux per photon).
+struct Emission {
+  Ray ray;
+  double weight = 0;
+};
+
+/// Photons of unit sun irradiance: uniform over the rectangle, perpendicular to the sun, that
+/// covers the lattice's shadow, travelling along -sun_dir. Flux per photon = area / count.
+class SunEmitter {
+ public:
+  SunEmitter(const Bounds3& b, const Vec3& sun_dir, int64_t count) : frame_(Frame::fromZ(sun_dir)) {
+    double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 corner((c & 1) ? b.max.x : b.min.x, (c & 2) ? b.max.y : b.min.y,
+                        (c & 4) ? b.max.z : b.min.z);
+      const Vec3 l = frame_.toLocal(corner);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], l[a]);
+        hi[a] = std::max(hi[a], l[a]);
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      lo_[a] = lo[a];
+      size_[a] = hi[a] - lo[a];
+    }
+    // Start just outside the box on the sun's side.
+    start_z_ = hi[2] + 1e-3 * (size_[0] + size_[1] + size_[2]) + 1e-9;
+    weight_ = size_[0] * size_[1] / double(count);
+  }
+  double weight() const { return weight_; }
+  Emission emit(Rng& rng) const {
+    const double u = rng.uniform(), v = rng.uniform();
+    const Vec3 p = frame_.toWorld(Vec3(lo_[0] + u * size_[0], lo_[1] + v * size_[1], start_z_));
+    return {{p, -frame_.n}, weight_};
+  }
+
+ private:
+  Frame frame_;
+  double lo_[3], size_[3];
+  double start_z_ = 0, weight_ = 0;
+};
+
+/// Photons of a uniform sky of unit radiance: from the box's bounding sphere of radius R,
+/// cosine-distributed inwards; the flux entering a sphere is pi L 4 pi R^2.
+class SkyEmitter {
+ public:
+  SkyEmitter(const Bounds3& b, int64_t count)
+      : centre_((b.min + b.max) * 0.5), radius_(0.5 * length(b.extent()) * (1 + 1e-6) + 1e-9) {
+    weight_ = kPi * 4 * kPi * radius_ * radius_ / double(count);
+  }
+  double weight() const { return weight_; }
+  Emission emit(Rng& rng) const {
+    const Vec3 n = sampleUniformSphere(rng.uniform(), rng.uniform());
+    const Vec3 local = sampleCosineHemisphere(rng.uniform(), rng.uniform());
+    const Vec3 d = Frame::fromZ(-n).toWorld(local);
+    return {{centre_ + n * radius_, d}, weight_};
+  }
+
+ private:
+  Vec3 centre_;
+  double radius_, weight_ = 0;
+};
+
+/// Follows one photon; every segment after its first scattering goes to `tally`.
+class PhotonTracer {
+ public:
+  PhotonTracer(const Medium& medium, const MajorantGrid& grid)
+      : medium_(medium), grid_(grid), lookup_(medium.density->lookup()) {}
+
+  void trace(const Emission& e, Rng& rng, PhotonTally* tally) {
+    Ray ray = e.ray;
+    Rgb beta(e.weight);
+    for (int order = 0; order <= kMaxScatterings; ++order) {
+      const Collision c =
+          decompositionTrack(grid_, *lookup_, medium_.extinction, ray, 0, kInf, rng);
+      if (order > 0) tally->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
+      if (!c.hit) return;
+      beta *= medium_.albedo;
+      const PhaseSample ps = medium_.phase->sample(ray.d, rng.uniform(), rng.uniform());
+      if (!(ps.pdf > 0)) return;
+      beta *= ps.value / ps.pdf;
+      if (!(maxComponent(beta) > 0)) return;
+      if (order + 1 >= kRouletteOrder) {
+        const double q = std::min(1.0, maxComponent(beta) / e.weight);
+        if (q < 1) {
+          if (!(rng.uniform() < q)) return;
+          beta /= q;
+        }
+      }
+      ray = {c.p, ps.direction};
+    }
+  }
+
+ private:
+  const Medium& medium_;
+  const MajorantGrid& grid_;
+  std::unique_ptr<DensityField::Lookup> lookup_;
+};
+
+// Traces `count` photons from `emit` into `tally` in parallel batches, one random stream per
+// photon; progress(fraction) false cancels.
+template <typename Emitter>
+void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter& emitter,
+                  int64_t count, uint64_t seed, uint64_t stream, PhotonTally* tally,
+                  const std::function<bool(double)>& progress) {
+  ParallelOptions po;
+  po.cancelled = [&](double f) { return progress && !progress(f); };
+  po.cancelled_message = "bake cancelled";
+  const int64_t batches = (count + kBatch - 1) / kBatch;
+  parallelFor(
+      0, batches,
+      [&](int64_t b) {
+        PhotonTracer tracer(medium, grid);
+        Rng rng;
+        for (int64_t i = b * kBatch; i < std::min(count, (b + 1) * kBatch); ++i) {
+          rng.setSeed(mixBits(seed, uint64_t(i)), stream);
+          tracer.trace(emitter.emit(rng), rng, tally);
+        }
+      },
+      po);
+}
+
+// Cd = (sun_transmittance + fluence of the scattered sunlight) / (4 pi), the fluence being
+// sqrt(4 pi) times coefficient 0 (Y_00 = 1 / sqrt(4 pi)): the isotropic DCC preview.
+void addPhotonMeanRadiance(BakedLight* bake) {
+  const BakeChannel* t = bake->find(bake_grids::kSunTransmittance);
+  const BakeChannel* l0 = bake->find(bake_grids::photonSh(0));
+  BakeChannel& cd = bake->add(bake_grids::kCd, 3);
+  const double inv4pi = 1 / (4 * kPi);
+  for (size_t v = 0; v < bake->grid.voxelCount(); ++v) {
+    for (int c = 0; c < 3; ++c) {
+      const double fluence = l0 ? std::max(0.0, kSqrt4Pi * l0->data[v * 3 + c]) : 0.0;
+      cd.data[v * 3 + c] = float(((t ? t->data[v] : 0.0) + fluence) * inv4pi);
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degree) {
+  // Midpoint rule in theta: fine enough for a droplet's forward peak (about 1 degree wide).
+  constexpr int kSteps = 20000;
+  std::vector<Rgb> out(size_t(degree) + 1, Rgb(0.0));
+  std::vector<double> p(size_t(degree) + 1);
+  const double dtheta = kPi / kSteps;
+  for (int k = 0; k < kSteps; ++k) {
+    const double theta = (k + 0.5) * dtheta;
+    const double mu = std::cos(theta);
+    const Rgb f = phase.eval(mu) * (2 * kPi * std::sin(theta) * dtheta);
+    legendreP(degree, mu, p.data());
+    for (int l = 0; l <= degree; ++l) out[size_t(l)] += f * p[size_t(l)];
+  }
+  return out;
+}
+
+BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions& options,
+                      const BakeProgressFn& progress) {
+  validate(medium, sun_dir, options);
+  auto stage = [&](double lo, double span, const char* name) {
+    return [&progress, lo, span, name](double f) {
+      return !progress || progress(lo + span * f, name);
+    };
+  };
+  if (progress && !progress(0, "lattice")) throw Cancelled("bake cancelled");
+  auto t0 = std::chrono::steady_clock::now();
+  BakedLight bake = makeBakeLattice(*medium.density, options.light_resolution);
+  bake.method = "photon";
+  bake.sun_direction = sun_dir;
+  computeSunTransmittance(bake, sun_dir, medium.extinction, [&](double f, const std::string& s) {
+    return !progress || progress(0.05 + 0.1 * f, s);
+  });
+  if (options.sky) {
+    computeSkyVisibility(bake, medium.extinction, [&](double f, const std::string& s) {
+      return !progress || progress(0.15 + 0.1 * f, s);
+    });
+  }
+  bake.metadata["cloudbake:seconds_lattice"] = str(secondsSince(t0));
+  t0 = std::chrono::steady_clock::now();
+  const auto grid = medium.density->trackingGrid({medium.extinction, 0});
+  const Bounds3 box = bake.grid.bounds();
+  const double sky_share = options.sky ? 0.35 : 0.0;
+  {
+    const SunEmitter sun(box, sun_dir, options.photons);
+    PhotonTally tally(bake.grid, options.order, sun.weight());
+    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally,
+                 stage(0.25, 0.75 - sky_share, "sun photons"));
+    tally.store(&bake, bake_grids::photonSh);
+  }
+  if (options.sky) {
+    const SkyEmitter sky(box, options.photons);
+    PhotonTally tally(bake.grid, options.order, sky.weight());
+    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally,
+                 stage(1.0 - sky_share, sky_share, "sky photons"));
+    tally.store(&bake, bake_grids::photonSkySh);
+  }
+  bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
+  bake.metadata["cloudbake:angular_model"] = "sh";
+  bake.metadata["cloudbake:photon_order"] = str(options.order);
+  bake.metadata["cloudbake:photons"] = str(options.photons);
+  bake.metadata["cloudbake:step"] = str(options.step);
+  bake.metadata["cloudbake:extinction"] = str(medium.extinction);
+  bake.metadata["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";
+  addPhotonMeanRadiance(&bake);
+  bake.trimToSupport();
+  if (progress && !progress(1, "done")) throw Cancelled("bake cancelled");
+  return bake;
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,60 @@
+// Method `photon`: multiply scattered light traced from the sun and the sky as photons and
+// tallied per lattice voxel in spherical harmonics; single scattering exact at render time.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/bake/bake_progress.h"
+#include "core/bake/baked_light.h"
+#include "core/phase/phase_function.h"
+#include "core/transport/scene.h"
+
+namespace cloudbake {
+
+namespace bake_grids {
+/// Vec3 (RGB): coefficient i (l * l + l + m, core/math/sh_basis.h) of the radiance of sunlight
+/// that has scattered at least once, per unit sun irradiance (W m^-2 sr^-1 per W m^-2, times
+/// the basis' sr^1/2 normalisation: integral of L Y_i over directions of travel).
+std::string photonSh(int i);
+/// Vec3 (RGB): the same for sky light, per unit radiance of a uniform sky.
+std::string photonSkySh(int i);
+}  // namespace bake_grids
+
+/// Knobs of method `photon` (docs/shot-format.md).
+struct PhotonBakeOptions {
+  /// Lattice voxels along the longest side of the volume's bounds, [8, 1024].
+  int light_resolution = 64;
+  /// Photons from the sun, and as many from the sky when it is not black, [1, 2^31).
+  int64_t photons = 1 << 18;
+  /// Highest spherical-harmonic degree of the tally, [1, 8]: (order + 1)^2 coefficients.
+  int order = 3;
+  uint64_t seed = 1;  ///< photon streams: the same bake at any thread count
+  /// Ray-march step of the view renders, world units; 0: half a lattice voxel.
+  double step = 0;
+  bool sky = true;  ///< trace sky photons and bake sky_visibility (false for a black sky)
+};
+
+/// p_l = 2 pi integral of p(mu) P_l(mu) dmu for l = 0..degree, per channel: the Funk-Hecke
+/// factors with which a phase function convolves degree l of a spherical-harmonic expansion
+/// (p_0 = 1 for a normalised phase, p_1 = its mean cosine g). Integrated in theta on a fine grid
+/// so droplet peaks are resolved.
+std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degree);
+
+/// Bakes `medium` for a sun in direction `sun_dir` (unit, towards the sun): the lattice, the
+/// sun_transmittance grid (exact single scattering at render time), sky_visibility when
+/// options.sky, and the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
+/// scattered at least once. Photons are emitted per unit sun irradiance over the lattice's
+/// shadow (and per unit radiance of a uniform sky from its bounding sphere), tracked by
+/// decomposition tracking through the medium's own density (core/transport/tracking.h), scatter
+/// with the albedo and the exact phase function (throughput value / pdf per channel), are
+/// rouletted on their throughput after three scatterings, and add every segment after their
+/// first scattering to the voxels it crosses (track-length estimator: segment length x weight x
+/// Y_i(direction of travel) / voxel volume). Tallies are fixed-point integers added atomically,
+/// so the bake is the same at any thread count. InputError for bad options or medium,
+/// Cancelled on request.
+BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions& options,
+                      const BakeProgressFn& progress = {});
+
+}  // namespace cloudbake

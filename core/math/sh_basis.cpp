@@ -1,0 +1,54 @@
+#include "core/math/sh_basis.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace cloudbake {
+namespace {
+
+// K_lm = sqrt((2l + 1) / (4 pi) (l - m)! / (l + m)!), the orthonormalising constant.
+double shNorm(int l, int m) {
+  double ratio = 1;  // (l - m)! / (l + m)!
+  for (int k = l - m + 1; k <= l + m; ++k) ratio /= k;
+  return std::sqrt((2 * l + 1) / (4 * kPi) * ratio);
+}
+
+}  // namespace
+
+void legendreP(int degree, double x, double* p) {
+  p[0] = 1;
+  if (degree >= 1) p[1] = x;
+  for (int l = 2; l <= degree; ++l) p[l] = ((2 * l - 1) * x * p[l - 1] - (l - 1) * p[l - 2]) / l;
+}
+
+void shBasisUpTo(int degree, const Vec3& w, double* y) {
+  const double z = std::clamp(w.z, -1.0, 1.0);
+  const double s = std::sqrt(std::max(0.0, 1 - z * z));  // sin theta
+  const double phi = std::atan2(w.y, w.x);
+  // P_l^m(z) for every l >= m, from P_m^m = (2m - 1)!! s^m, P_{m+1}^m = (2m + 1) z P_m^m and
+  // (l - m) P_l^m = (2l - 1) z P_{l-1}^m - (l + m - 1) P_{l-2}^m.
+  double pmm = 1;
+  for (int m = 0; m <= degree; ++m) {
+    if (m > 0) pmm *= (2 * m - 1) * s;
+    double p_prev = 0, p = pmm;
+    for (int l = m; l <= degree; ++l) {
+      if (l == m + 1) {
+        p_prev = p;
+        p = (2 * m + 1) * z * pmm;
+      } else if (l > m + 1) {
+        const double next = ((2 * l - 1) * z * p - (l + m - 1) * p_prev) / (l - m);
+        p_prev = p;
+        p = next;
+      }
+      const double k = shNorm(l, m);
+      if (m == 0) {
+        y[l * l + l] = k * p;
+      } else {
+        y[l * l + l + m] = std::sqrt(2.0) * k * std::cos(m * phi) * p;
+        y[l * l + l - m] = std::sqrt(2.0) * k * std::sin(m * phi) * p;
+      }
+    }
+  }
+}
+
+}  // namespace cloudbake

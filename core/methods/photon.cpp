@@ -1,0 +1,105 @@
+#include "core/methods/photon.h"
+
+#include "core/format.h"
+#include "core/math/sh_basis.h"
+#include "core/methods/common.h"
+
+namespace cloudbake {
+namespace {
+
+std::vector<Knob> photonKnobs() {
+  const PhotonBakeOptions d;
+  return {
+      stepKnob(),
+      lightResolutionKnob(d.light_resolution),
+      Knob::integer("photons", 1000, int64_t(1) << 28, d.photons,
+                    "photons traced from the sun (and as many from the sky when it is not "
+                    "black): the tally's noise falls as 1 / sqrt(photons)"),
+      Knob::integer("order", 1, kMaxShDegree, d.order,
+                    "highest spherical-harmonic degree of the tallied radiance: (order + 1)^2 "
+                    "coefficients per voxel and colour channel"),
+  };
+}
+
+class PhotonMethod final : public BakeMethod {
+ public:
+  PhotonMethod() {
+    info_.name = "photon";
+    info_.summary =
+        "multiply scattered light traced as photons from the sun and the sky, tallied per voxel "
+        "in spherical harmonics by the track-length estimator; exact single scattering and a "
+        "Funk-Hecke convolution with the phase at render time (converges to the reference as "
+        "photons, order and resolution grow)";
+    info_.citation =
+        "Jensen and Christensen 1998, \"Efficient simulation of light transport in scenes with "
+        "participating media using photon maps\" (SIGGRAPH); Evans 1998, \"The spherical "
+        "harmonics discrete ordinate method for three-dimensional atmospheric radiative "
+        "transfer\" (J. Atmos. Sci. 55), for radiance fields in spherical harmonics";
+    info_.version = 1;
+    info_.default_samples = 1;
+    info_.bakes_light = true;
+    info_.knobs = photonKnobs();
+  }
+  const MethodInfo& info() const override { return info_; }
+
+  nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {
+    // The photons scatter with the albedo and the phase: the whole medium is baked.
+    return {{"light",
+             {{"medium", canonical["medium"]},
+              {"seed", shot.bake.seed},
+              {"sky", needsSky(shot)},
+              {"knobs", bakeKnobMaterial(*this, shot)}}}};
+  }
+
+  MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,
+                  const std::function<bool(const std::string&)>& lookup) const override {
+    const PhotonBakeOptions o = photonBakeOptions(shot);
+    std::vector<std::string> lines = lightBakePlanLines(shot, o.light_resolution);
+    lines.push_back("multiple scattering: " + std::to_string(o.photons) + " sun photons" +
+                    (o.sky ? " and as many sky photons" : "") +
+                    ", tallied in spherical harmonics to degree " + std::to_string(o.order) + " (" +
+                    std::to_string(shCount(o.order)) + " coefficients per voxel)");
+    return lightBakePlan(shot, keys, lookup, std::move(lines));
+  }
+
+  void checkLimits(const ShotSpec& shot, const MethodLimits& limits,
+                   const std::string& source) const override {
+    const PhotonBakeOptions o = photonBakeOptions(shot);
+    // Per voxel: the fixed-point counts (two floats' worth each) and the stored floats, RGB,
+    // per coefficient and per tally, plus the lattice's own grids.
+    const double tallies = o.sky ? 2 : 1;
+    checkLatticeVoxels(o.light_resolution, 3 + tallies * shCount(o.order) * 3 * 3,
+                       "a photon bake lattice with its spherical-harmonic tallies", limits, source);
+  }
+
+  void run(MethodRun& run) const override {
+    const PhotonBakeOptions o = photonBakeOptions(run.shot());
+    runLightBake(run, [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {
+      return bakePhoton(medium, sun, o, progress);
+    });
+  }
+
+ private:
+  MethodInfo info_;
+};
+
+}  // namespace
+
+const BakeMethod& photonMethod() {
+  static const PhotonMethod kMethod;
+  return kMethod;
+}
+
+PhotonBakeOptions photonBakeOptions(const ShotSpec& shot) {
+  const KnobValues& k = shot.bake.knobs;
+  PhotonBakeOptions o;
+  o.light_resolution = int(k.integer("light_resolution"));
+  o.photons = k.integer("photons");
+  o.order = int(k.integer("order"));
+  o.step = k.optionalNumber("step").value_or(0.0);
+  o.sky = needsSky(shot);
+  o.seed = shot.bake.seed;
+  return o;
+}
+
+}  // namespace cloudbake
