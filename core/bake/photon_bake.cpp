@@ -22,12 +22,15 @@ namespace cloudbake {
 namespace bake_grids {
 std::string photonSh(int i) { return "ms_sh_" + std::to_string(i); }
 std::string photonSkySh(int i) { return "ms_sky_sh_" + std::to_string(i); }
+std::string photonSkyDirectSh(int i) { return "ss_sky_sh_" + std::to_string(i); }
 }  // namespace bake_grids
 
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr int64_t kBatch = 1024;         // photons per parallel work unit
+// Photons per parallel work unit: few, so a cancel is seen within about a second even where
+// every photon scatters thousands of times.
+constexpr int64_t kBatch = 64;
 constexpr int kRouletteOrder = 3;        // scatterings before the throughput is rouletted
 constexpr int kMaxScatterings = 100000;  // as pathtrace's max_depth: bounds every walk
 // Counts per unit of (weight / photon weight) x (length / voxel size) x Y_i: fixed point with 32
@@ -221,13 +224,15 @@ class PhotonTracer {
   PhotonTracer(const Medium& medium, const MajorantGrid& grid)
       : medium_(medium), grid_(grid), lookup_(medium.density->lookup()) {}
 
-  void trace(const Emission& e, Rng& rng, PhotonTally* tally) {
+  /// `direct` (optional) takes the segments before the first scattering.
+  void trace(const Emission& e, Rng& rng, PhotonTally* tally, PhotonTally* direct) {
     Ray ray = e.ray;
     Rgb beta(e.weight);
     for (int order = 0; order <= kMaxScatterings; ++order) {
       const Collision c =
           decompositionTrack(grid_, *lookup_, medium_.extinction, ray, 0, kInf, rng);
-      if (order > 0) tally->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
+      PhotonTally* to = order > 0 ? tally : direct;
+      if (to) to->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
       if (!c.hit) return;
       beta *= medium_.albedo;
       const PhaseSample ps = medium_.phase->sample(ray.d, rng.uniform(), rng.uniform());
@@ -256,7 +261,7 @@ class PhotonTracer {
 template <typename Emitter>
 void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter& emitter,
                   int64_t count, uint64_t seed, uint64_t stream, PhotonTally* tally,
-                  const std::function<bool(double)>& progress) {
+                  PhotonTally* direct, const std::function<bool(double)>& progress) {
   ParallelOptions po;
   po.cancelled = [&](double f) { return progress && !progress(f); };
   po.cancelled_message = "bake cancelled";
@@ -268,7 +273,7 @@ void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter&
         Rng rng;
         for (int64_t i = b * kBatch; i < std::min(count, (b + 1) * kBatch); ++i) {
           rng.setSeed(mixBits(seed, uint64_t(i)), stream);
-          tracer.trace(emitter.emit(rng), rng, tally);
+          tracer.trace(emitter.emit(rng), rng, tally, direct);
         }
       },
       po);
@@ -336,16 +341,18 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   {
     const SunEmitter sun(box, sun_dir, options.photons);
     PhotonTally tally(bake.grid, options.order, sun.weight());
-    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally,
+    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally, nullptr,
                  stage(0.25, 0.75 - sky_share, "sun photons"));
     tally.store(&bake, bake_grids::photonSh);
   }
   if (options.sky) {
     const SkyEmitter sky(box, options.photons);
     PhotonTally tally(bake.grid, options.order, sky.weight());
-    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally,
+    PhotonTally direct(bake.grid, options.order, sky.weight());
+    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally, &direct,
                  stage(1.0 - sky_share, sky_share, "sky photons"));
     tally.store(&bake, bake_grids::photonSkySh);
+    direct.store(&bake, bake_grids::photonSkyDirectSh);
   }
   bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
   bake.metadata["cloudbake:angular_model"] = "sh";

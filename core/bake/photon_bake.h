@@ -20,6 +20,9 @@ namespace bake_grids {
 std::string photonSh(int i);
 /// Vec3 (RGB): the same for sky light, per unit radiance of a uniform sky.
 std::string photonSkySh(int i);
+/// Vec3 (RGB): the same for sky light not yet scattered (the sky seen through the cloud): its
+/// convolution with the phase is the sky's single scattering, view-dependent for any phase.
+std::string photonSkyDirectSh(int i);
 }  // namespace bake_grids
 
 /// Knobs of method `photon` (docs/shot-format.md).
@@ -44,13 +47,14 @@ std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degre
 
 /// Bakes `medium` for a sun in direction `sun_dir` (unit, towards the sun): the lattice, the
 /// sun_transmittance grid (exact single scattering at render time), sky_visibility when
-/// options.sky, and the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
-/// scattered at least once. Photons are emitted per unit sun irradiance over the lattice's
+/// options.sky, the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
+/// scattered at least once, and photonSkyDirectSh(i) of the sky light that has not. Photons are emitted per unit sun irradiance over the lattice's
 /// shadow (and per unit radiance of a uniform sky from its bounding sphere), tracked by
 /// decomposition tracking through the medium's own density (core/transport/tracking.h), scatter
 /// with the albedo and the exact phase function (throughput value / pdf per channel), are
 /// rouletted on their throughput after three scatterings, and add every segment after their
-/// first scattering to the voxels it crosses (track-length estimator: segment length x weight x
+/// first scattering (for the sky: every segment, the ones before it to the direct tally) to the
+/// voxels it crosses (track-length estimator: segment length x weight x
 /// Y_i(direction of travel) / voxel volume). Tallies are fixed-point integers added atomically,
 /// so the bake is the same at any thread count. InputError for bad options or medium,
 /// Cancelled on request.

@@ -24,6 +24,11 @@
 //                         2.4x too bright for HG 0.75); P1 is within 15% there.
 //                       A missing mie_ratio grid means R = 0, and where light_dir is zero (or
 //                       missing) only the isotropic part;
+//                       "sh" (method photon): J_ms = E sum over l, m of p_l L_lm(x) Y_lm(-d),
+//                       the Funk-Hecke convolution of the photons' radiance tally ms_sh_* with
+//                       the phase's Legendre coefficients p_l, clamped at 0; the sky's tallies
+//                       ms_sky_sh_* (scattered) and ss_sky_sh_* (unscattered: the sky's single
+//                       scattering, replacing the ambient term) likewise, per unit sky radiance;
 //   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere;
 //                       or, when the bake holds sky_transmittance_sh_0..15 (method
 //                       precomputed), seed 002's Eq. 5: J_sky = integral Lsky(w) T(x, w)
@@ -295,6 +300,7 @@ class BakeMarcher {
     }
     if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
     if (s.sky > 0) sum->sky += scale_sky_ * s.sky;
+    sum->sky += scale_sky_ * s.sky_ss;
     if (sky_sh_) {
       double wts[3 * kShCoefficients];
       sky_sh_->weights(ray.d, wts);
@@ -321,6 +327,7 @@ class BakeMarcher {
     double ss = 0, sky = 0;               // integrals of T_v sigma_t Tsun and T_v sigma_t Vsky
     Rgb ms;                               // integral of T_v sigma_t J_ms, scaled
     Rgb sky_ms;                           // integral of T_v sigma_t Co_sky / (4 pi)
+    Rgb sky_ss;                           // integral of T_v sigma_t J_sky (photon tally)
     double sky_sh[kShCoefficients] = {};  // integrals of T_v sigma_t T_sky,i (Eq. 5)
     Rgb shw[shCount(kMaxShDegree)];       // photon tallies: p_l Y_lm(-d) per coefficient
     bool done = false;
@@ -347,6 +354,13 @@ class BakeMarcher {
     if (!sky.black() && bake.find(bake_grids::photonSkySh(0))) {
       for (int i = 0; i < shCount(order); ++i) {
         msky_sh_.push_back(channel(bake, bake_grids::photonSkySh(i).c_str(), 3, true, ""));
+      }
+    }
+    // The sky's single scattering from the tally of its unscattered light, for the view's
+    // direction and the whole phase, instead of the isotropic ambient term.
+    if (!sky.black() && bake.find(bake_grids::photonSkyDirectSh(0))) {
+      for (int i = 0; i < shCount(order); ++i) {
+        ssky_sh_.push_back(channel(bake, bake_grids::photonSkyDirectSh(i).c_str(), 3, true, ""));
       }
     }
     phase_l_ = phaseLegendreCoefficients(*medium.phase, order);
@@ -501,16 +515,18 @@ class BakeMarcher {
   struct Source {
     double tsun = 0, vsky = 0;
     Rgb ms, csky;  // csky: Co_sky / (4 pi)
+    Rgb ssky;      // photon: the sky's single scattering per unit sky radiance
     float tsh[kShCoefficients] = {};
   };
 
   void source(const Cell& c, const Vec3& d, const Rgb* shw, Source* s) const {
     s->tsun = read(tsun_, c);
     if (!msh_.empty()) s->ms = shSource(msh_, c, shw);
+    if (!ssky_sh_.empty()) s->ssky = shSource(ssky_sh_, c, shw);
     if (!msky_sh_.empty()) s->csky = shSource(msky_sh_, c, shw);
     if (sky_sh_) {
       for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = float(read(sh_[size_t(i)], c));
-    } else if (vsky_) {
+    } else if (vsky_ && ssky_sh_.empty()) {
       s->vsky = read(vsky_, c);
     }
     if (csky_) {
@@ -614,6 +630,7 @@ class BakeMarcher {
         s->sky += a0 * src_prev.vsky + a1 * src_cur.vsky;
         if (co_ || !msh_.empty()) s->ms += (src_prev.ms * a0 + src_cur.ms * a1) * scale_ms_;
         if (csky_ || !msky_sh_.empty()) s->sky_ms += src_prev.csky * a0 + src_cur.csky * a1;
+        if (!ssky_sh_.empty()) s->sky_ss += src_prev.ssky * a0 + src_cur.ssky * a1;
         if (sky_sh_) {
           for (int q = 0; q < kShCoefficients; ++q) {
             s->sky_sh[q] += a0 * src_prev.tsh[q] + a1 * src_cur.tsh[q];
@@ -647,7 +664,7 @@ class BakeMarcher {
   std::array<const float*, kShCoefficients> sh_{};
   std::optional<SkyShScatter> sky_sh_;
   int sh_order_ = 0;  // photon tallies' degree (0: none)
-  std::vector<const float*> msh_, msky_sh_;
+  std::vector<const float*> msh_, msky_sh_, ssky_sh_;
   std::vector<Rgb> phase_l_;
   Rgb albedo_;
   const SkyLight& sky_;

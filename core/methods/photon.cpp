@@ -56,7 +56,9 @@ class PhotonMethod final : public BakeMethod {
     const PhotonBakeOptions o = photonBakeOptions(shot);
     std::vector<std::string> lines = lightBakePlanLines(shot, o.light_resolution);
     lines.push_back("multiple scattering: " + std::to_string(o.photons) + " sun photons" +
-                    (o.sky ? " and as many sky photons" : "") +
+                    (o.sky ? " and as many sky photons (their unscattered light too: the sky's "
+                             "single scattering)"
+                           : "") +
                     ", tallied in spherical harmonics to degree " + std::to_string(o.order) + " (" +
                     std::to_string(shCount(o.order)) + " coefficients per voxel)");
     return lightBakePlan(shot, keys, lookup, std::move(lines));
@@ -67,7 +69,7 @@ class PhotonMethod final : public BakeMethod {
     const PhotonBakeOptions o = photonBakeOptions(shot);
     // Per voxel: the fixed-point counts (two floats' worth each) and the stored floats, RGB,
     // per coefficient and per tally, plus the lattice's own grids.
-    const double tallies = o.sky ? 2 : 1;
+    const double tallies = o.sky ? 3 : 1;  // sun; sky scattered and unscattered
     checkLatticeVoxels(o.light_resolution, 3 + tallies * shCount(o.order) * 3 * 3,
                        "a photon bake lattice with its spherical-harmonic tallies", limits, source);
   }

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/bake/render_from_bake.h"
 #include "core/error.h"
@@ -92,23 +93,26 @@ TEST(PhotonBake, LegendreCoefficientsOfHgArePowersOfG) {
   EXPECT_NEAR(iso[2].z, 0.0, 1e-6);
 }
 
-// A white, isotropic sphere under a uniform sky and no sun: every ray sees the sky's radiance,
-// scattered or not. The sky's single scattering (sky_visibility), the photons' tally of the
-// scattered sky light and the background must add up to it.
+// A white sphere under a uniform sky and no sun: every ray sees the sky's radiance, scattered
+// or not, for any phase function. The sky's single scattering (the tally of its unscattered
+// light), the tally of its scattered light and the background must add up to it.
 TEST(PhotonBake, WhiteFurnaceSeesTheSky) {
-  const Medium m = sphere(3, Rgb(1.0), std::make_shared<IsotropicPhase>());
-  const BakedLight bake = bakePhoton(m, Vec3(0, 0, 1), small(200000, 1));
-  Sun sun;
-  sun.direction = bake.sun_direction;
-  sun.irradiance = Rgb(0.0);
-  Sky sky;
-  sky.radiance = Rgb(0.2);
-  const RenderLayers l = renderFromBake(bake, m, sun, sky, perspectiveCamera(16), {});
-  const double beauty = cloudMean(l, l.beauty), multiple = cloudMean(l, l.multiple);
-  EXPECT_NEAR(beauty, 0.2, 0.2 * 0.04);
-  EXPECT_GT(multiple, 0.2 * 0.2) << "the test must see multiple scattering";
-  for (int y = 0; y < 16; ++y)
-    for (int x = 0; x < 16; ++x) EXPECT_LE(l.beauty.at(x, y)[0], 0.2 * 1.15);
+  for (const auto& phase : std::vector<std::shared_ptr<const PhaseFunction>>{
+           std::make_shared<IsotropicPhase>(), std::make_shared<HenyeyGreensteinPhase>(0.8)}) {
+    const Medium m = sphere(3, Rgb(1.0), phase);
+    const BakedLight bake = bakePhoton(m, Vec3(0, 0, 1), small(200000, 2));
+    Sun sun;
+    sun.direction = bake.sun_direction;
+    sun.irradiance = Rgb(0.0);
+    Sky sky;
+    sky.radiance = Rgb(0.2);
+    const RenderLayers l = renderFromBake(bake, m, sun, sky, perspectiveCamera(16), {});
+    const double beauty = cloudMean(l, l.beauty), multiple = cloudMean(l, l.multiple);
+    EXPECT_NEAR(beauty, 0.2, 0.2 * 0.04) << "g " << phase->meanCosine().x;
+    EXPECT_GT(multiple, 0.2 * 0.2) << "the test must see multiple scattering";
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) EXPECT_LE(l.beauty.at(x, y)[0], 0.2 * 1.15);
+  }
 }
 
 // The photons' multiply scattered sunlight against the path tracer's, same scene.
