@@ -48,15 +48,15 @@ std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degre
 /// Bakes `medium` for a sun in direction `sun_dir` (unit, towards the sun): the lattice, the
 /// sun_transmittance grid (exact single scattering at render time), sky_visibility when
 /// options.sky, the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
-/// scattered at least once, and photonSkyDirectSh(i) of the sky light that has not. Photons are emitted per unit sun irradiance over the lattice's
-/// shadow (and per unit radiance of a uniform sky from its bounding sphere), tracked by
-/// decomposition tracking through the medium's own density (core/transport/tracking.h), scatter
-/// with the albedo and the exact phase function (throughput value / pdf per channel), are
-/// rouletted on their throughput after three scatterings, and add every segment after their
-/// first scattering (for the sky: every segment, the ones before it to the direct tally) to the
-/// voxels it crosses (track-length estimator: segment length x weight x
-/// Y_i(direction of travel) / voxel volume). Tallies are fixed-point integers added atomically,
-/// so the bake is the same at any thread count. InputError for bad options or medium,
+/// scattered at least once, and photonSkyDirectSh(i) of the sky light that has not. Photons are
+/// emitted per unit sun irradiance over the lattice's shadow (and per unit radiance of a uniform
+/// sky from its bounding sphere), tracked by decomposition tracking through the medium's own
+/// density (core/transport/tracking.h), scatter with the albedo and the exact phase function
+/// (throughput value / pdf per channel), are rouletted on their throughput after three scatterings,
+/// and add every segment after their first scattering (for the sky: every segment, the ones before
+/// it to the direct tally) to the voxels it crosses (track-length estimator: segment length x
+/// weight x Y_i(direction of travel) / voxel volume). Tallies are fixed-point integers added
+/// atomically, so the bake is the same at any thread count. InputError for bad options or medium,
 /// Cancelled on request.
 BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions& options,
                       const BakeProgressFn& progress = {});
