@@ -70,8 +70,11 @@ class PhotonMethod final : public BakeMethod {
     // Per voxel: the fixed-point counts (two floats' worth each) and the stored floats, RGB,
     // per coefficient and per tally, plus the lattice's own grids.
     const double tallies = o.sky ? 3 : 1;  // sun; sky scattered and unscattered
-    checkLatticeVoxels(o.light_resolution, 3 + tallies * shCount(o.order) * 3 * 3,
-                       "a photon bake lattice with its spherical-harmonic tallies", limits, source);
+    checkLatticeVoxels(
+        o.light_resolution, 3 + tallies * shCount(o.order) * 3 * 3,
+        "a photon bake lattice with its tallies of " + std::to_string(shCount(o.order)) +
+            " spherical-harmonic coefficients (/bake/order " + std::to_string(o.order) + ")",
+        limits, source);
   }
 
   void run(MethodRun& run) const override {

@@ -1,0 +1,83 @@
+// The knobs of methods photon and pathtrace added this round: parsed, validated with the field
+// named, checked against the server's limits, and described in the dry-run plan.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "core/error.h"
+#include "core/methods/pathtrace.h"
+#include "core/methods/photon.h"
+#include "core/shot/shot_parser.h"
+
+namespace cloudbake {
+namespace {
+
+std::string shot(const std::string& bake) {
+  return R"({"version": 1, "name": "k",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": 3, "albedo": 0.95, "phase": {"type": "hg", "g": 0.6}},
+    "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]},
+                 "sky": {"radiance": [0.1, 0.1, 0.1]}},
+    "bake": )" +
+         bake + R"(,
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [8, 8]}]})";
+}
+
+void expectRejected(const std::string& bake, const std::string& field) {
+  try {
+    parseShot(shot(bake), "");
+    ADD_FAILURE() << bake << ": accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(field), std::string::npos) << e.what();
+  }
+}
+
+TEST(PhotonKnobs, ParsedAndValidated) {
+  const ShotSpec s = parseShot(
+      shot(R"({"method": "photon", "photons": 5000, "order": 5, "light_resolution": 40})"), "");
+  const PhotonBakeOptions o = photonBakeOptions(s);
+  EXPECT_EQ(o.photons, 5000);
+  EXPECT_EQ(o.order, 5);
+  EXPECT_EQ(o.light_resolution, 40);
+  EXPECT_TRUE(o.sky);
+  expectRejected(R"({"method": "photon", "order": 9})", "/bake/order");
+  expectRejected(R"({"method": "photon", "order": 0})", "/bake/order");
+  expectRejected(R"({"method": "photon", "photons": 10})", "/bake/photons");
+  expectRejected(R"({"method": "photon", "photons": "many"})", "/bake/photons");
+  expectRejected(R"({"method": "photon", "light_resolution": 4})", "/bake/light_resolution");
+}
+
+TEST(PhotonKnobs, LimitsNameTheLatticeAndTheOrder) {
+  const ShotSpec s = parseShot(shot(R"({"method": "photon", "order": 8})"), "");
+  MethodLimits limits;
+  limits.max_voxels = 64 * 64 * 64;
+  try {
+    photonMethod().checkLimits(s, limits, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("/bake/light_resolution"), std::string::npos) << m;
+    EXPECT_NE(m.find("/bake/order 8"), std::string::npos) << m;
+  }
+  limits.max_voxels = 0;  // no limit
+  EXPECT_NO_THROW(photonMethod().checkLimits(s, limits, "shot.json"));
+}
+
+TEST(PathtraceKnobs, TrackingAndMajorantCell) {
+  const ShotSpec s =
+      parseShot(shot(R"({"method": "pathtrace", "tracking": "delta", "majorant_cell": 4})"), "");
+  const PathTracerOptions o = pathTracerOptions(s, 1);
+  EXPECT_FALSE(o.decomposition_tracking);
+  EXPECT_EQ(o.majorant_cell, 4);
+  const PathTracerOptions d =
+      pathTracerOptions(parseShot(shot(R"({"method": "pathtrace"})"), ""), 1);
+  EXPECT_TRUE(d.decomposition_tracking);
+  EXPECT_EQ(d.majorant_cell, 0);
+  expectRejected(R"({"method": "pathtrace", "majorant_cell": 3})", "/bake/majorant_cell");
+  expectRejected(R"({"method": "pathtrace", "majorant_cell": 128})", "/bake/majorant_cell");
+  expectRejected(R"({"method": "pathtrace", "tracking": "ratio"})", "/bake/tracking");
+}
+
+}  // namespace
+}  // namespace cloudbake
