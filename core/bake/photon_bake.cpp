@@ -73,6 +73,11 @@ class PhotonTally {
         counts_(grid.voxelCount() * size_t(ncoef_) * 3, 0) {}
 
   int order() const { return order_; }
+  int coefficients() const { return ncoef_; }
+  /// The raw fixed-point sum of coefficient i, channel c, at voxel v (a common scale).
+  double count(size_t v, int i, int c) const {
+    return double(counts_[(v * size_t(ncoef_) + size_t(i)) * 3 + size_t(c)]);
+  }
 
   /// Adds the segment p + t d, t in [0, len], carrying weight `beta`, to the voxels it crosses.
   void addSegment(const Vec3& p, const Vec3& d, double len, const Rgb& beta) {
@@ -224,8 +229,10 @@ class PhotonTracer {
   PhotonTracer(const Medium& medium, const MajorantGrid& grid)
       : medium_(medium), grid_(grid), lookup_(medium.density->lookup()) {}
 
-  /// `direct` (optional) takes the segments before the first scattering.
-  void trace(const Emission& e, Rng& rng, PhotonTally* tally, PhotonTally* direct) {
+  /// `direct` (optional) takes the segments before the first scattering, `half` (optional)
+  /// the scattered ones again.
+  void trace(const Emission& e, Rng& rng, PhotonTally* tally, PhotonTally* direct,
+             PhotonTally* half) {
     Ray ray = e.ray;
     Rgb beta(e.weight);
     for (int order = 0; order <= kMaxScatterings; ++order) {
@@ -233,6 +240,7 @@ class PhotonTracer {
           decompositionTrack(grid_, *lookup_, medium_.extinction, ray, 0, kInf, rng);
       PhotonTally* to = order > 0 ? tally : direct;
       if (to) to->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
+      if (order > 0 && half) half->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
       if (!c.hit) return;
       beta *= medium_.albedo;
       const PhaseSample ps = medium_.phase->sample(ray.d, rng.uniform(), rng.uniform());
@@ -261,7 +269,8 @@ class PhotonTracer {
 template <typename Emitter>
 void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter& emitter,
                   int64_t count, uint64_t seed, uint64_t stream, PhotonTally* tally,
-                  PhotonTally* direct, const std::function<bool(double)>& progress) {
+                  PhotonTally* direct, PhotonTally* half,
+                  const std::function<bool(double)>& progress) {
   ParallelOptions po;
   po.cancelled = [&](double f) { return progress && !progress(f); };
   po.cancelled_message = "bake cancelled";
@@ -273,10 +282,39 @@ void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter&
         Rng rng;
         for (int64_t i = b * kBatch; i < std::min(count, (b + 1) * kBatch); ++i) {
           rng.setSeed(mixBits(seed, uint64_t(i)), stream);
-          tracer.trace(emitter.emit(rng), rng, tally, direct);
+          tracer.trace(emitter.emit(rng), rng, tally, direct, (i & 1) ? half : nullptr);
         }
       },
       po);
+}
+
+// The bake's own error estimates (PhotonErrorEstimate), from the full tally, the odd photons'
+// degree-0 tally and the phase's Legendre coefficients; voxels weighted by their density.
+PhotonErrorEstimate estimateErrors(const PhotonTally& full, const PhotonTally& odd,
+                                   const std::vector<Rgb>& p_l, const std::vector<float>& density) {
+  double noise_num = 0, noise_den = 0, top = 0, all = 0;
+  const int order = full.order();
+  for (size_t v = 0; v < density.size(); ++v) {
+    const double w = density[v];
+    if (!(w > 0)) continue;
+    for (int c = 0; c < 3; ++c) {
+      const double f = full.count(v, 0, c), o = odd.count(v, 0, c);
+      noise_num += w * (f - 2 * o) * (f - 2 * o);  // (even - odd)^2
+      noise_den += w * f * f;
+      for (int l = 0; l <= order; ++l) {
+        double sum = 0;
+        for (int i = l * l; i < (l + 1) * (l + 1); ++i)
+          sum += full.count(v, i, c) * full.count(v, i, c);
+        const double pl = p_l[size_t(l)][c];
+        all += w * pl * pl * sum;
+        if (l >= order - 1) top += w * pl * pl * sum;
+      }
+    }
+  }
+  PhotonErrorEstimate e;
+  e.tally_noise = noise_den > 0 ? std::sqrt(noise_num / noise_den) : 0.0;
+  e.truncation = all > 0 ? std::sqrt(top / all) : 0.0;
+  return e;
 }
 
 // Cd = (sun_transmittance + fluence of the scattered sunlight) / (4 pi), the fluence being
@@ -341,15 +379,20 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   {
     const SunEmitter sun(box, sun_dir, options.photons);
     PhotonTally tally(bake.grid, options.order, sun.weight());
-    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally, nullptr,
+    PhotonTally odd(bake.grid, 0, sun.weight());
+    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally, nullptr, &odd,
                  stage(0.25, 0.75 - sky_share, "sun photons"));
     tally.store(&bake, bake_grids::photonSh);
+    const PhotonErrorEstimate e = estimateErrors(
+        tally, odd, phaseLegendreCoefficients(*medium.phase, options.order), bake.density);
+    bake.metadata["cloudbake:tally_noise"] = str(e.tally_noise);
+    bake.metadata["cloudbake:truncation"] = str(e.truncation);
   }
   if (options.sky) {
     const SkyEmitter sky(box, options.photons);
     PhotonTally tally(bake.grid, options.order, sky.weight());
     PhotonTally direct(bake.grid, options.order, sky.weight());
-    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally, &direct,
+    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally, &direct, nullptr,
                  stage(1.0 - sky_share, sky_share, "sky photons"));
     tally.store(&bake, bake_grids::photonSkySh);
     direct.store(&bake, bake_grids::photonSkyDirectSh);

@@ -39,6 +39,20 @@ struct PhotonBakeOptions {
   bool sky = true;  ///< trace sky photons and bake sky_visibility (false for a black sky)
 };
 
+/// A bake's own estimates of its error in the multiply scattered sunlight (relative, over the
+/// voxels weighted by density), written to its metadata as cloudbake:tally_noise and
+/// cloudbake:truncation.
+struct PhotonErrorEstimate {
+  /// The tally's noise: the fluence of the even and the odd photons compared, RMS of their
+  /// difference over RMS of the fluence (the difference of two independent halves has the
+  /// variance of their sum). Per voxel: a view averages several, so its noise is lower.
+  double tally_noise = 0;
+  /// The truncation: the RMS over directions of what degrees order - 1 and order add to the
+  /// in-scattered light (its Funk-Hecke convolution with the phase, order L against L - 2),
+  /// over that of all of it.
+  double truncation = 0;
+};
+
 /// p_l = 2 pi integral of p(mu) P_l(mu) dmu for l = 0..degree, per channel: the Funk-Hecke
 /// factors with which a phase function convolves degree l of a spherical-harmonic expansion
 /// (p_0 = 1 for a normalised phase, p_1 = its mean cosine g). Integrated in theta on a fine grid

@@ -153,6 +153,28 @@ TEST(PhotonBake, ErrorFallsWithTheOrderForAForwardPeak) {
   EXPECT_LT(e6, 0.1);
 }
 
+// The bake's own error estimates: the tally's noise falls as 1 / sqrt(photons), the truncation
+// as the order grows.
+TEST(PhotonBake, ErrorEstimatesFallAsPhotonsAndOrderGrow) {
+  const Medium m = sphere(4, Rgb(0.95), std::make_shared<HenyeyGreensteinPhase>(0.8));
+  const Vec3 sun = normalize(Vec3(1, 0, 0.3));
+  auto estimate = [&](int64_t photons, int order, const char* key) {
+    PhotonBakeOptions o = small(photons, order);
+    o.sky = false;
+    const BakedLight b = bakePhoton(m, sun, o);
+    return std::stod(b.metadata.at(key));
+  };
+  const double n1 = estimate(20000, 2, "cloudbake:tally_noise");
+  const double n4 = estimate(80000, 2, "cloudbake:tally_noise");
+  EXPECT_GT(n1, 0);
+  EXPECT_GT(n4 / n1, 0.35) << n1 << " -> " << n4;
+  EXPECT_LT(n4 / n1, 0.7) << n1 << " -> " << n4;
+  const double t2 = estimate(80000, 2, "cloudbake:truncation");
+  const double t6 = estimate(80000, 6, "cloudbake:truncation");
+  EXPECT_GT(t2, 0);
+  EXPECT_LT(t6, t2) << t2 << " -> " << t6;
+}
+
 TEST(PhotonBake, CancelsAndNamesBadInput) {
   const Medium m = sphere(4, Rgb(0.9), std::make_shared<IsotropicPhase>());
   const Vec3 up(0, 0, 1);
