@@ -307,7 +307,7 @@ PhotonErrorEstimate estimateErrors(const PhotonTally& full, const PhotonTally& o
           sum += full.count(v, i, c) * full.count(v, i, c);
         const double pl = p_l[size_t(l)][c];
         all += w * pl * pl * sum;
-        if (l >= order - 1) top += w * pl * pl * sum;
+        if (l >= std::max(1, order - 1)) top += w * pl * pl * sum;  // order 1: degree 1
       }
     }
   }

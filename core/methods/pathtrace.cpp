@@ -120,8 +120,8 @@ class PathtraceMethod final : public BakeMethod {
             .derivedDefault("0.5 V / (V + 40), V = 4 pi integral(p^2) - 1 of the phase"),
         Knob::integer("sun_split_max", 1, 64, std::nullopt,
                       "most shadow rays towards the sun at one collision (split where the "
-                      "predicted contribution is large, rouletted where small); 1 turns both "
-                      "off")
+                      "predicted contribution is large, rouletted where small); 1 turns "
+                      "splitting off (and the roulette, unless shadow rays are predicted)")
             .derivedDefault(
                 "8 where shadow rays are predicted (decomposition tracking through a VDB, mesh "
                 "or procedural volume) or V > 100 (droplet Mie tables), else 1"),

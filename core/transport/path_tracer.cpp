@@ -257,7 +257,8 @@ class Integrator {
     const bool roulette = predictor_.active();
     const double predicted = 4 * kPi * maxComponent(beta * f) * predictor_.sun(p);
     const double u = split_max_ > 1 || roulette ? rng.uniform() : 0;
-    const ShadowRays rays = sunShadowRays(predicted, split_max_, u, roulette);
+    const ShadowRays rays =
+        sunShadowRays(predicted, split_max_, u, roulette, roulette ? kPredictedMinSurvival : 0.0);
     double tr = 0;
     for (int k = 0; k < rays.count; ++k) {
       tr += transmittance({p, sun_dir_}, lookup, rng);
@@ -277,7 +278,8 @@ class Integrator {
     const Rgb l = beta * f * s.radiance * (w / s.pdf);
     double keep = 1;
     if (predictor_.active()) {  // roulette the events the sky cannot reach
-      keep = shadowSurvival(maxComponent(l) / sky_scale_ * predictor_.sky(p));
+      keep =
+          shadowSurvival(maxComponent(l) / sky_scale_ * predictor_.sky(p), kPredictedMinSurvival);
       if (!(rng.uniform() < keep)) return;
     }
     const double tr = transmittance({p, s.to_sky}, lookup, rng);

@@ -27,16 +27,24 @@ constexpr double kShadowRouletteBelow = 0.02;
 /// `roulette` (then `predicted` includes a predicted transmittance, so that only collisions the
 /// sun cannot reach are rouletted); with both off `u` is unused. u is uniform in [0, 1) and
 /// only read for the roulette.
-ShadowRays sunShadowRays(double predicted, int max_rays, double u, bool roulette = false);
+ShadowRays sunShadowRays(double predicted, int max_rays, double u, bool roulette = false,
+                         double min_survival = 0);
 
 /// The probability of keeping a next event whose predicted contribution (relative to an
 /// isotropic scatter at unit throughput) is `predicted`: 1 at or above kShadowRouletteBelow,
-/// else predicted / kShadowRouletteBelow (0 for nothing predicted).
-inline double shadowSurvival(double predicted) {
-  return predicted >= kShadowRouletteBelow ? 1.0
-         : predicted > 0                   ? predicted / kShadowRouletteBelow
-                                           : 0.0;
+/// else predicted / kShadowRouletteBelow (0 for nothing predicted), and never below
+/// `min_survival`.
+inline double shadowSurvival(double predicted, double min_survival = 0) {
+  const double q = predicted >= kShadowRouletteBelow ? 1.0
+                   : predicted > 0                   ? predicted / kShadowRouletteBelow
+                                                     : 0.0;
+  return q > min_survival ? q : min_survival;
 }
+
+/// The least survival of an event rouletted on a predicted transmittance: a prediction is not a
+/// bound everywhere (a clear channel between the lattice's vertices), so every event keeps a
+/// chance, and a wrong prediction costs at most this factor's inverse in weight.
+constexpr double kPredictedMinSurvival = 1e-3;
 
 /// The most shadow rays chosen when a shot does not set it: 8 for phases whose spikiness
 /// (phaseSpikiness, core/transport/sun_guiding.h) exceeds 100, like droplets' Mie tables, else 1

@@ -18,7 +18,9 @@ double minorantTransmittance(const MajorantGrid& grid, double extinction, const 
                         tau += extinction * double(min) * (t1 - t0);
                         return tau < 50;  // exp(-50): nothing left to predict
                       });
-  return std::exp(-tau);
+  // Never 0 (the last cell may take tau far past 50, and a float flushes tiny values to 0): a
+  // prediction of 0 would roulette away, always, events the light does reach.
+  return std::exp(-std::min(tau, 50.0));
 }
 
 // Per cell, the largest of its 8 vertices' values.

@@ -12,7 +12,8 @@ namespace cloudbake {
 /// Predicts, for any point of a medium, how much of the sun and of the sky can reach it. Used
 /// only to choose how many shadow rays a collision gets (Russian roulette and splitting, which
 /// reweight what they keep), never as the estimate itself: a poor prediction costs variance,
-/// not bias.
+/// not bias, as long as every event keeps a chance (predictions are never 0, and the path
+/// tracer's roulette keeps at least kPredictedMinSurvival, core/transport/shadow_splitting.h).
 ///
 /// The tracking grid's minorants bound sigma_t from below, so exp(-extinction x the integral of
 /// the minorant) along a ray bounds its transmittance from above (and equals it in a

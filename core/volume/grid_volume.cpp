@@ -1,6 +1,7 @@
 #include "core/volume/grid_volume.h"
 
 #include <openvdb/tools/Interpolation.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -363,7 +364,10 @@ std::shared_ptr<const MajorantGrid> GridVolume::trackingGrid(
     DenseView view;
     view.values = im.dense.data();
     for (int a = 0; a < 3; ++a) view.n[a] = im.dense_n[a];
-    im.tracking_levels = cellBoundsLevels(view, kMaxMajorantCells);
+    // Isolated: a worker waiting inside this parallel build must not steal a task that calls
+    // trackingGrid() on this volume and waits for the lock it holds.
+    tbb::this_task_arena::isolate(
+        [&] { im.tracking_levels = cellBoundsLevels(view, kMaxMajorantCells); });
   }
   const std::vector<CellBounds>& levels = im.tracking_levels;
   size_t level = 0;

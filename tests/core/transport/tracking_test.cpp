@@ -126,6 +126,30 @@ TEST(Tracking, DecompositionAndResidualRatioTrackingAreUnbiased) {
   }
 }
 
+// A ray starting inside the slab and stopped before leaving it: [0, tmax] of a ray from z = 0.7
+// down to z = 0.2, across cells with and without their full length.
+TEST(Tracking, DecompositionOverAPartialInterval) {
+  const LinearSlab slab(0.2, 3.0, 5);
+  const auto grid = slab.trackingGrid({});
+  auto lookup = slab.lookup();
+  const double extinction = 2.0;
+  const Ray inside{Vec3(0.1, -0.2, 0.7), Vec3(0, 0, -1)};
+  const double exact = std::exp(-extinction * (slab.depth(0.7) - slab.depth(0.2)));
+  Rng rng(21, 4);
+  Stats residual, decomposition;
+  for (int i = 0; i < 400000; ++i) {
+    residual.add(residualRatioTrack(*grid, *lookup, extinction, inside, 0, 0.5, rng));
+    const Collision c = decompositionTrack(*grid, *lookup, extinction, inside, 0, 0.5, rng);
+    decomposition.add(c.hit ? 0.0 : 1.0);
+    if (c.hit) {
+      ASSERT_LE(c.t, 0.5);
+      ASSERT_GE(c.t, 0.0);
+    }
+  }
+  EXPECT_NEAR(residual.mean(), exact, 4 * residual.stderror());
+  EXPECT_NEAR(decomposition.mean(), exact, 4 * decomposition.stderror());
+}
+
 // In a homogeneous box the minorant is the density: transmittance needs no random numbers above
 // the roulette threshold, and free paths are exactly exponential.
 TEST(Tracking, DecompositionInAHomogeneousBoxIsAnalytic) {

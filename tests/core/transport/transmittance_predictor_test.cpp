@@ -44,6 +44,17 @@ TEST(TransmittancePredictor, BoundsAHomogeneousBoxFromAbove) {
   EXPECT_EQ(pred.sun(Vec3(10, 10, 10)), 1.0);  // outside: nothing in the way
 }
 
+// Deep inside a huge optical depth the prediction is tiny but never 0: a 0 would roulette away,
+// always, the events the light does reach where the prediction is wrong.
+TEST(TransmittancePredictor, NeverPredictsZero) {
+  const BoxDensity box(Vec3(0, 0, 0), Vec3(4, 2, 3), 1.0);
+  const Vec3 sun(0, 0, 1);
+  const TransmittancePredictor pred(*box.trackingGrid({1e4, 0}), 1e4, &sun, true, 8);
+  EXPECT_GT(pred.sun(Vec3(2, 1, 1.5)), 0.0);
+  EXPECT_LT(pred.sun(Vec3(2, 1, 1.5)), 1e-20);
+  EXPECT_GT(pred.sky(Vec3(2, 1, 1.5)), 0.0);
+}
+
 TEST(TransmittancePredictor, WithoutMinorantsPredictsOne) {
   const SphereDensity sphere(Vec3(0, 0, 0), 1, 5);
   const Vec3 sun(0, 0, 1);

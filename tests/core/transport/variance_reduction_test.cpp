@@ -168,7 +168,15 @@ TEST(ShadowSplitting, ExpectedWeightIsOneAndOffIsOneRay) {
     }
     EXPECT_NEAR(expect, 1.0, 1e-3) << predicted;
     EXPECT_NEAR(expect_roulette, 1.0, 1e-3) << predicted;
+    // With a floor on survival (the predictor's roulette): still one in expectation.
+    double expect_floor = 0;
+    for (int i = 0; i < kU; ++i) {
+      const ShadowRays q = sunShadowRays(predicted * 1e-6, 1, (i + 0.5) / kU, true, 1e-3);
+      expect_floor += q.count * q.weight / kU;
+    }
+    EXPECT_NEAR(expect_floor, 1.0, 1e-3) << predicted;
     EXPECT_NEAR(shadowSurvival(predicted), std::min(1.0, predicted / kShadowRouletteBelow), 1e-12);
+    EXPECT_GE(shadowSurvival(predicted * 1e-9, kPredictedMinSurvival), kPredictedMinSurvival);
     const ShadowRays off = sunShadowRays(predicted, 1, 0.999);
     EXPECT_EQ(off.count, 1);
     EXPECT_EQ(off.weight, 1.0);
