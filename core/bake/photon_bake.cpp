@@ -39,15 +39,7 @@ constexpr double kFixedScale = 4294967296.0;
 
 void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions& o) {
   if (!medium.density) throw InputError("medium: no density field");
-  if (!medium.phase) throw InputError("medium.phase: no phase function given");
-  if (!std::isfinite(medium.extinction) || medium.extinction < 0) {
-    throw InputError("medium.extinction: must be finite and >= 0, got " + str(medium.extinction));
-  }
-  for (int c = 0; c < 3; ++c) {
-    if (!(medium.albedo[c] >= 0 && medium.albedo[c] <= 1)) {
-      throw InputError("medium.albedo: each channel must be in [0, 1], got " + str(medium.albedo));
-    }
-  }
+  validateMediumOptics(medium);
   if (!isFinite(sun_dir) || std::abs(length(sun_dir) - 1) > 1e-6) {
     throw InputError("lighting.sun.direction: must be a unit vector");
   }

@@ -121,18 +121,6 @@ void validateOptions(const BakeRenderOptions& o, double voxel_size) {
   }
 }
 
-void validateMedium(const Medium& m) {
-  if (!m.phase) throw InputError("medium.phase: no phase function given");
-  if (!std::isfinite(m.extinction) || m.extinction < 0) {
-    throw InputError("medium.extinction: must be finite and >= 0, got " + str(m.extinction));
-  }
-  for (int c = 0; c < 3; ++c) {
-    if (!(m.albedo[c] >= 0 && m.albedo[c] <= 1)) {
-      throw InputError("medium.albedo: each channel must be in [0, 1], got " + str(m.albedo));
-    }
-  }
-}
-
 /// The channel `name` with `components` floats per voxel, or nullptr when absent (or, with
 /// `required`, InputError).
 const float* channel(const BakedLight& bake, const char* name, int components, bool required,
@@ -717,7 +705,7 @@ void validateBake(const BakedLight& bake) {
 RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const Sun& sun,
                             const Sky& sky, const Camera& camera, const BakeRenderOptions& options,
                             const ProgressFn& progress) {
-  validateMedium(medium);
+  validateMediumOptics(medium);
   validateBake(bake);
   validateOptions(options, bake.grid.voxel_size);
   if (!isFinite(sun.irradiance) || sun.irradiance.x < 0 || sun.irradiance.y < 0 ||

@@ -13,6 +13,16 @@ double shNorm(int l, int m) {
   return std::sqrt((2 * l + 1) / (4 * kPi) * ratio);
 }
 
+// K_lm for every l, m >= 0 up to kMaxShDegree, computed once: the basis is evaluated per photon
+// segment, where the factorial loops would cost more than the recurrences.
+struct ShNorms {
+  double k[kMaxShDegree + 1][kMaxShDegree + 1] = {};
+  ShNorms() {
+    for (int l = 0; l <= kMaxShDegree; ++l)
+      for (int m = 0; m <= l; ++m) k[l][m] = shNorm(l, m);
+  }
+};
+
 }  // namespace
 
 void legendreP(int degree, double x, double* p) {
@@ -25,6 +35,7 @@ void shBasisUpTo(int degree, const Vec3& w, double* y) {
   const double z = std::clamp(w.z, -1.0, 1.0);
   const double s = std::sqrt(std::max(0.0, 1 - z * z));  // sin theta
   const double phi = std::atan2(w.y, w.x);
+  static const ShNorms norms;
   // P_l^m(z) for every l >= m, from P_m^m = (2m - 1)!! s^m, P_{m+1}^m = (2m + 1) z P_m^m and
   // (l - m) P_l^m = (2l - 1) z P_{l-1}^m - (l + m - 1) P_{l-2}^m.
   double pmm = 1;
@@ -40,7 +51,7 @@ void shBasisUpTo(int degree, const Vec3& w, double* y) {
         p_prev = p;
         p = next;
       }
-      const double k = shNorm(l, m);
+      const double k = norms.k[l][m];
       if (m == 0) {
         y[l * l + l] = k * p;
       } else {

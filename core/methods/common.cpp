@@ -122,6 +122,15 @@ Knob lightResolutionKnob(int64_t default_resolution) {
                        "bake lattice voxels along the longest side of the volume");
 }
 
+nlohmann::json wholeMediumLightKey(const BakeMethod& method, const ShotSpec& shot,
+                                   const nlohmann::json& canonical) {
+  return {{"light",
+           {{"medium", canonical["medium"]},
+            {"seed", shot.bake.seed},
+            {"sky", needsSky(shot)},
+            {"knobs", bakeKnobMaterial(method, shot)}}}};
+}
+
 BakeRenderOptions bakeRenderOptions(const ShotSpec& shot, int threads) {
   BakeRenderOptions o;
   o.step = shot.bake.knobs.optionalNumber("step").value_or(0.0);

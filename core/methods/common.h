@@ -30,6 +30,10 @@ BakeRenderOptions bakeRenderOptions(const ShotSpec& shot, int threads);
 
 /// Knobs of the shot that change the bake (view-only knobs left out), as key material.
 nlohmann::json bakeKnobMaterial(const BakeMethod& method, const ShotSpec& shot);
+/// The key material of a light bake that scatters with the whole medium (albedo and phase
+/// included): the canonical medium, the seed, whether the sky is baked, and the bake's knobs.
+nlohmann::json wholeMediumLightKey(const BakeMethod& method, const ShotSpec& shot,
+                                   const nlohmann::json& canonical);
 
 /// InputError unless (resolution + 2)^3 * floats_per_voxel * lattices fits max_voxels.
 void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const std::string& what,

@@ -44,11 +44,7 @@ class PhotonMethod final : public BakeMethod {
 
   nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {
     // The photons scatter with the albedo and the phase: the whole medium is baked.
-    return {{"light",
-             {{"medium", canonical["medium"]},
-              {"seed", shot.bake.seed},
-              {"sky", needsSky(shot)},
-              {"knobs", bakeKnobMaterial(*this, shot)}}}};
+    return wholeMediumLightKey(*this, shot, canonical);
   }
 
   MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,

@@ -57,11 +57,7 @@ class PointcloudMethod final : public BakeMethod {
   }
 
   nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {
-    return {{"light",
-             {{"medium", canonical["medium"]},
-              {"seed", shot.bake.seed},
-              {"sky", needsSky(shot)},
-              {"knobs", bakeKnobMaterial(*this, shot)}}}};
+    return wholeMediumLightKey(*this, shot, canonical);
   }
 
   MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,

@@ -26,15 +26,7 @@ constexpr int kRouletteDepth = 3;
 
 void validateMedium(const Medium& m) {
   if (!m.density) throw InputError("medium.density: no density field given");
-  if (!m.phase) throw InputError("medium.phase: no phase function given");
-  if (!std::isfinite(m.extinction) || m.extinction < 0) {
-    throw InputError("medium.extinction: must be finite and >= 0, got " + str(m.extinction));
-  }
-  for (int c = 0; c < 3; ++c) {
-    if (!(m.albedo[c] >= 0 && m.albedo[c] <= 1)) {  // also rejects NaN
-      throw InputError("medium.albedo: each channel must be in [0, 1], got " + str(m.albedo));
-    }
-  }
+  validateMediumOptics(m);
   const double max_density = m.density->maxDensity();
   if (!std::isfinite(max_density) || max_density < 0) {
     throw InputError("medium.density: maximum density must be finite and >= 0, got " +

@@ -20,6 +20,10 @@ struct Medium {
   std::shared_ptr<const PhaseFunction> phase;
 };
 
+/// InputError naming the field unless the medium has a phase function, a finite extinction
+/// >= 0 and an albedo in [0, 1] per channel (the density is each caller's to check).
+void validateMediumOptics(const Medium& m);
+
 /// A distant sun. `direction` points from the scene towards the sun (unit). `irradiance` E per
 /// channel is measured on a plane perpendicular to the sun direction (W m^-2 when radiance is
 /// W m^-2 sr^-1). Treated as a delta light (no angular extent).
