@@ -210,6 +210,14 @@ void addSkyTransmittance(const PrecomputedDatabase& db, const BlendFrame& frame,
               {kCheapIterationGrain});
 }
 
+// integral L_sky (1 - T) dw for one channel's sky SH and a transmittance SH: the sky light the
+// medium removes at a point (>= 0).
+double skyRemoved(const ShCoefficients& sky, const ShCoefficients& t) {
+  double e = 0;
+  for (int q = 0; q < kShCoefficients; ++q) e += double(sky[size_t(q)]) * t[size_t(q)];
+  return std::max(0.0, 4 * kPi * double(sky[0]) / kSqrt4Pi - e);
+}
+
 // Per receiver: the merged cut (Eq. 9) and the first-order sources.
 struct FrameReceivers {
   std::vector<std::vector<uint32_t>> nodes;
@@ -219,6 +227,8 @@ struct FrameReceivers {
   // Sky light scattered into the forward peak, integral L_sky (T^s - T), 3 floats each: its
   // fluence is added to Co_sky as it is (light from every direction, so no one beam direction).
   std::vector<float> sky_beam;
+  // Sky light the true medium removes, integral L_sky (1 - T), 3 floats each (skyFractions).
+  std::vector<float> sky_removed;
 };
 
 FrameReceivers frameReceivers(const PrecomputedDatabase& db, const BlendFrame& frame, double s,
@@ -234,6 +244,7 @@ FrameReceivers frameReceivers(const PrecomputedDatabase& db, const BlendFrame& f
   rec.values.resize(nr);
   rec.source.assign(6 * nr, 0.f);
   rec.sky_beam.assign(3 * nr, 0.f);
+  rec.sky_removed.assign(3 * nr, 0.f);
   parallelFor(0, int64_t(nr), [&](size_t r) {
     if (!db.receiver_mask[r]) return;
     const int i = int(r % size_t(rg.nx)), j = int((r / size_t(rg.nx)) % size_t(rg.ny)),
@@ -264,6 +275,7 @@ FrameReceivers frameReceivers(const PrecomputedDatabase& db, const BlendFrame& f
       }
       rec.source[6 * r + 3 + size_t(c)] = float(inv4pi_albedo[c] * std::max(0.0, e));
       rec.sky_beam[3 * r + size_t(c)] = float(std::max(0.0, beam));
+      rec.sky_removed[3 * r + size_t(c)] = float(skyRemoved(sky_sh[size_t(c)], t_full));
     }
   });
   return rec;
@@ -323,10 +335,12 @@ void gatherOrder(const PrecomputedDatabase& db, const std::vector<float>& sigma_
 // as a geometric tail of the last one (the pointcloud method's tail): their sum is
 // last * q / (1 - q) with q the last ratio between orders. Without it a tolerance of 1% leaves
 // ~10% of the light out where q is ~0.9 (high albedo, thick cloud). Returns Co per receiver
-// (sun then sky, with the sky's forward beam); rec.source is left at the last order.
+// (sun then sky, with the sky's forward beam; the sky's tail apart, in `sky_tail`, for
+// skyFractions); rec.source is left at the last order.
 std::vector<float> scatterOrders(const PrecomputedDatabase& db, const std::vector<float>& sigma_q,
                                  const Rgb& inv4pi_albedo, const FrameLightOptions& options,
-                                 FrameReceivers& rec, int* orders_out) {
+                                 FrameReceivers& rec, int* orders_out,
+                                 std::vector<float>* sky_tail) {
   const size_t nr = rec.nodes.size();
   std::vector<float> co(6 * nr, 0.f), fluence(6 * nr, 0.f);
   double total = 0, previous = 0, ratio = 0;
@@ -347,9 +361,15 @@ std::vector<float> scatterOrders(const PrecomputedDatabase& db, const std::vecto
     previous = added;
     if (!(added > options.tolerance * total)) break;
   }
+  sky_tail->assign(3 * nr, 0.f);
   if (orders >= 2 && ratio > 0 && ratio < 1) {
     const double tail = std::min(ratio, 0.99) / (1 - std::min(ratio, 0.99));
-    for (size_t i = 0; i < co.size(); ++i) co[i] += float(tail * fluence[i]);
+    for (size_t r = 0; r < nr; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        co[6 * r + size_t(c)] += float(tail * fluence[6 * r + size_t(c)]);
+        (*sky_tail)[3 * r + size_t(c)] = float(tail * fluence[6 * r + 3 + size_t(c)]);
+      }
+    }
   }
   for (size_t r = 0; r < nr; ++r) {
     for (int c = 0; c < 3; ++c) co[6 * r + 3 + size_t(c)] += rec.sky_beam[3 * r + size_t(c)];
@@ -358,8 +378,54 @@ std::vector<float> scatterOrders(const PrecomputedDatabase& db, const std::vecto
   return co;
 }
 
+// The receivers' scattered sky fluence as a fraction of the sky light the medium removes there
+// (rec.sky_removed), in place, with the geometric tail of the orders not iterated. A furnace
+// bounds the fraction by 1 at any albedo <= 1. So the tail, an extrapolation from the global
+// ratio between the last orders, is bounded by what that leaves: in thick white media (optical
+// depth 600, albedo 1) the orders still grow in the interior after 64 of them while those near
+// the surface decay, and the global ratio (0.99) extrapolated near the surface doubled their
+// light. addMultipleScattering scales the fractions by each voxel's own removed light, so
+// interpolating from the coarser receivers cannot put more scattered light into a voxel than
+// the sky it shadows either: with the fluence itself interpolated, edge voxels took the fluence
+// of receivers deeper inside (a white isotropic sphere under a uniform sky came out 1.4x
+// brighter than the sky). Where the iterated orders alone exceed the bound, the receivers'
+// cells are optically too thick for the cut transfer (optical depth 50 per cell: a white
+// sphere of optical depth 600 at transfer_resolution 12 put 1.6x the removed light into some
+// receivers near its surface while its interior stayed dark after 64 orders). The fraction is
+// then set to the bound, and the number of such receivers returned (the bake's metadata
+// cloudbake:sky_fraction_capped; docs/methods.md: raise transfer_resolution, or use photon).
+int64_t skyFractions(const FrameReceivers& rec, const std::vector<float>& sky_tail,
+                     std::vector<float>& co) {
+  int64_t capped = 0;
+  for (size_t r = 0; r < rec.sky_removed.size() / 3; ++r) {
+    bool over = false;
+    for (int c = 0; c < 3; ++c) {
+      const double removed = rec.sky_removed[3 * r + size_t(c)];
+      float& v = co[6 * r + 3 + size_t(c)];
+      const double tail =
+          std::min(double(sky_tail[3 * r + size_t(c)]), std::max(0.0, removed - double(v)));
+      const double fraction = removed > 1e-12 ? (v + tail) / removed : 0.0;
+      over = over || fraction > 1;
+      v = float(std::min(1.0, fraction));
+    }
+    capped += over ? 1 : 0;
+  }
+  return capped;
+}
+
+// The lattice's transmittance-to-sky SH grids (addSkyTransmittance), or nulls without a sky.
+std::array<const float*, kShCoefficients> skyShGrids(const BakedLight& bake) {
+  std::array<const float*, kShCoefficients> t{};
+  for (int i = 0; i < kShCoefficients; ++i) {
+    const BakeChannel* ch = bake.find(bake_grids::skyTransmittanceSh(i));
+    t[size_t(i)] = ch ? ch->data.data() : nullptr;
+  }
+  return t;
+}
+
 // Back onto the lattice: Co per unit E; Co_sky per unit mean sky radiance (the render scales
 // it by the sky's mean, so the sky's actual distribution is baked in); null `sky_sh`: no sky.
+// Co_sky arrives as fractions of the removed sky light (skyFractions).
 // The sun light scattered into the forward peak travels on with the sun: the beam T^s - T (per
 // unit E), scattered towards a view with the full phase function.
 void addMultipleScattering(const PrecomputedDatabase& db, const std::vector<float>& co, double s,
@@ -373,6 +439,7 @@ void addMultipleScattering(const PrecomputedDatabase& db, const std::vector<floa
     for (int c = 0; c < 3; ++c) sky_mean[c] = (*sky_sh)[size_t(c)][0] / kSqrt4Pi;
   }
   BakeChannel* co_sky = sky_sh ? &bake.add(bake_grids::kSkyMultipleFluence, 3) : nullptr;
+  const std::array<const float*, kShCoefficients> tsh = skyShGrids(bake);
   float* ratio_out = s < 1 ? bake.add(bake_grids::kMieRatio, 1).data.data() : nullptr;
   float* dir_out = s < 1 ? bake.add(bake_grids::kLightDir, 3).data.data() : nullptr;
   const Vec3 travel = -bake.sun_direction;
@@ -388,7 +455,11 @@ void addMultipleScattering(const PrecomputedDatabase& db, const std::vector<floa
                   co_sun.data[3 * v + size_t(c)] =
                       float(std::max(0.0, double(f[c]) + std::max(0.0, beam)));
                   if (co_sky && sky_mean[c] > 0) {
-                    co_sky->data[3 * v + size_t(c)] = float(std::max(0.0, f[3 + c] / sky_mean[c]));
+                    ShCoefficients t{};
+                    for (int q = 0; q < kShCoefficients; ++q) t[size_t(q)] = tsh[size_t(q)][v];
+                    const double removed = skyRemoved((*sky_sh)[size_t(c)], t);
+                    co_sky->data[3 * v + size_t(c)] =
+                        float(std::max(0.0, f[3 + c] * removed / sky_mean[c]));
                   }
                 }
                 if (ratio_out && beam > 0) {
@@ -548,12 +619,16 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   for (const auto& m : rec.nodes) merged += m.size();
   const std::vector<float> sigma_q = sampleCollisionWeights(db, frame, bake.density, rec, sim.s);
   int orders = 0;
-  const std::vector<float> co = scatterOrders(db, sigma_q, inv4pi_albedo, options, rec, &orders);
+  std::vector<float> sky_tail;
+  std::vector<float> co =
+      scatterOrders(db, sigma_q, inv4pi_albedo, options, rec, &orders, &sky_tail);
+  const int64_t capped = sky ? skyFractions(rec, sky_tail, co) : 0;
   addMultipleScattering(db, co, sim.s, sky ? &sky_sh : nullptr, tsun, support, bake);
 
   bake.metadata["cloudbake:frame_blend"] =
       std::to_string(frame.a) + "," + std::to_string(frame.b) + "," + std::to_string(frame.w);
   bake.metadata["cloudbake:orders"] = std::to_string(orders);
+  if (sky) bake.metadata["cloudbake:sky_fraction_capped"] = std::to_string(capped);
   bake.metadata["cloudbake:similarity_scale"] = std::to_string(sim.s);
   if (sim.s < 1) bake.metadata["cloudbake:angular_model"] = "p1";
   bake.metadata["cloudbake:sample_points"] = std::to_string(db.tree.points.size());

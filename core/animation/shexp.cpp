@@ -58,6 +58,7 @@ ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int direc
     throw InputError("shexp: bins must be in [4, 4096], got " + std::to_string(bins));
   }
   ShExp e;
+  e.quadrature_ = makeQuadrature();
   std::vector<ShCoefficients> reduced;
   reduced.reserve(samples.size());
   for (const ShCoefficients& g : samples) {
@@ -100,9 +101,31 @@ ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int direc
   return e;
 }
 
+ShExp::Quadrature ShExp::makeQuadrature() {
+  Quadrature q;
+  for (const Vec3& w : sphereDirections(kQuadratureDirections)) q.push_back(shBasis(w));
+  return q;
+}
+
+ShCoefficients ShExp::projectTransmittance(const ShCoefficients& g) const {
+  std::array<double, kShCoefficients> acc{};
+  for (const auto& y : quadrature_) {
+    double f = 0;
+    for (int i = 0; i < kShCoefficients; ++i) f += double(g[size_t(i)]) * y[size_t(i)];
+    const double e = std::exp(std::min(0.0, f));  // -tau <= 0: a transmittance is at most 1
+    for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += e * y[size_t(i)];
+  }
+  ShCoefficients out{};
+  for (int i = 0; i < kShCoefficients; ++i) {
+    out[size_t(i)] = float(acc[size_t(i)] * 4 * kPi / double(quadrature_.size()));
+  }
+  return out;
+}
+
 ShCoefficients ShExp::operator()(const ShCoefficients& g_in) const {
   const int k = squarings(g_in);
-  const ShCoefficients g = scaled(g_in, k);
+  if (k > 0) return projectTransmittance(g_in);
+  const ShCoefficients& g = g_in;
   const int bins = int(a_.size());
   const double width = range_ > 0 ? range_ / bins : 1.0;
   // Linear interpolation between the bin centres, and from the exact values at |g^| = 0 (a = b =
@@ -124,7 +147,6 @@ ShCoefficients ShExp::operator()(const ShCoefficients& g_in) const {
   ShCoefficients out{};
   out[0] = float(scale * a * kSqrt4Pi);
   for (int i = 1; i < kShCoefficients; ++i) out[size_t(i)] = float(scale * b * g[size_t(i)]);
-  for (int s = 0; s < k; ++s) out = shProduct(out, out);
   return out;
 }
 
@@ -141,6 +163,7 @@ ShExp ShExp::fromTables(std::vector<double> a, std::vector<double> b, double ran
     }
   }
   ShExp e;
+  e.quadrature_ = makeQuadrature();
   e.a_ = std::move(a);
   e.b_ = std::move(b);
   e.range_ = range;

@@ -5,12 +5,19 @@
 
 namespace cloudbake {
 
-PhaseLut::PhaseLut(const PhaseFunction& phase, int size) : size_(std::max(size, 16)) {
-  table_.resize(size_t(size_));
-  for (int i = 0; i < size_; ++i) {
-    const double u = double(i) / (size_ - 1);
-    table_[size_t(i)] = phase.eval(1 - 2 * u * u);
+PhaseLut::PhaseLut(const PhaseFunction& phase, int bins)
+    : bins_(std::max(bins, 8)), scale_(bins_ * std::sqrt(2.0)) {
+  table_.resize(size_t(nodes()));
+  for (int i = 0; i < nodes(); ++i) table_[size_t(i)] = phase.eval(nodeCosine(i));
+}
+
+double PhaseLut::nodeCosine(int i) const {
+  if (i <= bins_) {
+    const double u = i / scale_;
+    return 1 - 2 * u * u;
   }
+  const double v = (2 * bins_ - i) / scale_;
+  return 2 * v * v - 1;
 }
 
 }  // namespace cloudbake

@@ -10,6 +10,25 @@
 #include "core/math/parallel.h"
 
 namespace cloudbake {
+namespace {
+
+// Co_sky_p / (4 pi (1 - V_p)) per point: the scattered sky light as a fraction of the sky light
+// the medium removes at the point (V_p its sky visibility). A furnace bounds it by 1 at any
+// albedo <= 1, so averaging it over points and scaling by the voxel's own 4 pi (1 - V) keeps
+// every voxel within the bound. Averaging Co_sky itself did not: voxels at the cloud's edge,
+// whose V is high, took the fluence of points deeper inside, and a white, thick sphere under a
+// uniform sky came out up to 1.5x brighter than the sky. Where the medium removes nothing (1 - V
+// below 1e-9) the point carries no scattered sky light.
+std::vector<Rgb> skyFractions(const BakeGrid& g, const float* vis, const PointCloudResult& r) {
+  std::vector<Rgb> f(r.co_sky.size(), Rgb(0.0));
+  for (size_t p = 0; p < f.size(); ++p) {
+    const double removed = 4 * kPi * (1.0 - double(sampleTrilinear(g, vis, r.cloud.position[p])));
+    if (removed > 4 * kPi * 1e-9) f[p] = r.co_sky[p] / removed;
+  }
+  return f;
+}
+
+}  // namespace
 
 double splatPoints(BakedLight& bake, const PointCloudResult& result,
                    const std::function<bool(double)>& cancelled) {
@@ -23,6 +42,9 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
   float* mr = bake.add(bake_grids::kMieRatio, 1).data.data();
   const bool sky = !result.co_sky.empty();
   float* cs = sky ? bake.add(bake_grids::kSkyMultipleFluence, 3).data.data() : nullptr;
+  const BakeChannel* vis_channel = sky ? bake.find(bake_grids::kSkyVisibility) : nullptr;
+  const float* vis = vis_channel ? vis_channel->data.data() : nullptr;
+  const std::vector<Rgb> sky_fraction = vis ? skyFractions(g, vis, result) : std::vector<Rgb>();
   ParallelOptions rows;
   rows.grain = g.ny;  // a z slice of rows between cancellation polls
   rows.cancelled = cancelled;
@@ -42,7 +64,7 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
             const double w = t * t;
             wsum += w;
             csum += result.co[p] * w;
-            if (sky) ssum += result.co_sky[p] * w;
+            if (sky) ssum += (vis ? sky_fraction[p] : result.co_sky[p]) * w;
             lsum += result.light_dir[p] * w;
             rsum += double(result.mie_ratio[p]) * w;
           });
@@ -58,7 +80,7 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
             if (!std::isfinite(best)) continue;
             wsum = 1;
             csum = result.co[nearest];
-            if (sky) ssum = result.co_sky[nearest];
+            if (sky) ssum = vis ? sky_fraction[nearest] : result.co_sky[nearest];
             lsum = result.light_dir[nearest];
             rsum = result.mie_ratio[nearest];
           }
@@ -67,7 +89,7 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
           co[3 * v + 1] = float(cv.y);
           co[3 * v + 2] = float(cv.z);
           if (sky) {
-            const Rgb sv = ssum / wsum;
+            const Rgb sv = ssum / wsum * (vis ? 4 * kPi * (1.0 - vis[v]) : 1.0);
             cs[3 * v] = float(sv.x);
             cs[3 * v + 1] = float(sv.y);
             cs[3 * v + 2] = float(sv.z);

@@ -239,6 +239,9 @@ class BakeMarcher {
       }
       sky_sh_.emplace(projectSkyRadiance(sky), lut_);
       albedo_ = medium.albedo;
+      Sky unit;
+      unit.radiance = Rgb(1.0);
+      if (csky_) sky_unit_sh_.emplace(projectSkyRadiance(SkyLight(unit)), lut_);
     }
     if (angularModel(bake) == "sh") loadPhotonTallies(bake, medium, sky);
     co_ = channel(bake, bake_grids::kMultipleFluence, 3, false, "");
@@ -300,6 +303,19 @@ class BakeMarcher {
       }
       sum->sky += sky_single;
     }
+    if (sky_unit_sh_) {
+      // Precomputed: the scattered sky light seen along d, f (1 - integral T p), f per unit
+      // (see SkyMsShape).
+      double wts[3 * kShCoefficients];
+      sky_unit_sh_->weights(ray.d, wts);
+      for (int c = 0; c < 3; ++c) {
+        double v = 0;
+        for (int i = 0; i < kShCoefficients; ++i) {
+          v += s.sky_ms_sh[i][c] * wts[c * kShCoefficients + i];
+        }
+        s.sky_ms[c] = std::max(0.0, s.sky_ms[c] - v);
+      }
+    }
     sum->sky_multiple += scale_sky_ * s.sky_ms;
     sum->multiple += s.ms;
     sum->alpha += 1 - s.transmittance;
@@ -317,6 +333,7 @@ class BakeMarcher {
     Rgb sky_ms;                           // integral of T_v sigma_t Co_sky / (4 pi)
     Rgb sky_ss;                           // integral of T_v sigma_t J_sky (photon tally)
     double sky_sh[kShCoefficients] = {};  // integrals of T_v sigma_t T_sky,i (Eq. 5)
+    Rgb sky_ms_sh[kShCoefficients];       // precomputed: integrals of T_v sigma_t f T_sky,i
     Rgb shw[shCount(kMaxShDegree)];       // photon tallies: p_l Y_lm(-d) per coefficient
     bool done = false;
   };
@@ -499,6 +516,18 @@ class BakeMarcher {
     }
   }
 
+  /// Precomputed's scattered sky light has the angular shape of the sky light the medium
+  /// removes: radiance f L_sky (1 - T(x, w)) from direction w, with f = (Co_sky / 4 pi) / (1 - V)
+  /// the scattered fraction of it (<= 1 in a furnace at any albedo <= 1), so that seen along d
+  /// it is f L_sky (1 - integral T p(w . d) dw), the complement of the view-dependent single
+  /// scattering (Eq. 5). Isotropic phases give the old f L_sky (1 - V) = L_sky Co_sky / (4 pi);
+  /// a strong backward peak, whose single scattering alone returns half the sky towards a
+  /// viewer behind it, no longer adds an isotropic multiple term on top (HG -0.999 at albedo 1
+  /// was 1.45x the sky).
+  static Rgb skyMsShape(const Rgb& co_sky_4pi, double v) {
+    return 1 - v > 1e-6 ? co_sky_4pi / (1 - v) : Rgb(0.0);
+  }
+
   /// The source terms at a sample: Tsun, Vsky, and the multiple term J_ms (RGB, per unit E).
   struct Source {
     double tsun = 0, vsky = 0;
@@ -521,6 +550,7 @@ class BakeMarcher {
       float v[3];
       read3(csky_, c, v);
       s->csky = Rgb(v[0], v[1], v[2]) * kInv4Pi;
+      if (sky_unit_sh_) s->csky = skyMsShape(s->csky, read(vsky_, c));
     }
     if (co_) {
       float co[3], ld[3];
@@ -624,6 +654,12 @@ class BakeMarcher {
             s->sky_sh[q] += a0 * src_prev.tsh[q] + a1 * src_cur.tsh[q];
           }
         }
+        if (sky_unit_sh_) {
+          for (int q = 0; q < kShCoefficients; ++q) {
+            s->sky_ms_sh[q] +=
+                src_prev.csky * (a0 * src_prev.tsh[q]) + src_cur.csky * (a1 * src_cur.tsh[q]);
+          }
+        }
         transmittance *= e;
         src_prev = src_cur;
         have_prev = true;
@@ -651,7 +687,8 @@ class BakeMarcher {
   const float* mie_ = nullptr;
   std::array<const float*, kShCoefficients> sh_{};
   std::optional<SkyShScatter> sky_sh_;
-  int sh_order_ = 0;  // photon tallies' degree (0: none)
+  std::optional<SkyShScatter> sky_unit_sh_;  // precomputed with Co_sky: the unit sky's Eq. 5
+  int sh_order_ = 0;                         // photon tallies' degree (0: none)
   std::vector<const float*> msh_, msky_sh_, ssky_sh_;
   std::vector<Rgb> phase_l_;
   Rgb albedo_;

@@ -22,8 +22,13 @@ constexpr double kMaxPaperCi = 1e30;  // the paper rule grows without bound; kee
 constexpr int64_t kDestinationGrain = 128;  // destinations per chunk
 
 // The similarity (transport) reduction of the normalised rule: s = 1 - lum(a g) scales the
-// extinction, `albedo` = a (1 - g) / s per channel; `isotropic` is false only when the phase
-// function has no forward bias (g <= 0), where the beam model of R and L is used as it is.
+// extinction, `albedo` = a (1 - g) / s per channel; `isotropic` is false only for g = 0, where
+// the reduction is the identity and the beam model of R and L is used as it is. Backscattering
+// phases (g < 0) are reduced too (s > 1): their beam model concentrates each source's light on
+// the few neighbours behind it without normalising the phase over them, and its passes grew
+// without bound (Co 3e10 at g = -0.8, 5e28 at -0.9), while the reduced medium conserves energy
+// like any other (the similarity relations hold for either sign of g: the diffusion
+// coefficient depends on sigma_s (1 - g) alone).
 struct TransportScaling {
   double s = 1;
   Rgb albedo{1, 1, 1};
@@ -34,7 +39,7 @@ TransportScaling transportScaling(const Medium& medium) {
   TransportScaling ts;
   const Rgb g = medium.phase->meanCosine();
   const Rgb a = medium.albedo;
-  if (!(luminance(g) > 0)) {
+  if (!(luminance(g) != 0)) {
     ts.albedo = a;
     return ts;
   }
@@ -246,7 +251,9 @@ bool addSunOrder(const PassInputs& in, int pass, double prev_sum, SunOrders& o,
 }
 
 // Co, light_dir and mie_ratio from the sun's orders plus the forward-scattered beam Ci' - Ci,
-// which travels along the sun's direction.
+// which travels along the sun's direction. For backscattering phases (s > 1) the beam is
+// negative: the reduced medium counts as scattered light that is still unscattered in truth,
+// so it is taken back; Co stays >= 0 (it can only reach 0 where albedo leaves no orders).
 void finishSunOrders(const PassInputs& in, SunOrders& o, PointCloudResult& out) {
   const PointCloud& pc = out.cloud;
   const size_t n = pc.size();
@@ -254,10 +261,10 @@ void finishSunOrders(const PassInputs& in, SunOrders& o, PointCloudResult& out) 
   out.light_dir.resize(n);
   out.mie_ratio.resize(n);
   for (size_t j = 0; j < n; ++j) {
-    const double beam = std::max(0.0, o.ci_reduced[j] - double(pc.sun[j]));
-    o.co[j] += Rgb(beam);
+    const double beam = o.ci_reduced[j] - double(pc.sun[j]);
+    o.co[j] = max(o.co[j] + Rgb(beam), Rgb(0.0));
     o.total_flux[j] += -in.sun_dir * beam;
-    o.total_incoming[j] += beam;
+    o.total_incoming[j] = std::max(0.0, o.total_incoming[j] + beam);
     out.co[j] = o.co[j];
     const double fl = length(o.total_flux[j]);
     if (fl > 0 && o.total_incoming[j] > 0) {
@@ -281,7 +288,7 @@ void runSkyOrders(const PassInputs& in, const std::vector<double>& self, PointCl
     const double vr = sampleTrilinear(*in.grid, in.escape_visibility->data(), pc.position[j]);
     const double vt = sampleTrilinear(*in.grid, in.true_visibility->data(), pc.position[j]);
     d[j] = Rgb(4 * kPi * vr);
-    beam[j] = 4 * kPi * std::max(0.0, vr - vt);
+    beam[j] = 4 * kPi * (vr - vt);  // signed, as the sun's beam (finishSunOrders)
   }
   double prev = 0;
   for (int pass = 0; pass < in.options.passes; ++pass) {
@@ -317,7 +324,7 @@ void runSkyOrders(const PassInputs& in, const std::vector<double>& self, PointCl
     prev = sum;
   }
   out.co_sky.resize(n);
-  for (size_t j = 0; j < n; ++j) out.co_sky[j] = acc[j] + Rgb(beam[j]);
+  for (size_t j = 0; j < n; ++j) out.co_sky[j] = max(acc[j] + Rgb(beam[j]), Rgb(0.0));
 }
 
 // The normalised rule (derivation in the header). The passes run on the similarity-reduced
@@ -553,6 +560,8 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   }
   const Vec3 sun_dir = normalize(sun_dir_in);
   PointCloudResult out;
+  // An empty cloud is a valid shot (it renders the background): no points, a zero bake.
+  if (std::none_of(density.begin(), density.end(), [](float d) { return d > 0; })) return out;
   // Stage fractions: points 0-0.1, neighbours 0.1-0.3, passes 0.3-1.
   auto report = [&](double f, const std::string& stage) {
     if (progress && !progress(f, stage)) throw Cancelled();

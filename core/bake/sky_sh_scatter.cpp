@@ -34,17 +34,23 @@ std::array<ShCoefficients, 3> projectSkyRadiance(const SkyLight& sky) {
 }
 
 std::array<std::array<double, 4>, 3> phaseEigenvalues(const PhaseLut& lut) {
-  // mu = 1 - 2 s^2, dmu = -4 s ds: uniform steps in s crowd towards the forward peak.
+  // Midpoint rule in u = sin(theta / 2) over the forward hemisphere and v = cos(theta / 2) over
+  // the backward one (mu = 1 - 2 u^2 = 2 v^2 - 1, |dmu| = 4 u du = 4 v dv): steps uniform in
+  // theta at both ends, so a forward and a backward peak are resolved alike (PhaseLut).
   std::array<std::array<double, 4>, 3> lambda{};
-  constexpr int kSteps = 20000;
-  for (int n = 0; n < kSteps; ++n) {
-    const double s = (n + 0.5) / kSteps;
-    const double mu = 1 - 2 * s * s;
-    const double legendre[4] = {1, mu, 0.5 * (3 * mu * mu - 1), 0.5 * (5 * mu * mu * mu - 3 * mu)};
-    const Rgb p = lut.eval(mu);
-    const double w = 2 * kPi * 4 * s / kSteps;
-    for (int c = 0; c < 3; ++c)
-      for (int l = 0; l < 4; ++l) lambda[size_t(c)][size_t(l)] += w * p[c] * legendre[l];
+  constexpr int kSteps = 10000;  // per hemisphere
+  const double half = std::sqrt(0.5);
+  for (int side = 0; side < 2; ++side) {
+    for (int n = 0; n < kSteps; ++n) {
+      const double s = (n + 0.5) / kSteps * half;
+      const double mu = side == 0 ? 1 - 2 * s * s : 2 * s * s - 1;
+      const double legendre[4] = {1, mu, 0.5 * (3 * mu * mu - 1),
+                                  0.5 * (5 * mu * mu * mu - 3 * mu)};
+      const Rgb p = lut.eval(mu);
+      const double w = 2 * kPi * 4 * s * half / kSteps;
+      for (int c = 0; c < 3; ++c)
+        for (int l = 0; l < 4; ++l) lambda[size_t(c)][size_t(l)] += w * p[c] * legendre[l];
+    }
   }
   return lambda;
 }

@@ -11,6 +11,8 @@
 #include "core/bake/baked_light_vdb.h"
 #include "core/bake/render_from_bake.h"
 #include "core/bake/sky_sh_scatter.h"
+#include "core/bake/sky_visibility.h"
+#include "core/bake/sun_transmittance.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/methods/common.h"
@@ -221,7 +223,7 @@ class PrecomputedMethod final : public BakeMethod {
     info_.citation =
         "Iwasaki, Nishino and Dobashi 2011, \"Real-time rendering of endless cloud animation\" "
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
-    info_.version = 1;
+    info_.version = 2;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.animates = true;
@@ -334,9 +336,32 @@ void PrecomputedMethod::checkLimits(const ShotSpec& shot, const MethodLimits& li
   }
 }
 
+// An empty cloud (a static volume whose density is 0 everywhere) is a valid shot, as for every
+// method: each frame renders the background from a zero bake. No database can be built for
+// it (its sample points would have nowhere to go).
+bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o) {
+  const ShotSpec& shot = run.shot();
+  if (std::holds_alternative<SequenceVolumeSpec>(shot.volume)) return false;
+  const Scene& scene = run.scene();
+  if (scene.medium.density->maxDensity() > 0) return false;
+  BakedLight light = makeBakeLattice(*scene.medium.density, o.light_resolution);
+  light.method = "precomputed";
+  light.sun_direction = sunDirection(shot);
+  computeSunTransmittance(light, light.sun_direction, scene.medium.extinction, {});
+  computeSkyVisibility(light, scene.medium.extinction, {});
+  light.metadata["cloudbake:empty_cloud"] = "1";
+  run.result().bakes_computed += 1;
+  const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
+  const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
+  const FrameProgress progress{double(o.frames) * per_frame, per_frame};
+  for (int f = 0; f < o.frames; ++f) renderFrame(run, light, BlendFrame{0, 0, 1}, f, progress);
+  return true;
+}
+
 void PrecomputedMethod::run(MethodRun& run) const {
   const ShotSpec& shot = run.shot();
   const PrecomputedShotOptions o = precomputedOptions(shot);
+  if (renderEmptyCloud(run, o)) return;
   const PrecomputedDatabase db = obtainDatabase(run, o);
   const std::vector<BlendFrame> walk = walkDatabase(run, db, o);
 

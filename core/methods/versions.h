@@ -16,9 +16,9 @@ constexpr int kPhaseVersion = 1;
 /// core/transport: tracking, sky, camera and the path tracer's estimators.
 constexpr int kTransportVersion = 1;
 /// core/bake/render_from_bake: views ray-marched from a baked-light lattice.
-constexpr int kRenderFromBakeVersion = 1;
+constexpr int kRenderFromBakeVersion = 2;
 
-/// "volume/1 phase/1 transport/1 render_from_bake/1": the shared part of every method's salt.
+/// "volume/1 phase/1 transport/1 render_from_bake/2": the shared part of every method's salt.
 inline std::string sharedVersionSalt() {
   return "volume/" + std::to_string(kVolumeVersion) + " phase/" + std::to_string(kPhaseVersion) +
          " transport/" + std::to_string(kTransportVersion) + " render_from_bake/" +

@@ -46,8 +46,8 @@ TEST(ShProduct, ProjectsTheProductOfTwoFunctions) {
   for (int i = 0; i < kShCoefficients; ++i) EXPECT_NEAR(p[size_t(i)], direct[size_t(i)], 2e-3) << i;
 }
 
-TEST(ShExp, ExactForConstantsAndCloseToTheReference) {
-  // exp of a constant function is a constant: exactly, whatever the tables.
+// A small fitting set: a constant optical depth growing with a z gradient.
+std::vector<ShCoefficients> gradientSamples() {
   std::vector<ShCoefficients> samples;
   for (int i = 0; i < 16; ++i) {
     ShCoefficients g{};
@@ -55,6 +55,12 @@ TEST(ShExp, ExactForConstantsAndCloseToTheReference) {
     g[2] = float(0.05 * i);
     samples.push_back(g);
   }
+  return samples;
+}
+
+TEST(ShExp, ExactForConstantsAndCloseToTheReference) {
+  // exp of a constant function is a constant: exactly, whatever the tables.
+  const std::vector<ShCoefficients> samples = gradientSamples();
   const ShExp e = ShExp::fit(samples, 8);
   ShCoefficients c{};
   c[0] = -2.0f;
@@ -62,6 +68,28 @@ TEST(ShExp, ExactForConstantsAndCloseToTheReference) {
   EXPECT_NEAR(out[0], std::exp(-2.0 / std::sqrt(4 * kPi)) * std::sqrt(4 * kPi), 1e-5);
   EXPECT_THROW(ShExp::fit(std::vector<ShCoefficients>(3), 8), InputError);
   EXPECT_THROW(ShExp::fit(samples, 2), InputError);
+}
+
+// Optically thick voxels (|g^| far beyond the tables) are projected directly: every direction's
+// transmittance within [0, 1], so the DC term (4 pi x the mean transmittance / sqrt(4 pi)) is
+// within [0, sqrt(4 pi)] and the function stays near [0, 1] everywhere. Scaling and squaring
+// with truncated SH products gave 1e18 at optical depths of 1000.
+TEST(ShExp, StaysATransmittanceInOpticallyThickVoxels) {
+  const ShExp e = ShExp::fit(gradientSamples(), 8);
+  for (const double depth : {30.0, 300.0, 1e3, 1e6}) {
+    ShCoefficients g{};  // -tau(w) = -depth (1 + 0.9 cos theta): thin towards -z, thick towards +z
+    g[0] = float(-depth * std::sqrt(4 * kPi));
+    g[2] = float(-0.9 * depth * std::sqrt(4 * kPi / 3));
+    const ShCoefficients t = e(g);
+    for (float v : t) ASSERT_TRUE(std::isfinite(v)) << depth;
+    EXPECT_GE(t[0], 0.f) << depth;
+    EXPECT_LE(t[0], float(std::sqrt(4 * kPi)) + 1e-5f) << depth;
+    for (const Vec3& w : sphereDirections(64)) {
+      const double v = shEvaluate(t, w);
+      EXPECT_GT(v, -0.3) << depth;
+      EXPECT_LT(v, 1.3) << depth;
+    }
+  }
 }
 
 TEST(ShExp, MatchesDirectlyProjectedTransmittanceInACloud) {

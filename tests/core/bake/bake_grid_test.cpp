@@ -64,5 +64,29 @@ TEST(PhaseLut, MatchesTheFunctionItTabulates) {
   EXPECT_TRUE(std::isfinite(lut.eval(1.5).x));
 }
 
+// Either peak is resolved: the table integrates to 1 over the sphere (by a midpoint rule in
+// theta, independent of the table's own nodes) for strongly forward and backward phases. A table
+// uniform in sin(theta / 2) alone gave 4x for HG -0.99.
+TEST(PhaseLut, ResolvesTheForwardAndTheBackwardPeak) {
+  for (const double g : {-0.999, -0.99, -0.9, 0.9, 0.99, 0.999}) {
+    const HenyeyGreensteinPhase hg(g);
+    const PhaseLut lut(hg);
+    constexpr int kSteps = 400000;
+    double integral = 0;
+    for (int k = 0; k < kSteps; ++k) {
+      const double theta = (k + 0.5) * kPi / kSteps;
+      integral += lut.eval(std::cos(theta)).x * 2 * kPi * std::sin(theta) * kPi / kSteps;
+    }
+    EXPECT_NEAR(integral, 1.0, 0.01) << "g = " << g;
+    EXPECT_NEAR(lut.eval(-1).x / hg.eval(-1).x, 1.0, 1e-6) << g;
+    EXPECT_NEAR(lut.eval(1).x / hg.eval(1).x, 1.0, 1e-6) << g;
+  }
+  const PhaseLut lut(HenyeyGreensteinPhase(0.5), 64);
+  EXPECT_EQ(lut.nodes(), 129);
+  EXPECT_DOUBLE_EQ(lut.nodeCosine(0), 1.0);
+  EXPECT_NEAR(lut.nodeCosine(64), 0.0, 1e-15);
+  EXPECT_DOUBLE_EQ(lut.nodeCosine(128), -1.0);
+}
+
 }  // namespace
 }  // namespace cloudbake
