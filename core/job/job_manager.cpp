@@ -269,6 +269,10 @@ JobPlan JobManager::plan(const SubmitInput& input) {
   plan.bake_key = mp.bake_key.empty() ? p.keys.bake : mp.bake_key;
   plan.bake_cached = mp.bake_cached;
   plan.components = mp.components;
+  const unsigned threads =
+      options_.worker_threads ? options_.worker_threads : std::thread::hardware_concurrency();
+  const std::string phase = phasePlanLine(p.shot.medium.phase, &phases_, int(threads));
+  if (!phase.empty()) plan.components.push_back(phase);
   plan.view_cached = mp.view_cached;
   plan.pixel_samples = mp.pixel_samples;
   if (p.shot.outputs.exr) {
@@ -550,6 +554,7 @@ RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {
   ro.out_dir = store_->outputDir(job->record.id);
   ro.cache = cache_.get();
   ro.volumes = &volumes_;
+  ro.phases = &phases_;
   ro.directions = directions_.get();
   ro.sun_tolerance_deg = job->sun_tolerance_deg;
   ro.max_voxels = options_.limits.max_voxels;

@@ -22,6 +22,7 @@
 #include "core/job/cache_key.h"
 #include "core/job/direction_index.h"
 #include "core/job/job_record.h"
+#include "core/job/phase_cache.h"
 #include "core/job/run_shot.h"
 #include "core/job/volume_cache.h"
 #include "core/shot/shot.h"
@@ -163,6 +164,7 @@ class JobManager {
   std::unique_ptr<BakeCache> cache_;
   std::unique_ptr<AssetStore> assets_;
   VolumeCache volumes_;
+  PhaseCache phases_;
   std::unique_ptr<DirectionIndex> directions_;
   mutable std::mutex mutex_;
   mutable std::condition_variable cv_;  // queue changes and new events

@@ -15,6 +15,7 @@
 #include "core/job/cache_key.h"
 #include "core/job/direction_index.h"
 #include "core/job/file_util.h"
+#include "core/job/phase_cache.h"
 #include "core/job/run_outputs.h"
 #include "core/job/volume_cache.h"
 #include "core/job/volume_limits.h"
@@ -71,7 +72,16 @@ class ShotRun final : public MethodRun {
     if (!scene_) {
       ShotSpec light = shot_;
       light.volume = BoxVolumeSpec{{0, 0, 0}, {1, 1, 1}, 0.0};  // stand-in until scene()
-      scene_ = buildScene(light, opt_.source);
+      scene_ = buildScene(light, opt_.source, [this](const PhaseSpec& spec) {
+        const auto t0 = std::chrono::steady_clock::now();
+        bool cached = false;
+        auto phase = cachedPhase(spec, opt_.phases, &cached);
+        if (spec.type == PhaseSpec::Type::kMie) {
+          result_.steps.push_back(
+              {"phase", "", -1, secondsSince(t0), {{"cached", cached ? 1.0 : 0.0}}});
+        }
+        return phase;
+      });
     }
     return *scene_;
   }

@@ -13,6 +13,7 @@ namespace cloudbake {
 
 class BakeCache;
 class DirectionIndex;
+class PhaseCache;
 class VolumeCache;
 
 /// Return false to cancel: the run then throws Cancelled within about one tile of work.
@@ -31,6 +32,7 @@ struct RunOptions {
   RunProgressFn progress;          ///< optional
   BakeCache* cache = nullptr;      ///< optional: reuse/commit renders and VDBs
   VolumeCache* volumes = nullptr;  ///< optional: reuse built density fields
+  PhaseCache* phases = nullptr;    ///< optional: reuse built phase functions (Mie tables)
   /// With a cache and a direction index: a view not cached for the shot's own sun direction may
   /// reuse a cached render whose sun direction lies within this angle (degrees, in [0, 90]);
   /// 0 (default): only the exact (quantised) direction.

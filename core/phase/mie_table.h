@@ -26,11 +26,22 @@ struct MieTableOptions {
   /// fringes) oscillates with a period of order 1 in x, so 0.25 resolves it; narrow resonances
   /// are averaged statistically.
   double dx = 0.25;
+  /// Beyond x = dx / relative_dx the step grows as relative_dx x (0: uniform steps of dx), so a
+  /// table's cost grows linearly with the largest droplet instead of quadratically
+  /// (sizeParameterNodes in mie_table.cpp; measured in tests/core/phase/mie_table_test.cpp).
+  double relative_dx = 0.002;
 };
 
 /// Angle grid of the table in degrees, ascending from 0 to 180: 0.02 deg steps near the
 /// diffraction peak, 0.25 deg across the fogbow, 0.05 deg near the glory.
 std::vector<double> mieTableAngleGridDeg();
+
+/// The work of building a table with `options`: Mie terms summed over its size-parameter nodes
+/// and channels, times its angles (InputError for options out of range).
+double mieTableWork(const MieTableOptions& options);
+/// The predicted build time in seconds on `threads` cores (a dry run's estimate; the constant is
+/// measured on the reference machine).
+double estimateMieTableSeconds(const MieTableOptions& options, int threads);
 
 /// Polydisperse Mie phase function per RGB channel,
 ///   p_c(theta) = sum_lambda int n(r) (|S1|^2 + |S2|^2)(x, theta) dr / normalisation,

@@ -75,13 +75,14 @@ DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame
                   [&] { return loadVdbVolume(options); });
 }
 
-Scene buildScene(const ShotSpec& shot, const std::string& source) {
+Scene buildScene(const ShotSpec& shot, const std::string& source, const PhaseBuilder& phase) {
   Scene scene;
   scene.medium.density = buildVolume(shot.volume, source);
   scene.medium.extinction = shot.medium.extinction;
   scene.medium.albedo = shot.medium.albedo;
-  scene.medium.phase =
-      labelled(source, "/medium/phase", [&] { return makePhaseFunction(shot.medium.phase); });
+  scene.medium.phase = labelled(source, "/medium/phase", [&] {
+    return phase ? phase(shot.medium.phase) : makePhaseFunction(shot.medium.phase);
+  });
   if (shot.lighting.has_sun) {
     scene.sun = shot.lighting.sun;
   } else {

@@ -1,6 +1,8 @@
 // Turns a validated ShotSpec into what the renderers consume: medium, lights, cameras.
 #pragma once
 
+#include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -21,8 +23,13 @@ DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source 
 DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame,
                                    const std::string& source = "shot.json");
 
+/// Builds a phase function from its description (e.g. through a server's cache).
+using PhaseBuilder = std::function<std::shared_ptr<const PhaseFunction>(const PhaseSpec&)>;
+
 /// Medium (density, extinction, albedo, phase function), sun, sky and cameras of a shot.
-/// Throws InputError (with `source` and the JSON pointer) when a part cannot be built.
-Scene buildScene(const ShotSpec& shot, const std::string& source = "shot.json");
+/// Throws InputError (with `source` and the JSON pointer) when a part cannot be built. The phase
+/// function comes from `phase` when given, else makePhaseFunction.
+Scene buildScene(const ShotSpec& shot, const std::string& source = "shot.json",
+                 const PhaseBuilder& phase = {});
 
 }  // namespace cloudbake

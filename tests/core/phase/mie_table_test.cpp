@@ -231,5 +231,37 @@ TEST(MieTable, AngleGridResolvesPeaks) {
   }
 }
 
+// The size-parameter step that grows with x (relative_dx) keeps the table of the uniform step:
+// every angle within 10 % (the largest differences sit on the glory's and fogbow's fringes,
+// which the uniform step itself only averages), the asymmetry parameter within 1e-3, at a
+// fraction of the work. Measured (r_eff 50 um, v_eff 0.499): 210 s uniform, 5.0 s relative,
+// at most 5.5 % apart (at 179.8 deg).
+TEST(MieTable, RelativeSizeStepKeepsTheTableAtAFractionOfTheWork) {
+  MieTableOptions uniform;
+  uniform.relative_dx = 0;
+  const MieTableOptions relative;  // the default relative step
+  const MieTablePhase a(uniform), b(relative);
+  ASSERT_EQ(a.cosTheta().size(), b.cosTheta().size());
+  for (size_t j = 0; j < a.cosTheta().size(); ++j) {
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(b.values()[j][c] / a.values()[j][c], 1.0, 0.1)
+          << "theta " << std::acos(a.cosTheta()[j]) * 180 / kPi << " deg, channel " << c;
+    }
+  }
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(b.meanCosine()[c], a.meanCosine()[c], 1e-3);
+  EXPECT_LT(mieTableWork(relative), 0.5 * mieTableWork(uniform));
+  // The heavy-tailed end of the documented range: the work of the uniform step grows with the
+  // square of the largest droplet, the relative step's about linearly.
+  MieTableOptions wide;
+  wide.effective_radius_um = 50;
+  wide.effective_variance = 0.499;
+  const double relative_work = mieTableWork(wide);
+  wide.relative_dx = 0;
+  EXPECT_LT(relative_work, mieTableWork(wide) / 20);
+  MieTableOptions bad;
+  bad.relative_dx = 0.5;
+  EXPECT_THROW(mieTableWork(bad), InputError);
+}
+
 }  // namespace
 }  // namespace cloudbake
