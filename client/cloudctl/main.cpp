@@ -23,6 +23,7 @@
 #include "cloudbake/v1/bake_service.grpc.pb.h"
 #include "common/exit_codes.h"
 #include "common/grpc_status.h"
+#include "common/json_limits.h"
 #include "core/job/sha256.h"
 
 namespace {
@@ -474,8 +475,12 @@ std::string readShotFile(const std::string& path) {
 void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
   // The server validates the shot; here we only find the files to send. Text that is not JSON
   // goes as it is, for the server's parser to report where it breaks.
-  Json shot = Json::parse(req->shot_json(), nullptr, false);
-  if (shot.is_discarded()) return;
+  Json shot;
+  try {
+    shot = cloudbake::parseJsonLimited(req->shot_json(), a.shot);
+  } catch (const cloudbake::InputError&) {
+    return;
+  }
   const fs::path base = fs::absolute(a.shot).parent_path();
   bool rewritten = false;
   for (Json* node : cloudbake::client::shotPathNodes(shot)) {

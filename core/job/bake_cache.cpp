@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "common/json_limits.h"
 #include "core/error.h"
 #include "core/job/file_util.h"
 #include "core/job/sha256.h"
@@ -63,7 +64,8 @@ bool BakeCache::verifyLocked(const std::string& key) {
   const fs::path dir = fs::path(root_) / "entries" / key;
   bool ok = false;
   try {
-    const Json manifest = Json::parse(readWholeFile((dir / kManifest).string()));
+    const Json manifest =
+        parseJsonLimited(readWholeFile((dir / kManifest).string()), (dir / kManifest).string());
     ok = manifest.at("key").get<std::string>() == key;
     size_t files = 0;
     for (const auto& [name, info] : manifest.at("files").items()) {

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "common/json_limits.h"
 #include "core/job/file_util.h"
 
 namespace cloudbake {
@@ -25,8 +26,8 @@ std::vector<Vec3> DirectionIndex::loadLocked(const std::string& family) const {
   if (it != memo_.end()) return it->second;
   std::vector<Vec3> dirs;
   try {
-    for (const Json& d :
-         Json::parse(readWholeFile((fs::path(root_) / (family + ".json")).string()))) {
+    const std::string file = (fs::path(root_) / (family + ".json")).string();
+    for (const Json& d : parseJsonLimited(readWholeFile(file), file)) {
       dirs.push_back({d.at(0).get<double>(), d.at(1).get<double>(), d.at(2).get<double>()});
     }
   } catch (const std::exception&) {

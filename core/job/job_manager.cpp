@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "common/json_limits.h"
 #include "core/error.h"
 #include "core/job/cache_key.h"
 #include "core/job/file_util.h"
@@ -84,7 +85,8 @@ void writeSubmission(const std::string& job_dir, const SubmitInput& input) {
 }
 
 SubmitInput readSubmission(const std::string& job_dir) {
-  const Json s = Json::parse(readWholeFile((fs::path(job_dir) / kSubmittedFile).string()));
+  const std::string file = (fs::path(job_dir) / kSubmittedFile).string();
+  const Json s = parseJsonLimited(readWholeFile(file), file);
   SubmitInput input;
   input.shot_json = s.at("shot_json").get<std::string>();
   input.assets = s.at("assets").get<std::vector<std::pair<std::string, std::string>>>();
@@ -336,17 +338,16 @@ JobRecord JobManager::render(const std::string& job_id, const std::string& views
     spdlog::error("job {}: cannot read its submission: {}", job_id, e.what());
     throw FailedPreconditionError("job " + job_id + " has no stored submission to render from");
   }
-  Json shot = Json::parse(input.shot_json);  // it parsed when the job was submitted
+  Json shot = parseJsonLimited(input.shot_json, "job " + job_id + ": stored shot");
   if (!views_json.empty()) {
-    const Json views = Json::parse(views_json, nullptr, false);
-    if (views.is_discarded() || !views.is_array()) {
+    const Json views = parseJsonLimited(views_json, "views_json");
+    if (!views.is_array()) {
       throw InputError("views_json: must be a JSON array of shot-format views");
     }
     shot["views"] = views;
   }
   if (!sun_irradiance_json.empty()) {
-    const Json e = Json::parse(sun_irradiance_json, nullptr, false);
-    if (e.is_discarded()) throw InputError("sun_irradiance_json: not valid JSON");
+    const Json e = parseJsonLimited(sun_irradiance_json, "sun_irradiance_json");
     if (!shot.contains("lighting") || !shot["lighting"].contains("sun")) {
       throw InputError("sun_irradiance_json: the shot of job " + job_id + " has no sun");
     }

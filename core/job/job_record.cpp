@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "common/json_limits.h"
 #include "core/job/file_util.h"
 
 namespace cloudbake {
@@ -119,7 +120,7 @@ std::vector<JobRecord> JobStore::loadAll() const {
     if (!dir.is_directory() || !isJobId(dir.path().filename().string())) continue;
     const fs::path file = dir.path() / "job.json";
     try {
-      records.push_back(fromJson(Json::parse(readWholeFile(file.string()))));
+      records.push_back(fromJson(parseJsonLimited(readWholeFile(file.string()), file.string())));
     } catch (const std::exception& e) {
       // A job folder without a readable record was never acknowledged to a client.
       spdlog::warn("job store: skipping {}: {}", dir.path().string(), e.what());

@@ -7,6 +7,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "common/json_limits.h"
 #include "core/shot/shot_parser.h"
 
 namespace cloudbake::shotjson {
@@ -66,15 +67,6 @@ std::string pointerOf(const std::vector<Frame>& stack) {
   return p;
 }
 
-// nlohmann's messages start with "[json.exception.parse_error.101] "; the tag helps nobody.
-std::string stripExceptionTag(const std::string& what) {
-  if (!what.empty() && what[0] == '[') {
-    const size_t end = what.find("] ");
-    if (end != std::string::npos) return what.substr(end + 2);
-  }
-  return what;
-}
-
 bool isNonFiniteSpelling(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
@@ -104,7 +96,7 @@ Json parseStrict(const std::string& text, const std::string& source) {
   constexpr size_t kMaxDepth = 32;
   std::vector<Frame> stack;
   std::string duplicate;  // pointer of the first repeated key
-  auto callback = [&](int /*depth*/, Json::parse_event_t event, Json& parsed) {
+  auto on_event = [&](int /*depth*/, Json::parse_event_t event, Json& parsed) {
     switch (event) {
       case Json::parse_event_t::object_start:
       case Json::parse_event_t::array_start:
@@ -133,14 +125,12 @@ Json parseStrict(const std::string& text, const std::string& source) {
         if (!stack.empty() && !stack.back().object) ++stack.back().index;
         break;
     }
-    return true;
   };
-  Json doc;
-  try {
-    doc = Json::parse(text, callback);
-  } catch (const Json::exception& e) {
-    throw InputError(source + ": /: invalid JSON: " + stripExceptionTag(e.what()));
-  }
+  // The common parser's own depth bound sits one level deeper, so the error above, which names
+  // the pointer, is the one a user sees.
+  JsonLimits limits;
+  limits.max_depth = kMaxDepth + 1;
+  const Json doc = parseJsonLimited<Json>(text, source + ": /", limits, on_event);
   if (!duplicate.empty()) {
     throw InputError(source + ": " + duplicate + ": duplicate key (each key may appear once)");
   }

@@ -661,6 +661,19 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
   EXPECT_EQ(run(server_.cloudctl() + " submit " + ws_.path("no-such-shot.json")).code, 3);
   EXPECT_EQ(run(server_.cloudctl() + " frobnicate").code, 2);
   EXPECT_EQ(run(server_.cloudctl() + " health").code, 0);
+  // RenderView with views nested 100,000 deep: a clear error naming views_json (it was a
+  // SIGSEGV in the handler thread, and UNAVAILABLE for everyone after it); likewise the irradiance.
+  const CmdResult job = run(server_.cloudctl() + " --json submit " + ws_.path("good/g.json") +
+                            " --quiet --out " + ws_.path("good/out2"));
+  ASSERT_EQ(job.code, 0) << job.err;
+  const std::string id = Json::parse(job.out).at("id");
+  const std::string deep =
+      ws_.write("deep.json", std::string(100000, '[') + std::string(100000, ']'));
+  const CmdResult r = run(server_.cloudctl() + " render " + id + " --views " + deep +
+                          " --quiet --out " + ws_.path("deep"));
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("views_json: nested deeper than"), std::string::npos) << r.err;
+  EXPECT_EQ(run(server_.cloudctl() + " health").code, 0);
 }
 
 // --max-voxels and --max-frames: each volume kind over the limit is refused naming the field
