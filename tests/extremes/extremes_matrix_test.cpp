@@ -28,12 +28,14 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/io/vdb_io.h"
 #include "core/job/file_util.h"
 #include "core/job/run_shot.h"
 #include "core/methods/registry.h"
 #include "core/phase/phase_factory.h"
 #include "core/shot/shot_parser.h"
 #include "core/transport/layers_exr.h"
+#include "core/volume/analytic.h"
 
 namespace cloudbake {
 namespace {
@@ -70,10 +72,49 @@ json cheapBake(const std::string& method) {
 }
 
 // Scales the scene about the origin by `s` (positions, radii, widths) keeping its look.
-void scaleScene(json& shot, double s) {
-  shot["volume"]["sphere"]["radius"] = s;
+void scaleCamera(json& shot, double s) {
   shot["views"][0]["camera"]["position"] = {0, -5 * s, 0};
   shot["views"][0]["camera"]["width"] = 2.5 * s;
+}
+
+void scaleScene(json& shot, double s) {
+  shot["volume"]["sphere"]["radius"] = s;
+  scaleCamera(shot, s);
+}
+
+// The VDBs written by boxVdb, removed when the test program ends.
+std::map<std::pair<int, double>, std::string>& writtenVdbs() {
+  static std::map<std::pair<int, double>, std::string> written;
+  return written;
+}
+
+class RemoveVdbs : public ::testing::Environment {
+ public:
+  void TearDown() override {
+    std::error_code ec;
+    for (const auto& [spec, path] : writtenVdbs()) fs::remove(path, ec);
+  }
+};
+const auto* const kRemoveVdbs = ::testing::AddGlobalTestEnvironment(new RemoveVdbs);
+
+// A VDB of a box of `voxels`^3 voxels of size `voxel` centred on the origin, written once per
+// process into the temporary folder; returns its path.
+std::string boxVdb(int voxels, double voxel) {
+  auto& path = writtenVdbs()[{voxels, voxel}];
+  if (path.empty()) {
+    const double h = 0.5 * voxels * voxel;
+    path = (fs::temp_directory_path() / ("cloudbake-extremes-" + uniqueSuffix() + ".vdb")).string();
+    VdbWriteOptions o;
+    o.voxel_size = voxel;
+    writeVdb(path, BoxDensity(Vec3(-h), Vec3(h), 1.0), o);
+  }
+  return path;
+}
+
+// The shot's volume as such a VDB, the camera scaled to its size.
+void vdbVolume(json& shot, int voxels, double voxel) {
+  shot["volume"] = {{"vdb", {{"path", boxVdb(voxels, voxel)}}}};
+  scaleCamera(shot, 0.5 * voxels * voxel);
 }
 
 struct Variant {
@@ -177,6 +218,9 @@ std::vector<Variant> variants() {
          s["volume"] = {{"box", {{"min", {-0.01, -0.01, -0.01}}, {"max", {0.01, 0.01, 0.01}}}}};
          s["medium"]["extinction"] = 300;
        }},
+      {"vdb_one_voxel", [](json& s) { vdbVolume(s, 1, 1.0); }},
+      {"vdb_voxel_1e-4", [](json& s) { vdbVolume(s, 8, 1e-4); }},
+      {"vdb_voxel_1e4", [](json& s) { vdbVolume(s, 8, 1e4); }},
       {"perlin_smallest",
        [](json& s) {
          s["volume"] = {{"procedural",
