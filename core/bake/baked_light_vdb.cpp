@@ -66,7 +66,10 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
       auto grid = makeGrid<openvdb::Vec3SGrid>(bake, mask, name, [&](size_t v) {
         return openvdb::Vec3s(c.data[3 * v], c.data[3 * v + 1], c.data[3 * v + 2]);
       });
-      grid->setVectorType(openvdb::VEC_INVARIANT);
+      // light_dir is a direction: a DCC's transform of the volume must rotate it (with the
+      // transform's linear part, not its translation); colours and fluences stay as they are.
+      grid->setVectorType(name == bake_grids::kLightDir ? openvdb::VEC_CONTRAVARIANT_RELATIVE
+                                                        : openvdb::VEC_INVARIANT);
       grids.push_back(grid);
     } else {
       throw InputError(path + ": bake grid '" + name + "' has " + std::to_string(c.components) +

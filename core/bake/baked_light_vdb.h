@@ -10,7 +10,9 @@ namespace cloudbake {
 /// Writes `bake` to `path` atomically (PATH.tmp then rename): one grid per channel on one
 /// transform (voxel size grid.voxel_size, index (0,0,0) at grid.origin), `density` as a float
 /// GRID_FOG_VOLUME, float channels as float grids, 3-component channels as Vec3s grids of class
-/// unknown with vector type VEC_INVARIANT (colours and directions, as Houdini's Cd); only the
+/// unknown with vector type VEC_INVARIANT (colours, as Houdini's Cd), except the direction
+/// light_dir, VEC_CONTRAVARIANT_RELATIVE (rotated and scaled by a transform, not translated:
+/// renormalise it after a non-uniform scale); only the
 /// density's support is stored (BakedLight::trimToSupport). File metadata: cloudbake:version,
 /// cloudbake:method, cloudbake:sun_direction ("x y z"), cloudbake:units, cloudbake:lattice
 /// ("nx ny nz"), plus bake.metadata. Throws InputError for I/O failures naming the path.

@@ -103,7 +103,10 @@ TEST(BakedLight, ValidateNamesTheGridAndTheVoxel) {
 }
 
 TEST_F(BakeFile, RoundTripsExactlyWithVdbConventions) {
-  const BakedLight b = smallBake();
+  BakedLight b = smallBake();
+  BakeChannel& ld = b.add(bake_grids::kLightDir, 3);
+  const std::vector<uint8_t> support = densitySupport(b.grid, b.density);  // what is stored
+  for (size_t v = 0; v < support.size(); ++v) ld.data[3 * v + 2] = support[v] ? 1.f : 0.f;
   const std::string file = path("bake.vdb");
   writeBakedLight(file, b);
   EXPECT_FALSE(fs::exists(file + ".tmp"));
@@ -122,22 +125,30 @@ TEST_F(BakeFile, RoundTripsExactlyWithVdbConventions) {
   }
   EXPECT_EQ(r.metadata.at("cloudbake:light_resolution"), "8");
 
-  // What other tools see: a fog-volume density, invariant vectors, one transform whose voxel
+  // What other tools see: a fog-volume density, invariant colours, a direction that transforms,
+  // one transform whose voxel
   // centres are the lattice's, and the provenance metadata.
   VdbFileReader vdb(file);
   EXPECT_EQ(vdb.fileMetadata().at("cloudbake:method"), "single");
   EXPECT_EQ(vdb.fileMetadata().at("cloudbake:lattice"), "10 10 10");
   EXPECT_EQ(vdb.fileMetadata().at("cloudbake:version"), CLOUDBAKE_VERSION);
   EXPECT_TRUE(vdb.fileMetadata().count("cloudbake:sun_direction"));
+  int directions = 0;
   for (const VdbGridInfo& g : vdb.grids()) {
+    directions += g.name == "light_dir";
     if (g.name == "density") {
       EXPECT_EQ(g.grid_class, "fog volume");
     }
     if (g.name == "Co") {
       EXPECT_EQ(g.vector_type, "invariant");
     }
+    if (g.name == "light_dir") {
+      // A direction: a DCC rotates it with the volume (a colour it would leave alone).
+      EXPECT_EQ(g.vector_type, "contravariant relative");
+    }
     EXPECT_NEAR(g.voxel_size, 0.25, 1e-12) << g.name;
   }
+  EXPECT_EQ(directions, 1);
   const Vec3 c = b.grid.center(5, 4, 6);
   EXPECT_FLOAT_EQ(vdb.floatAt("density", c), b.density[b.grid.index(5, 4, 6)]);
   EXPECT_FLOAT_EQ(float(vdb.vec3At("Co", c).z), b.find("Co")->data[3 * b.grid.index(5, 4, 6) + 2]);
