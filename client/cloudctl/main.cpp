@@ -21,6 +21,7 @@
 
 #include "client/shot_paths.h"
 #include "cloudbake/v1/bake_service.grpc.pb.h"
+#include "common/cli_suggest.h"
 #include "common/exit_codes.h"
 #include "common/grpc_status.h"
 #include "common/json_limits.h"
@@ -68,6 +69,15 @@ void check(const grpc::Status& s, const std::string& what) {
     throw CliError{cloudbake::exitCodeFor(cloudbake::errorKindFor(s.error_code())),
                    what + ": " + statusName(s.error_code()) + ": " + s.error_message()};
   }
+}
+
+/// As check, for the server's verdict on a shot: its messages name the shot "shot.json" (the
+/// name the server gives every shot), which the user never used; the user's file is named instead.
+void checkShot(const grpc::Status& s, const std::string& shot_file) {
+  if (s.ok()) return;
+  std::string message = s.error_message();
+  if (message.rfind("shot.json: ", 0) == 0) message.erase(0, 11);
+  check(grpc::Status(s.error_code(), message), shot_file);
 }
 
 // Protobuf's own names of the enum values ("QUEUED", "RUNNING", ...); they live for the program.
@@ -119,17 +129,31 @@ struct Client {
   std::string server;
   double timeout_s = 10;
   bool json = false;
+  bool wait_for_server = false;
   std::shared_ptr<grpc::Channel> channel;
   std::unique_ptr<v1::BakeService::Stub> stub;
 
+  /// Fails at once when the connection is refused or the host unreachable (the channel's
+  /// first attempt fails), unless --wait-for-server asks to keep trying until --timeout.
   void connect() {
     grpc::ChannelArguments args;
     args.SetMaxReceiveMessageSize(4 << 20);
     channel = grpc::CreateCustomChannel(server, grpc::InsecureChannelCredentials(), args);
-    if (!channel->WaitForConnected(deadline())) {
-      throw CliError{ExitCode::kUnavailable, server +
-                                                 ": server unavailable (no connection within " +
-                                                 std::to_string(int(std::ceil(timeout_s))) + " s)"};
+    const auto until = deadline();
+    grpc_connectivity_state state = channel->GetState(/*try_to_connect=*/true);
+    while (state != GRPC_CHANNEL_READY) {
+      if (state == GRPC_CHANNEL_TRANSIENT_FAILURE && !wait_for_server) {
+        throw CliError{ExitCode::kUnavailable,
+                       server +
+                           ": server unavailable (connection refused or unreachable; "
+                           "--wait-for-server keeps trying for --timeout seconds)"};
+      }
+      if (!channel->WaitForStateChange(state, until)) {
+        throw CliError{ExitCode::kUnavailable,
+                       server + ": server unavailable (no connection within " +
+                           std::to_string(int(std::ceil(timeout_s))) + " s)"};
+      }
+      state = channel->GetState(/*try_to_connect=*/true);
     }
     stub = v1::BakeService::NewStub(channel);
   }
@@ -516,7 +540,7 @@ v1::SubmitJobResponse sendSubmit(Client& c, const SubmitArgs& a, const v1::Submi
   c.shortCall(&ctx);
   v1::SubmitJobResponse reply;
   try {
-    check(c.stub->SubmitJob(&ctx, req, &reply), a.shot);
+    checkShot(c.stub->SubmitJob(&ctx, req, &reply), a.shot);
   } catch (CliError& e) {
     if (!a.allow_outside && e.message.find("is outside the allowed") != std::string::npos) {
       e.message += " (cloudctl submit --allow-outside uploads such files)";
@@ -778,6 +802,9 @@ void addGlobalOptions(CLI::App& app, Client* c, double* deadline_s) {
                  "exit 4 and the job goes on (default: none)")
       ->check(CLI::PositiveNumber);
   app.add_flag("--json", c->json, "machine-readable output on stdout (logs stay on stderr)");
+  app.add_flag("--wait-for-server", c->wait_for_server,
+               "keep trying to connect until --timeout instead of failing at once when the "
+               "connection is refused (e.g. while the server starts)");
   app.set_version_flag("--version", std::string("cloudctl ") + CLOUDBAKE_VERSION);
   app.require_subcommand(1);
   app.fallthrough();  // --json, --server, --timeout also after the command
@@ -871,6 +898,14 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
+    std::vector<std::string> commands;
+    for (const CLI::App* sub : app.get_subcommands({})) commands.push_back(sub->get_name());
+    const std::string typo =
+        cloudbake::unknownCommand(argc, argv, commands, {"--server", "--timeout", "--deadline"});
+    if (!typo.empty()) {
+      std::cerr << "cloudctl: " << cloudbake::unknownCommandMessage(typo, commands) << "\n";
+      return ExitCode::kBadInput;
+    }
     const int code = app.exit(e);
     return code == 0 ? ExitCode::kOk : ExitCode::kBadInput;
   }

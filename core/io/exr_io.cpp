@@ -11,7 +11,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <set>
 #include <sstream>
@@ -120,8 +122,10 @@ ExrContents readExr(const std::string& path) {
   // for the common "not an EXR at all / does not exist" cases.
   if (FILE* f = std::fopen(path.c_str(), "rb")) {
     std::fclose(f);
+  } else if (errno == ENOENT) {
+    throw MissingFileError(path + ": file not found");  // exit code 3, as for shots' files
   } else {
-    throw InputError(path + ": cannot open EXR file (missing or unreadable)");
+    throw InputError(path + ": cannot open EXR file (" + std::strerror(errno) + ")");
   }
   if (!Imf::isOpenExrFile(path.c_str())) throw InputError(path + ": not an OpenEXR file");
 

@@ -934,6 +934,27 @@ TEST(ServerUnavailable, CloudctlReportsUnavailableExitCode) {
   EXPECT_NE(r.err.find("unavailable"), std::string::npos) << r.err;
 }
 
+// A refused connection fails at once, not after --timeout (it waited the whole 10 s default);
+// --wait-for-server keeps trying until --timeout.
+TEST(ServerUnavailable, RefusedConnectionFailsAtOnceUnlessAskedToWait) {
+  const std::string addr = "127.0.0.1:" + std::to_string(freePort());
+  auto timed = [&](const std::string& args) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const CmdResult r = run(std::string(CLOUDCTL_BIN) + " --server " + addr + " " + args);
+    EXPECT_EQ(r.code, 4) << r.err;
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  EXPECT_LT(timed("--timeout 60 health"), 20.0);
+  EXPECT_GE(timed("--timeout 2 --wait-for-server health"), 1.5);
+}
+
+TEST(CloudctlCommandLine, MistypedCommandIsNamedWithTheNearestOne) {
+  const CmdResult r = run(std::string(CLOUDCTL_BIN) + " --server 127.0.0.1:1 sumbit shot.json");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("unknown command 'sumbit' (did you mean 'submit'?)"), std::string::npos)
+      << r.err;
+}
+
 TEST(ServerState, SecondServerOnTheSameStateFolderRefusesToStart) {
   Workspace ws;
   ServerProc first(ws.path("state"));

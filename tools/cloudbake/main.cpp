@@ -2,7 +2,10 @@
 #include <CLI/CLI.hpp>
 #include <exception>
 #include <iostream>
+#include <string>
+#include <vector>
 
+#include "common/cli_suggest.h"
 #include "common/exit_codes.h"
 #include "tools/cloudbake/commands.h"
 
@@ -40,6 +43,13 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
+    std::vector<std::string> commands;
+    for (const CLI::App* sub : app.get_subcommands({})) commands.push_back(sub->get_name());
+    const std::string typo = cloudbake::unknownCommand(argc, argv, commands, {});
+    if (!typo.empty()) {
+      std::cerr << "cloudbake: " << cloudbake::unknownCommandMessage(typo, commands) << "\n";
+      return kBadInput;
+    }
     return app.exit(e) == 0 ? kOk : kBadInput;
   } catch (...) {
     return reportError(std::current_exception());

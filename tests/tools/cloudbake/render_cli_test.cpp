@@ -343,8 +343,24 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   r = run("compare '" + view + "' '" + view + "' --cloud-alpha 0.99");
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("--cloud-alpha: no pixel"), std::string::npos) << r.err;
+  // A missing file is "not found" (exit 3, docs/cli.md), as everywhere else.
   r = run("compare '" + view + "' '" + (dir_ / "none.exr").string() + "'");
-  EXPECT_NE(r.rc, 0);
+  EXPECT_EQ(r.rc, 3);
+  EXPECT_NE(r.err.find("none.exr: file not found"), std::string::npos) << r.err;
+}
+
+// A mistyped subcommand is named, with the nearest command (CLI11 said "A subcommand is
+// required").
+TEST_F(RenderCli, MistypedCommandIsNamedWithTheNearestOne) {
+  CliResult r = run("rendr '" + (kExamples / "slab.json").string() + "' --out x");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("unknown command 'rendr' (did you mean 'render'?)"), std::string::npos)
+      << r.err;
+  r = run("frobnicate");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("unknown command 'frobnicate'; commands: mie, phase, render"),
+            std::string::npos)
+      << r.err;
 }
 
 }  // namespace
