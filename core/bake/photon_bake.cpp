@@ -228,8 +228,12 @@ class PhotonTracer {
     Ray ray = e.ray;
     Rgb beta(e.weight);
     for (int order = 0; order <= kMaxScatterings; ++order) {
+      // Only over the ray's part inside the density's support (as the path tracer).
+      double t0 = 0, t1 = 0;
       const Collision c =
-          decompositionTrack(grid_, *lookup_, medium_.extinction, ray, 0, kInf, rng);
+          medium_.density->supportInterval(ray, 0, kInf, &t0, &t1)
+              ? decompositionTrack(grid_, *lookup_, medium_.extinction, ray, t0, t1, rng)
+              : Collision{};
       PhotonTally* to = order > 0 ? tally : direct;
       if (to) to->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
       if (order > 0 && half) half->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);

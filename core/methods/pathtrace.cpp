@@ -107,7 +107,7 @@ class PathtraceMethod final : public BakeMethod {
     // 2: sun-directional importance sampling and shadow-ray splitting/roulette by default.
     // 3: decomposition and residual ratio tracking on a tracking grid chosen for the density,
     //    shadow rays rouletted and split by a transmittance predictor.
-    info_.version = 3;
+    info_.version = 4;
     info_.default_samples = 64;
     info_.knobs = {
         Knob::integer("max_depth", 1, 1000000, PathTracerOptions{}.max_depth,

@@ -35,7 +35,7 @@ class PhotonMethod final : public BakeMethod {
         "participating media using photon maps\" (SIGGRAPH); Evans 1998, \"The spherical "
         "harmonics discrete ordinate method for three-dimensional atmospheric radiative "
         "transfer\" (J. Atmos. Sci. 55), for radiance fields in spherical harmonics";
-    info_.version = 1;
+    info_.version = 2;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = photonKnobs();

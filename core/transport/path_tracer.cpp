@@ -104,6 +104,7 @@ class Integrator {
   Integrator(const Medium& medium, const Vec3& sun_dir, const Rgb& sun_e, const SkyLight& sky,
              const PathTracerOptions& options, double sun_guiding, int sun_split_max)
       : phase_(*medium.phase),
+        density_(*medium.density),
         extinction_(medium.extinction),
         albedo_(medium.albedo),
         sun_dir_(sun_dir),
@@ -160,14 +161,20 @@ class Integrator {
     return medium.density->trackingGrid({medium.extinction, 2});
   }
 
+  // Both trackers run over the ray's part inside the density's support only (exactly zero
+  // outside it, so nothing is lost): no null collisions in the empty corners of the cells.
   Collision track(const Ray& ray, DensityField::Lookup& lookup, Rng& rng) const {
-    return decomposition_ ? decompositionTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng)
-                          : deltaTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng);
+    double t0 = 0, t1 = 0;
+    if (!density_.supportInterval(ray, 0, kInfinity, &t0, &t1)) return Collision{};
+    return decomposition_ ? decompositionTrack(*grid_, lookup, extinction_, ray, t0, t1, rng)
+                          : deltaTrack(*grid_, lookup, extinction_, ray, t0, t1, rng);
   }
 
   double transmittance(const Ray& ray, DensityField::Lookup& lookup, Rng& rng) const {
-    return decomposition_ ? residualRatioTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng)
-                          : ratioTrack(*grid_, lookup, extinction_, ray, 0, kInfinity, rng);
+    double t0 = 0, t1 = 0;
+    if (!density_.supportInterval(ray, 0, kInfinity, &t0, &t1)) return 1.0;
+    return decomposition_ ? residualRatioTrack(*grid_, lookup, extinction_, ray, t0, t1, rng)
+                          : ratioTrack(*grid_, lookup, extinction_, ray, t0, t1, rng);
   }
 
   void walk(Walk w, DensityField::Lookup& lookup, Rng& rng, PathSample* out) const {
@@ -284,6 +291,7 @@ class Integrator {
   }
 
   const PhaseFunction& phase_;
+  const DensityField& density_;
   double extinction_;
   Rgb albedo_;
   Vec3 sun_dir_;

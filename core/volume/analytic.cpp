@@ -108,6 +108,21 @@ SphereDensity::SphereDensity(const Vec3& center, double radius, double density)
   majorants_ = MajorantGrid(b, kCells, kCells, kCells, std::move(maxima));
 }
 
+bool SphereDensity::supportInterval(const Ray& ray, double tmin, double tmax, double* t0,
+                                    double* t1) const {
+  // |o + t d - c|^2 = r^2 with |d| = 1: t = -b -+ sqrt(b^2 - (|o - c|^2 - r^2)), b = d.(o - c).
+  // The roots are widened by a relative 1e-9 so that points on the surface stay inside.
+  const Vec3 oc = ray.o - center_;
+  const double b = dot(ray.d, oc);
+  const double disc = b * b - (dot(oc, oc) - radius_ * radius_);
+  if (!(disc >= 0)) return false;
+  const double h = std::sqrt(disc);
+  const double pad = 1e-9 * (radius_ + std::abs(b));
+  *t0 = std::max(tmin, -b - h - pad);
+  *t1 = std::min(tmax, -b + h + pad);
+  return *t1 > *t0;
+}
+
 Bounds3 SphereDensity::bounds() const {
   Bounds3 b;
   b.min = center_ - Vec3(radius_);

@@ -38,6 +38,9 @@ class SphereDensity final : public DensityField {
   double maxDensity() const override { return density_; }
   std::unique_ptr<Lookup> lookup() const override;
   const MajorantGrid& majorants() const override { return majorants_; }
+  /// The ray's chord through the sphere.
+  bool supportInterval(const Ray& ray, double tmin, double tmax, double* t0,
+                       double* t1) const override;
   double featureSize() const override { return radius_ / 32.0; }
   std::string describe() const override;
 

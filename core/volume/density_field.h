@@ -53,6 +53,15 @@ class DensityField {
   static std::shared_ptr<const MajorantGrid> nonOwning(const MajorantGrid& grid) {
     return std::shared_ptr<const MajorantGrid>(std::shared_ptr<const MajorantGrid>(), &grid);
   }
+  /// The part [t0, t1] of `ray`'s [tmin, tmax] outside which the density is exactly zero (one
+  /// interval: a convex support); false when the ray misses it. The default clips to bounds();
+  /// analytic shapes clip to themselves, so trackers take no null collisions in the empty
+  /// corners of majorant cells they straddle (a sphere of extinction 1e6 cost a path tracer
+  /// about 5e5 of them per escaping path, 2 ms).
+  virtual bool supportInterval(const Ray& ray, double tmin, double tmax, double* t0,
+                               double* t1) const {
+    return intersectBounds(bounds(), ray, tmin, tmax, t0, t1);
+  }
   /// Characteristic feature size in world units (voxel size for grids; for analytic shapes a
   /// small fraction of their extent). Ray marchers use it to choose step lengths.
   virtual double featureSize() const = 0;

@@ -40,6 +40,37 @@ TEST(SphereDensity, InsideAndOutsideAndBadInput) {
 namespace cloudbake {
 namespace {
 
+// The support interval is the ray's chord: density is zero outside it and the full density
+// just inside it, from inside, from outside and for a miss; the default (a box) clips to the
+// bounds.
+TEST(SphereDensity, SupportIntervalIsTheChord) {
+  const SphereDensity s(Vec3(1, 2, 3), 2, 1.5);
+  auto lookup = s.lookup();
+  double t0 = 0, t1 = 0;
+  ASSERT_TRUE(s.supportInterval(Ray{Vec3(1, 2, -5), Vec3(0, 0, 1)}, 0, 1e30, &t0, &t1));
+  EXPECT_NEAR(t0, 6, 1e-6);
+  EXPECT_NEAR(t1, 10, 1e-6);
+  ASSERT_TRUE(s.supportInterval(Ray{Vec3(1, 2, 3), Vec3(1, 0, 0)}, 0, 1e30, &t0, &t1));
+  EXPECT_EQ(t0, 0);
+  EXPECT_NEAR(t1, 2, 1e-6);
+  ASSERT_TRUE(s.supportInterval(Ray{Vec3(1, 2, 3), Vec3(1, 0, 0)}, 0, 0.5, &t0, &t1));
+  EXPECT_EQ(t1, 0.5);
+  EXPECT_FALSE(s.supportInterval(Ray{Vec3(4, 2, -5), Vec3(0, 0, 1)}, 0, 1e30, &t0, &t1));
+  EXPECT_FALSE(s.supportInterval(Ray{Vec3(1, 2, 6), Vec3(0, 0, 1)}, 0, 1e30, &t0, &t1));
+  // Random chords: full density just inside each end, none just outside.
+  const Vec3 d = normalize(Vec3(0.9, -0.2, 5));
+  const Ray ray{Vec3(0.5, 2.5, -2), d};
+  ASSERT_TRUE(s.supportInterval(ray, 0, 1e30, &t0, &t1));
+  EXPECT_EQ(lookup->density(ray.o + d * (t0 + 1e-6)), 1.5);
+  EXPECT_EQ(lookup->density(ray.o + d * (t1 - 1e-6)), 1.5);
+  EXPECT_EQ(lookup->density(ray.o + d * (t0 - 1e-6)), 0.0);
+  EXPECT_EQ(lookup->density(ray.o + d * (t1 + 1e-6)), 0.0);
+  const BoxDensity box(Vec3(0, 0, 0), Vec3(1, 1, 1), 1);
+  ASSERT_TRUE(box.supportInterval(Ray{Vec3(0.5, 0.5, -1), Vec3(0, 0, 1)}, 0, 1e30, &t0, &t1));
+  EXPECT_NEAR(t0, 1, 1e-12);
+  EXPECT_NEAR(t1, 2, 1e-12);
+}
+
 TEST(SphereDensity, MajorantsBoundTheSphereAndSkipEmptyCorners) {
   SphereDensity s(Vec3(0.5, -1, 2), 1.5, 3.0);
   const MajorantGrid& m = s.majorants();
