@@ -2,7 +2,10 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -16,6 +19,7 @@
 
 namespace cloudbake {
 namespace {
+namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
 // Hashing a large VDB on every submit would dominate small jobs, so hashes are memoised by
@@ -44,6 +48,9 @@ std::string fileHashMemo(const std::string& path) {
 
 // Paths in a canonical shot are absolute: replace each that names a regular file by the hash of
 // its content, so the key follows the bytes, not where they were uploaded to.
+// A file stands in a key for its content and for how it is read: readers choose the format by
+// the name's extension (a mesh's .obj or .ply), so the same bytes under another extension are
+// another input (PLY bytes named m.obj fail to read, and must not hit the cache of m.ply).
 void replaceFilesByHashes(Json& j) {
   if (j.is_object() || j.is_array()) {
     for (auto& child : j) replaceFilesByHashes(child);
@@ -51,7 +58,10 @@ void replaceFilesByHashes(Json& j) {
     const std::string s = j.get<std::string>();
     if (!s.empty() && s[0] == '/') {
       const std::string hash = fileHashMemo(s);
-      if (!hash.empty()) j = "sha256:" + hash;
+      std::string ext = fs::path(s).extension().string();
+      std::transform(ext.begin(), ext.end(), ext.begin(),
+                     [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+      if (!hash.empty()) j = "sha256:" + hash + " read as '" + ext + "'";
     }
   }
 }

@@ -171,6 +171,30 @@ TEST(CacheKey, FilesAreKeyedByContentNotPath) {
   fs::remove_all(dir);
 }
 
+// How a file is read belongs in the key: readers choose the format by the extension, so PLY
+// bytes named m.obj (which fail to read) must not find the cache entry of m.ply (an outside test
+// found a server answering from the cache what a fresh one refused). Case does not matter.
+TEST(CacheKey, FilesAreKeyedByHowTheyAreReadToo) {
+  const fs::path dir = freshDir("key-ext");
+  const std::string ply =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  for (const char* name : {"m.ply", "m.obj", "n.PLY"}) std::ofstream(dir / name) << ply;
+  auto keyFor = [&](const std::string& name) {
+    const std::string s =
+        R"({"version": 1, "volume": {"mesh": {"path": ")" + name + R"(", "resolution": 8}},
+      "medium": {"extinction": 1, "albedo": 1, "phase": {"type": "isotropic"}},
+      "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]}},
+      "views": [{"name": "v", "camera": {"type": "perspective", "position": [0,-5,0],
+        "look_at": [0,0,0], "up": [0,0,1], "fov_deg": 30}, "resolution": [4, 4]}]})";
+    return computeCacheKeys(parseShot(s, dir.string())).volume;
+  };
+  EXPECT_NE(keyFor("m.ply"), keyFor("m.obj"));
+  EXPECT_EQ(keyFor("m.ply"), keyFor("n.PLY"));
+  fs::remove_all(dir);
+}
+
 TEST(BakeCache, ComputesOnceThenHitsAndSurvivesReopen) {
   const fs::path dir = freshDir("cache");
   int computed = 0;
