@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -465,10 +466,15 @@ TEST(ExtremesMatrix, OutOfRangeValuesAreClearErrorsNamingTheField) {
 // spp), 32x32, printing the run's seconds and each layer's ratios to its bound (1 = at the
 // bound; ratiosTo).
 //   build/tests/extremes/test_extremes --gtest_also_run_disabled_tests --gtest_filter='*Sweep*'
+// (CLOUDBAKE_SWEEP_METHODS=photon,pathtrace runs only those methods).
 TEST(ExtremesMatrix, DISABLED_SweepAtDefaultKnobs) {
   std::printf("%-11s %-25s %7s %17s %17s %17s\n", "method", "variant", "seconds", "sky mean/max",
               "single mean/max", "multiple mean/max");
+  const char* only = std::getenv("CLOUDBAKE_SWEEP_METHODS");  // e.g. "photon,pathtrace"
   for (const std::string& method : methodNames(/*runnable_only=*/true)) {
+    if (only && ("," + std::string(only) + ",").find("," + method + ",") == std::string::npos) {
+      continue;
+    }
     for (const Variant& v : variants()) {
       json shot = baseShot();
       v.edit(shot);
