@@ -2,6 +2,7 @@
 // reads the same everywhere ("2.58 s", "0.05", "1e+06").
 #pragma once
 
+#include <charconv>
 #include <chrono>
 #include <cstdio>
 #include <string>
@@ -23,6 +24,14 @@ inline std::string shortNumber(double value) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", value);
   return buf;
+}
+
+/// A number as the user wrote it: the shortest text that reads back as the same double, so an
+/// error about 1.0000000000000002 does not say "got 1" and 1e-300 is not "0.000000".
+inline std::string exactNumber(double value) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, value);
+  return std::string(buf, r.ptr);
 }
 
 inline double secondsSince(std::chrono::steady_clock::time_point since) {

@@ -7,6 +7,7 @@
 #include <sstream>
 #include <vector>
 
+#include "common/printable.h"
 #include "core/error.h"
 #include "core/methods/registry.h"
 #include "server/convert.h"
@@ -84,7 +85,7 @@ grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
     if (ctx->IsCancelled()) return abandoned(ctx, "UploadAsset");
     writer.finish();
     spdlog::info("asset {} stored ({} bytes, '{}')", header.sha256(), header.size(),
-                 header.name().substr(0, 256));
+                 printable(header.name().substr(0, 256)));
     return grpc::Status::OK;
   });
 }
@@ -99,7 +100,7 @@ grpc::Status BakeServiceImpl::SubmitJob(Ctx* ctx, const v1::SubmitJobRequest* re
       toProto(jobs_.plan(input), reply->mutable_plan());
     } else {
       const JobRecord record = jobs_.submit(input);
-      spdlog::info("job {}: submitted ('{}')", record.id, record.shot_name);
+      spdlog::info("job {}: submitted ('{}')", record.id, printable(record.shot_name));
       toProto(record, reply->mutable_job());
     }
     return grpc::Status::OK;

@@ -4,6 +4,7 @@
 
 #include "common/exit_codes.h"
 #include "common/grpc_status.h"
+#include "common/printable.h"
 
 namespace cloudbake::server {
 namespace {
@@ -35,7 +36,11 @@ const char* codeName(grpc::StatusCode code) {
 }  // namespace
 
 grpc::Status statusFromException(std::exception_ptr error, const char* rpc) {
-  const ClassifiedError e = classifyException(error);
+  ClassifiedError e = classifyException(error);
+  // Messages may quote a shot's bytes: escaped, so the status is never dropped for not being
+  // UTF-8 (invalid UTF-8 in a shot used to reach the client as an empty message) and the log
+  // line never split.
+  e.message = printable(e.message);
   const grpc::StatusCode code = statusCodeFor(e.kind);
   switch (e.kind) {
     case ErrorKind::kCancelled:

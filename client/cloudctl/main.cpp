@@ -34,6 +34,8 @@ using Json = nlohmann::json;
 using cloudbake::ExitCode;
 
 constexpr size_t kUploadChunk = 1 << 20;
+/// gRPC's default limit on a received message, which the server keeps.
+constexpr size_t kMaxRequestBytes = size_t(4) << 20;
 
 /// An error with the exit code it maps to; main() prints it once.
 struct CliError {
@@ -62,6 +64,13 @@ const char* statusName(grpc::StatusCode code) {
     default:
       return "error";
   }
+}
+
+/// A request gRPC would refuse as RESOURCE_EXHAUSTED, which reads as "server busy, retry".
+CliError tooLarge(const std::string& what, size_t bytes) {
+  return CliError{ExitCode::kBadInput, what + " too large (" + std::to_string(bytes) +
+                                           " bytes; a request may have at most " +
+                                           std::to_string(kMaxRequestBytes) + " bytes)"};
 }
 
 void check(const grpc::Status& s, const std::string& what) {
@@ -269,10 +278,25 @@ uint64_t healthCheck(Client& c) {
 
 class Progress {
  public:
-  explicit Progress(bool quiet) : quiet_(quiet), tty_(isatty(fileno(stderr)) != 0) {}
+  /// `json`: one JSON object per line on stderr (stdout keeps the one result document).
+  Progress(bool quiet, bool json)
+      : quiet_(quiet), json_(json), tty_(!json && isatty(fileno(stderr)) != 0) {}
   void event(const v1::JobEvent& e) {
     if (quiet_) return;
     const int percent = int(std::floor(std::clamp(e.fraction(), 0.0, 1.0) * 100));
+    if (json_) {
+      if (!e.message().empty() || percent > last_percent_ || terminal(e.state())) {
+        Json line = {{"state", stateName(e.state())},
+                     {"stage", e.stage()},
+                     {"fraction", e.fraction()},
+                     {"message", e.message()}};
+        if (e.eta_seconds() >= 0 && !terminal(e.state())) line["eta_seconds"] = e.eta_seconds();
+        std::fprintf(stderr, "%s\n", line.dump().c_str());
+        std::fflush(stderr);
+        last_percent_ = std::max(last_percent_, percent);
+      }
+      return;
+    }
     std::string eta = e.eta_seconds() >= 0 && !terminal(e.state())
                           ? " ETA " + std::to_string(int(std::ceil(e.eta_seconds()))) + " s"
                           : "";
@@ -297,8 +321,8 @@ class Progress {
     return std::to_string(percent) + "% " + stateName(e.state()) + " " + e.stage() +
            (e.message().empty() ? "" : ": " + e.message());
   }
-  bool quiet_, tty_;
-  int last_decile_ = -1;
+  bool quiet_, json_, tty_;
+  int last_decile_ = -1, last_percent_ = -1;
 };
 
 // ---- uploads -----------------------------------------------------------------------------
@@ -427,7 +451,7 @@ int fetchAll(Client& c, const v1::Job& job, const std::string& dir, const std::s
 /// Streams events until the job finishes; returns its final record. Reconnects (resuming
 /// after the last event) when the stream breaks while the server is still reachable.
 v1::Job watch(Client& c, const std::string& id, bool quiet) {
-  Progress progress(quiet || c.json);
+  Progress progress(quiet, c.json);
   uint64_t after = 0;
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
@@ -536,6 +560,11 @@ void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
 }
 
 v1::SubmitJobResponse sendSubmit(Client& c, const SubmitArgs& a, const v1::SubmitJobRequest& req) {
+  // gRPC refuses a larger request as RESOURCE_EXHAUSTED, which reads as "server busy, retry":
+  // said here for what it is.
+  if (req.ByteSizeLong() > kMaxRequestBytes) {
+    throw tooLarge(a.shot + ": shot", req.ByteSizeLong());
+  }
   grpc::ClientContext ctx;
   c.shortCall(&ctx);
   v1::SubmitJobResponse reply;
@@ -578,6 +607,9 @@ int cmdSubmit(Client& c, const SubmitArgs& a) {
   if (a.wait && a.detach)
     throw CliError{ExitCode::kBadInput, "--wait and --detach exclude each other"};
   const std::string text = readShotFile(a.shot);
+  if (text.size() > kMaxRequestBytes) {
+    throw tooLarge(a.shot + ": shot", text.size());
+  }
   c.connect();
   v1::SubmitJobRequest req;
   req.set_shot_json(text);
@@ -774,6 +806,9 @@ int cmdRender(Client& c, const JobArgs& a) {
     std::ifstream in(a.views_file, std::ios::binary);
     if (!in) throw CliError{ExitCode::kNotFound, a.views_file + ": file not found"};
     req.set_views_json(std::string(std::istreambuf_iterator<char>(in), {}));
+    if (req.views_json().size() > kMaxRequestBytes) {
+      throw tooLarge(a.views_file + ": views file", req.views_json().size());
+    }
   }
   for (double v : a.sun) req.add_sun_irradiance(v);
   grpc::ClientContext ctx;

@@ -59,7 +59,10 @@ struct PassInputs {
   const PointcloudOptions& options;
   bool geometric_tail;
   // Polled with (fraction of the pass, pass) between chunks of destinations; may be empty.
+  // The sky's passes (normalised rule) poll sky_cancelled instead, so progress goes on past
+  // the sun's passes rather than starting them again.
   std::function<bool(double, int)> cancelled = {};
+  std::function<bool(double, int)> sky_cancelled = {};
   // The normalised rule only: the lattice, the reduced medium's sky visibility (the escape
   // probability of header step 6), the reduction itself and, for sky light, the true medium's
   // sky visibility (null: no sky passes).
@@ -355,7 +358,11 @@ void runNormalised(const PassInputs& in, PointCloudResult& out) {
     prev_sum = sum;
   }
   finishSunOrders(in, o, out);
-  if (in.true_visibility) runSkyOrders(in, self, out);
+  if (in.true_visibility) {
+    PassInputs sky = in;
+    sky.cancelled = in.sky_cancelled;
+    runSkyOrders(sky, self, out);
+  }
 }
 
 // Seed 000's Eq. 1-5 (readings in the header).
@@ -586,9 +593,17 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   const int passes = options.passes;
   PassInputs in{pairs, medium, sun_dir, options, geometric_tail};
   if (progress) {
-    in.cancelled = [&](double f, int pass) {
-      const std::string stage = "pass " + str(pass + 1) + "/" + str(passes);
-      return !progress(0.3 + 0.7 * (pass + f) / passes, stage);
+    // The sun's passes, then as many for the sky: one range, never going back.
+    const bool sky = normalised && options.sky && sky_visibility.size() == grid.voxelCount();
+    const double all = passes * (sky ? 2.0 : 1.0);
+    in.cancelled = [&progress, passes, all, sky](double f, int pass) {
+      const std::string stage =
+          std::string(sky ? "sun pass " : "pass ") + str(pass + 1) + "/" + str(passes);
+      return !progress(0.3 + 0.7 * (pass + f) / all, stage);
+    };
+    in.sky_cancelled = [&progress, passes, all](double f, int pass) {
+      const std::string stage = "sky pass " + str(pass + 1) + "/" + str(passes);
+      return !progress(0.3 + 0.7 * (passes + pass + f) / all, stage);
     };
   }
   if (normalised) {

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/json_limits.h"
+#include "common/printable.h"
 #include "core/error.h"
 #include "core/job/cache_key.h"
 #include "core/job/file_util.h"
@@ -531,7 +532,7 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
     saveLocked(*job);
     pushEventLocked(*job, "build", 0, "started");
   }
-  spdlog::info("job {}: started ('{}', {} view(s))", id, job->record.shot_name,
+  spdlog::info("job {}: started ('{}', {} view(s))", id, printable(job->record.shot_name),
                job->record.views.size());
   const RunOptions ro = runOptions(job);
   Outcome outcome;
@@ -547,7 +548,7 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   }
   finishJob(*job, result, outcome);
   spdlog::info("job {}: {}{}", id, jobStateName(outcome.state),
-               outcome.error.empty() ? "" : ": " + outcome.error);
+               outcome.error.empty() ? "" : ": " + printable(outcome.error));
 }
 
 RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {

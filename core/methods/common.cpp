@@ -39,13 +39,14 @@ std::string nearbyBake(MethodRun& run, std::string* how) {
   return "";
 }
 
-// The bake itself: from the cache when it holds it, else computed (and committed).
-BakedLight obtainBake(MethodRun& run, const LightBakeFn& bake, double total, std::string* entry) {
+// The bake itself: from the cache when it holds it, else computed (and committed). Its progress
+// runs over [0, share] of the run's.
+BakedLight obtainBake(MethodRun& run, const LightBakeFn& bake, double share, std::string* entry) {
   const ShotSpec& shot = run.shot();
   auto compute = [&] {
     run.report("bake", 0, "baking light (method " + shot.bake.method + ")");
     return bake(run.scene().medium, sunDirection(shot), [&](double f, const std::string& stage) {
-      return run.pollMessage(f / total, "bake: " + stage);
+      return run.pollMessage(f * share, "bake: " + stage);
     });
   };
   const auto t0 = std::chrono::steady_clock::now();
@@ -84,7 +85,7 @@ BakedLight obtainBake(MethodRun& run, const LightBakeFn& bake, double total, std
   const BakeGrid& g = light->grid;
   result.steps.push_back(
       {"bake", "", -1, secondsSince(t0), {{"cached", how == "baked" ? 0.0 : 1.0}}});
-  run.report("bake", 1 / total,
+  run.report("bake", share,
              "light " + how + " in " + fixed(secondsSince(t0), 2) + " s (" + std::to_string(g.nx) +
                  "x" + std::to_string(g.ny) + "x" + std::to_string(g.nz) + " lattice)");
   return std::move(*light);
@@ -213,36 +214,46 @@ MethodPlan lightBakePlan(const ShotSpec& shot, const ShotCacheKeys& keys,
   return plan;
 }
 
-void runLightBake(MethodRun& run, const LightBakeFn& bake) {
+double latticeSeconds(int64_t resolution) { return 1.3e-6 * 0.5 * std::pow(double(resolution), 3); }
+
+void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& work) {
   const ShotSpec& shot = run.shot();
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
-  // Progress units: the bake, each view and the VDB weigh one each.
-  const double total = 1 + n_views + (shot.outputs.vdb ? 1 : 0);
-  std::string entry;
-  const BakedLight light = obtainBake(run, bake, total, &entry);
-
   const Scene& lights = run.lights();
   const BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
+  // Progress weights: predicted seconds of each part (a cached bake is a file read).
+  const bool cached = run.hasCache() && run.lookup(run.keys().light).has_value();
+  const double bake_w = cached ? 0.02 * work.bake_seconds : work.bake_seconds;
+  std::vector<double> start(size_t(n_views) + 1, bake_w);
+  for (int i = 0; i < n_views; ++i) {
+    const Camera& c = lights.cameras[size_t(i)];
+    start[size_t(i) + 1] = start[size_t(i)] + double(c.width_px) * c.height_px *
+                                                  ro.samples_per_pixel * work.view_seconds_per_ray;
+  }
+  const double total = start.back() + (shot.outputs.vdb ? 0.05 * work.bake_seconds : 0.0);
+  std::string entry;
+  const BakedLight light = obtainBake(run, bake, bake_w / total, &entry);
+
   for (int i = 0; i < n_views; ++i) {
     const Camera& camera = lights.cameras[size_t(i)];
     const std::string label = "view '" + camera.name + "' " + std::to_string(camera.width_px) +
                               "x" + std::to_string(camera.height_px) + " from the bake";
-    run.report("render", (1 + i) / total, label, camera.name);
+    const double v0 = start[size_t(i)] / total, v1 = start[size_t(i) + 1] / total;
+    run.report("render", v0, label, camera.name);
     const auto t0 = std::chrono::steady_clock::now();
-    RenderLayers layers =
-        renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
-                       [&](double f) { return run.poll((1 + i + f) / total, f); });
+    RenderLayers layers = renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
+                                         [&](double f) { return run.poll(v0 + (v1 - v0) * f, f); });
     run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)),
                   {{"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
                    {"cloudbake:seed", std::to_string(ro.seed)}});
     ++run.result().views_from_bake;
     run.result().steps.push_back({"view", camera.name, -1, secondsSince(t0), {}});
-    run.poll((2 + i) / total, 1);
-    run.report("render", (2 + i) / total,
-               label + ": rendered in " + fixed(secondsSince(t0), 2) + " s", camera.name);
+    run.poll(v1, 1);
+    run.report("render", v1, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s",
+               camera.name);
   }
   if (shot.outputs.vdb) {
-    run.report("vdb", (1 + n_views) / total, "writing bake.vdb (the baked light)");
+    run.report("vdb", start.back() / total, "writing bake.vdb (the baked light)");
     if (!entry.empty()) {
       run.copyOutput(kBakeFile, (fs::path(entry) / kBakeFile).string());
     } else {

@@ -57,9 +57,23 @@ MethodPlan lightBakePlan(const ShotSpec& shot, const ShotCacheKeys& keys,
 using LightBakeFn = std::function<BakedLight(const Medium& medium, const Vec3& sun_direction,
                                              const BakeProgressFn& progress)>;
 
+/// What a light-baking run's parts cost, predicted in seconds on the reference machine (2 cores),
+/// for progress and its ETA only: a part's share of the bar is its share of the predicted work.
+/// `bake_seconds`: the bake, computed; `view_seconds_per_ray`: a view's cost per ray (pixels x
+/// rays per pixel).
+struct LightBakeWork {
+  double bake_seconds = 1;
+  double view_seconds_per_ray = 1.5e-6;
+};
+
+/// The predicted seconds of a bake lattice of `resolution` voxels along the longest side: its
+/// sun transmittance and sky visibility (about 1.3 us per voxel of the lattice's box; measured
+/// on the Perlin example, which fills half of it).
+double latticeSeconds(int64_t resolution);
+
 /// The run of a light-baking method: the bake from the cache (or a cached bake of a sun
 /// direction within the tolerance) or computed by `bake`, every view ray-marched from it, and
-/// bake.vdb when asked.
-void runLightBake(MethodRun& run, const LightBakeFn& bake);
+/// bake.vdb when asked. Progress advances by each part's share of `work`.
+void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& work);
 
 }  // namespace cloudbake

@@ -46,9 +46,16 @@ class SingleMethod final : public BakeMethod {
 
   void run(MethodRun& run) const override {
     const SingleBakeOptions o = singleBakeOptions(run.shot());
-    runLightBake(run, [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {
-      return bakeSingle(medium, sun, o, progress);
-    });
+    // Measured on the Perlin example (cloudbake render --stats-json).
+    LightBakeWork work;
+    work.bake_seconds = latticeSeconds(o.light_resolution);
+    work.view_seconds_per_ray = 1.3e-6;
+    runLightBake(
+        run,
+        [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {
+          return bakeSingle(medium, sun, o, progress);
+        },
+        work);
   }
 
  private:

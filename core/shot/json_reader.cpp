@@ -8,6 +8,7 @@
 #include <system_error>
 
 #include "common/json_limits.h"
+#include "core/format.h"
 #include "core/shot/shot_parser.h"
 
 namespace cloudbake::shotjson {
@@ -74,11 +75,7 @@ bool isNonFiniteSpelling(std::string s) {
   return s == "nan" || s == "inf" || s == "infinity";
 }
 
-std::string formatNumber(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
+std::string formatNumber(double v) { return exactNumber(v); }
 
 // True when `path` (canonical) is `root` (canonical) or lies below it.
 bool isWithin(const fs::path& path, const fs::path& root) {

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "core/format.h"
 #include "core/methods/registry.h"
 #include "core/shot/json_reader.h"
 #include "core/shot/shot_sections.h"
@@ -107,6 +108,16 @@ Sky parseSky(const Object& o) {
   return sky;
 }
 
+// The unit vector along `v`, scaled by its largest component first so that neither huge
+// components ([1e200, 1e200, 1e200]: its length overflows) nor tiny ones (1e-300: it underflows)
+// look like a zero vector; (0, 0, 0) for a zero or non-finite vector.
+Vec3 directionOf(const Vec3& v) {
+  const double m = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+  if (!(m > 0) || !std::isfinite(m)) return Vec3(0.0);
+  const Vec3 s = v / m;
+  return s / length(s);
+}
+
 LightingSpec parseLighting(const Object& o) {
   const Reader& r = o.reader();
   LightingSpec l;
@@ -115,11 +126,13 @@ LightingSpec parseLighting(const Object& o) {
     Object sun(r, *v, o.path("sun"), {"direction", "irradiance"});
     l.has_sun = true;
     const Vec3 d = r.vec3(sun.required("direction"), sun.path("direction"));
-    const double len = length(d);
-    if (!(len > 1e-12) || !std::isfinite(len)) {
-      r.fail(sun.path("direction"), "must be a non-zero vector (towards the sun)");
+    const Vec3 unit = directionOf(d);
+    if (!(length(unit) > 0)) {
+      r.fail(sun.path("direction"), "must be a non-zero vector (towards the sun), got [" +
+                                        exactNumber(d.x) + ", " + exactNumber(d.y) + ", " +
+                                        exactNumber(d.z) + "]");
     }
-    l.sun.direction = d / len;
+    l.sun.direction = unit;
     l.sun.irradiance = r.rgb(sun.required("irradiance"), sun.path("irradiance"), 0, 1e12);
   }
   if (auto* v = o.find("sky")) l.sky = parseSky(Object(r, *v, o.path("sky")));
@@ -234,8 +247,8 @@ Camera parseView(const Object& o) {
   if (!(length(forward) > 0) || !std::isfinite(length(forward))) {
     r.fail(c.path("look_at"), "must differ from position");
   }
-  if (!(length(cam.up) > 0)) r.fail(c.path("up"), "must be a non-zero vector");
-  if (length(cross(normalize(forward), normalize(cam.up))) < 1e-6) {
+  if (!(length(directionOf(cam.up)) > 0)) r.fail(c.path("up"), "must be a non-zero vector");
+  if (length(cross(directionOf(forward), directionOf(cam.up))) < 1e-6) {
     r.fail(c.path("up"), "must not be parallel to the view direction (look_at - position)");
   }
 

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/volume/noise.h"
 #include "core/volume/openvdb_grid.h"
 #include "core/volume/winding_number.h"
@@ -267,8 +268,9 @@ double meshVoxelSize(const MeshSourceOptions& o, const Bounds3& b) {
   if (!(total <= static_cast<double>(kMaxMeshVoxels))) {
     std::ostringstream os;
     os << o.path << ": mesh." << (has_size ? "voxel_size" : "resolution") << ": "
-       << (has_size ? std::to_string(o.voxel_size) : std::to_string(o.resolution)) << " needs "
-       << total << " voxels, more than the limit of " << kMaxMeshVoxels
+       << (has_size ? exactNumber(o.voxel_size) : std::to_string(o.resolution)) << " needs "
+       << (total < 1e18 ? exactNumber(total) : std::string("more than 1e18"))
+       << " voxels, more than the limit of " << kMaxMeshVoxels
        << " (1024^3); use a coarser voxel size";
     throw InputError(os.str());
   }

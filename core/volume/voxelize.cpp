@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/volume/openvdb_grid.h"
 #include "core/volume/sources.h"
 
@@ -36,8 +37,8 @@ DensityFieldPtr voxelize(const DensityField& field, double voxel_size, uint64_t 
   }
   if (total > max_voxels) {
     std::ostringstream os;
-    os << "voxelize: voxel_size " << voxel_size << " over " << field.describe() << " needs "
-       << (total == UINT64_MAX ? std::string("too many") : std::to_string(total))
+    os << "voxelize: voxel_size " << exactNumber(voxel_size) << " over " << field.describe()
+       << " needs " << (total == UINT64_MAX ? std::string("too many") : std::to_string(total))
        << " voxels, more than the limit of " << max_voxels;
     throw InputError(os.str());
   }

@@ -95,6 +95,15 @@ TEST_F(StatusMapping, ClientErrorsKeepTheirMessage) {
       2003u);  // clipped, with "..."
 }
 
+// A message quoting a shot's bytes reaches the client readable: invalid UTF-8 and control
+// characters escaped (an invalid byte made the whole message empty; a newline forged log lines).
+TEST_F(StatusMapping, MessagesAreValidUtf8WithControlsEscaped) {
+  const grpc::Status s =
+      statusOf(std::make_exception_ptr(InputError("shot.json: /name: bad \xFF\xFE"
+                                                  "byte\nforged: line \u00e9")));
+  EXPECT_EQ(s.error_message(), "shot.json: /name: bad \\xFF\\xFEbyte\\nforged: line \u00e9");
+}
+
 TEST_F(StatusMapping, InternalErrorsHideTheirDetails) {
   for (const std::exception_ptr& error :
        {std::make_exception_ptr(InternalError("/srv/state/cache/ab: unreadable")),

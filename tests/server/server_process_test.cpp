@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -334,6 +335,26 @@ TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
   fetch = run(server_.cloudctl() + " fetch " + id + " --name front.exr --out " + ws_.path("again"));
   EXPECT_EQ(fetch.code, 0) << fetch.err;
   EXPECT_EQ(slurp(ws_.path("again/front.exr")), slurp(out + "/front.exr"));
+
+  // --json submit: the result on stdout, progress on stderr as JSON lines, never going back.
+  const CmdResult js =
+      run(server_.cloudctl() + " --json submit " + shot + " --out " + ws_.path("json"));
+  ASSERT_EQ(js.code, 0) << js.err;
+  EXPECT_EQ(Json::parse(js.out).at("state"), "SUCCEEDED") << js.out;
+  std::istringstream lines(js.err);
+  std::string line, last_state;
+  double last = -1;
+  int events = 0;
+  while (std::getline(lines, line)) {
+    if (line.empty() || line[0] != '{') continue;
+    const Json e = Json::parse(line);
+    EXPECT_GE(e.at("fraction").get<double>(), last) << js.err;
+    last = e.at("fraction");
+    last_state = e.at("state");
+    ++events;
+  }
+  EXPECT_GE(events, 2) << js.err;
+  EXPECT_EQ(last_state, "SUCCEEDED") << js.err;
 }
 
 // Issue 5's cache contract for the bake methods: once a shot's light is baked for its sun
@@ -946,6 +967,17 @@ TEST(ServerUnavailable, RefusedConnectionFailsAtOnceUnlessAskedToWait) {
   };
   EXPECT_LT(timed("--timeout 60 health"), 20.0);
   EXPECT_GE(timed("--timeout 2 --wait-for-server health"), 1.5);
+}
+
+// A shot larger than a request may be is bad input with the limit named (it read "server busy",
+// exit 4, inviting a retry). Checked before connecting, so no server is needed.
+TEST(CloudctlCommandLine, OversizedShotIsBadInputNotServerBusy) {
+  Workspace ws;
+  const std::string shot =
+      ws.write("big.json", "{\"version\": 1, \"name\": \"" + std::string(5 << 20, 'a') + "\"}");
+  const CmdResult r = run(std::string(CLOUDCTL_BIN) + " --server 127.0.0.1:1 submit " + shot);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("shot too large"), std::string::npos) << r.err;
 }
 
 TEST(CloudctlCommandLine, MistypedCommandIsNamedWithTheNearestOne) {

@@ -545,11 +545,34 @@ TEST(Pointcloud, ProgressCancelsBetweenPasses) {
   auto progress = [&](double f, const std::string& stage) {
     monotone = monotone && f >= last && f <= 1;
     last = f;
-    return stage.rfind("pass 2/", 0) != 0;
+    return stage.find("pass 2/") == std::string::npos;
   };
   EXPECT_THROW(bakePointcloud(m, Vec3(0, 0, 1), smallBake(), progress), Cancelled);
   EXPECT_TRUE(monotone);
   EXPECT_GT(last, 0.25);
+}
+
+// The sky's passes follow the sun's in one range: progress never goes back (it restarted at the
+// sun's first pass, 18% then 14%), and each stage says whose pass it is.
+TEST(Pointcloud, ProgressGoesOnThroughTheSkysPasses) {
+  const Medium m = sphereMedium(1, 3, Rgb(0.9), isotropic());
+  PointcloudOptions o = smallBake();
+  o.tolerance = 1e-9;  // every pass runs
+  o.sky = true;
+  double last = -1;
+  bool monotone = true, sun = false, sky = false;
+  auto progress = [&](double f, const std::string& stage) {
+    monotone = monotone && f >= last && f <= 1;
+    last = f;
+    sun = sun || stage.rfind("sun pass ", 0) == 0;
+    sky = sky || stage.rfind("sky pass 8/8", 0) == 0;
+    return true;
+  };
+  bakePointcloud(m, Vec3(0, 0, 1), o, progress);
+  EXPECT_TRUE(monotone);
+  EXPECT_TRUE(sun);
+  EXPECT_TRUE(sky);
+  EXPECT_DOUBLE_EQ(last, 1.0);
 }
 
 // Speed on the Stanford bunny (not run by ctest): 100k points, 8 passes, 1 and 2 threads.

@@ -357,6 +357,11 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
       {"duplicate key", nullptr, "/medium/extinction: duplicate key",
        R"({"version": 1, "medium": {"extinction": 1, "extinction": 2}})"},
       {"missing version", [](json& j) { j.erase("version"); }, "/version: missing"},
+      // Numbers read back as written: not "got 1" for an albedo a hair above 1.
+      {"albedo a hair above 1", [](json& j) { j["medium"]["albedo"] = 1.0000000000000002; },
+       "/medium/albedo: must be in [0, 1], got 1.0000000000000002"},
+      {"tiny extinction below 0", [](json& j) { j["medium"]["extinction"] = -1e-300; },
+       "got -1e-300"},
       {"version 2", [](json& j) { j["version"] = 2; },
        "/version: unsupported shot format version 2"},
       {"version as string", [](json& j) { j["version"] = "1"; }, "/version: must be the number 1"},
@@ -606,6 +611,20 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
   };
   ASSERT_GE(cases.size(), 25u);
   for (const BadCase& c : cases) check(c);
+}
+
+// A direction is a direction at any scale: neither huge components (their length overflows) nor
+// tiny ones (it underflows) make it a zero vector.
+TEST(ShotParser, HugeAndTinyDirectionsAreDirections) {
+  for (const json& d : {json{1e200, 1e200, 1e200}, json{1e-300, 0, 0}, json{-1e308, 0, 1e308}}) {
+    json j = json::parse(kDesignSlab);
+    j["lighting"]["sun"]["direction"] = d;
+    const ShotSpec shot = parseShot(j.dump(), "");
+    EXPECT_NEAR(length(shot.lighting.sun.direction), 1.0, 1e-12) << d;
+  }
+  json j = json::parse(kDesignSlab);
+  j["lighting"]["sun"]["direction"] = {0, 0, 0};
+  EXPECT_THROW(parseShot(j.dump(), ""), InputError);
 }
 
 TEST(ShotParser, AllowedRootsAcceptPathsInside) {
