@@ -792,6 +792,7 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
         const Rgb sky_total = sum.sky + sum.sky_multiple;
         store(out.beauty, x, y, sun_total + sky_total + sum.background, inv_spp);
         out.beauty.at(x, y)[3] = static_cast<float>(sum.alpha * inv_spp);
+        store(out.background, x, y, sum.background, inv_spp);
         store(out.sun, x, y, sun_total, inv_spp);
         store(out.sky, x, y, sky_total, inv_spp);
         store(out.single, x, y, sum.sun_single + sum.sky, inv_spp);

@@ -4,6 +4,7 @@
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
+#include <ImfMatrixAttribute.h>
 #include <ImfOutputFile.h>
 #include <ImfStringAttribute.h>
 #include <ImfTestFile.h>
@@ -59,7 +60,8 @@ std::string uniqueTempPath(const std::string& path) {
 }  // namespace
 
 void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
-              const std::map<std::string, std::string>& attributes) {
+              const std::map<std::string, std::string>& attributes,
+              const std::map<std::string, ExrMatrix>& matrices) {
   if (layers.empty()) throw InputError(path + ": no layers to write");
   const int width = layers.front().image.width, height = layers.front().image.height;
   if (width <= 0 || height <= 0) throw InputError(path + ": image has zero size");
@@ -87,6 +89,12 @@ void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
   for (const auto& [key, value] : attributes) {
     if (key.empty()) throw InputError(path + ": empty attribute name");
     header.insert(key, Imf::StringAttribute(value));
+  }
+  for (const auto& [key, m] : matrices) {
+    if (key.empty()) throw InputError(path + ": empty attribute name");
+    header.insert(
+        key, Imf::M44fAttribute(Imath::M44f(m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8],
+                                            m[9], m[10], m[11], m[12], m[13], m[14], m[15])));
   }
   Imf::FrameBuffer fb;
   for (const ExrLayer& layer : layers) {
@@ -143,6 +151,10 @@ ExrContents readExr(const std::string& path) {
     out.height = static_cast<int>(h);
 
     for (auto it = header.begin(); it != header.end(); ++it) {
+      if (const auto* m = dynamic_cast<const Imf::M44fAttribute*>(&it.attribute())) {
+        ExrMatrix& to = out.matrices[it.name()];
+        for (int k = 0; k < 16; ++k) to[size_t(k)] = m->value()[k / 4][k % 4];
+      }
       if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) {
         out.attributes[it.name()] = s->value();
       }

@@ -1,6 +1,7 @@
 // Reading and writing multi-layer OpenEXR images (OpenEXR headers stay in exr_io.cpp).
 #pragma once
 
+#include <array>
 #include <map>
 #include <string>
 #include <utility>
@@ -19,6 +20,10 @@ struct ExrLayer {
 };
 
 /// Everything readExr() found in a file.
+/// An M44f header attribute, m[4 * row + column], in Imath's row-vector convention
+/// (p' = p M: translation in the last row).
+using ExrMatrix = std::array<float, 16>;
+
 struct ExrContents {
   int width = 0, height = 0;
   /// Layers by prefix ("" = unprefixed). Channels are ordered R, G, B, A, then Y, then any
@@ -27,6 +32,8 @@ struct ExrContents {
   std::map<std::string, std::vector<std::string>> channel_names;
   /// String-valued header attributes (e.g. "cloudbake:version").
   std::map<std::string, std::string> attributes;
+  /// 4x4 float matrix attributes (e.g. "worldToCamera"), row-major as Imath stores them.
+  std::map<std::string, ExrMatrix> matrices;
 };
 
 /// Writes a single-part scanline EXR with FLOAT pixels and ZIP compression. All layers must have
@@ -36,7 +43,8 @@ struct ExrContents {
 /// image. Throws InputError (naming `path`) when the layers are invalid or the file cannot be
 /// written.
 void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
-              const std::map<std::string, std::string>& attributes = {});
+              const std::map<std::string, std::string>& attributes = {},
+              const std::map<std::string, ExrMatrix>& matrices = {});
 
 /// Reads every channel of an EXR (any pixel type, converted to float; the data window is read
 /// as a whole, top row first). Throws InputError naming `path` for a missing, truncated or

@@ -60,7 +60,11 @@ OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
 void addPreview(const RunOptions& opt, const std::string& stem, const std::string& exr_path,
                 RunResult& result) {
   const std::string png_name = stem + ".png";
-  writePreviewPng((fs::path(opt.out_dir) / png_name).string(), readExrRgb(exr_path),
+  // The beauty (the cloud over what is seen through it), not the cloud element alone.
+  ExrContents exr = readExr(exr_path);
+  auto beauty = exr.layers.find("beauty");
+  writePreviewPng((fs::path(opt.out_dir) / png_name).string(),
+                  beauty != exr.layers.end() ? beauty->second : readExrRgb(exr_path),
                   opt.png_exposure);
   result.files.push_back(describeOutput(opt.out_dir, png_name));
 }

@@ -22,6 +22,7 @@
 #include "core/methods/common.h"
 #include "core/methods/registry.h"
 #include "core/shot/scene_builder.h"
+#include "core/transport/camera.h"
 
 namespace cloudbake {
 namespace {
@@ -226,10 +227,25 @@ void ShotRun::writeView(const std::string& stem, const Camera& camera,
       {"cloudbake:view", camera.name},
       {"cloudbake:method", shot_.bake.method},
       {"cloudbake:units", "radiance, units of sun irradiance per sr"}};
+  if (shot_.lighting.has_sun) {
+    const Vec3& d = shot_.lighting.sun.direction;
+    const Rgb& e = shot_.lighting.sun.irradiance;
+    header["cloudbake:sun_direction"] =
+        exactNumber(d.x) + " " + exactNumber(d.y) + " " + exactNumber(d.z);
+    header["cloudbake:sun_irradiance"] =
+        exactNumber(e.x) + " " + exactNumber(e.y) + " " + exactNumber(e.z);
+  }
   for (const auto& [k, v] : attributes) header[k] = v;
+  // The camera in OpenEXR's standard attributes, which compositing packages read.
+  const CameraRays rays(camera);
+  std::map<std::string, ExrMatrix> matrices;
+  for (const auto& [key, m] : {std::pair{"worldToCamera", rays.worldToCamera()},
+                               std::pair{"worldToNDC", rays.worldToNdc()}}) {
+    for (int k = 0; k < 16; ++k) matrices[key][size_t(k)] = float(m[size_t(k)]);
+  }
   const std::string name = stem + ".exr";
   const std::string path = (fs::path(opt_.out_dir) / name).string();
-  writeExr(path, layers, header);
+  writeExr(path, layers, header, matrices);
   result_.files.push_back(describeOutput(opt_.out_dir, name));
   if (opt_.png) addPreview(opt_, stem, path, result_);
 }

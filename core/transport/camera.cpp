@@ -60,6 +60,34 @@ CameraRays::CameraRays(const Camera& camera) : camera_(camera) {
   half_h_ = half_w_ * aspect;
 }
 
+std::array<double, 16> CameraRays::worldToCamera() const {
+  const Vec3 back = -forward_;
+  const Vec3& p = camera_.position;
+  return {right_.x,        up_.x,        back.x,        0,  //
+          right_.y,        up_.y,        back.y,        0,  //
+          right_.z,        up_.z,        back.z,        0,  //
+          -dot(p, right_), -dot(p, up_), -dot(p, back), 1};
+}
+
+std::array<double, 16> CameraRays::worldToNdc() const {
+  // Camera space to clip space, then the product (row vectors: world -> camera -> clip).
+  const bool persp = camera_.type == Camera::Type::kPerspective;
+  const std::array<double, 16> proj =
+      persp ? std::array<double, 16>{1 / half_w_, 0, 0, 0,  0, 1 / half_h_, 0, 0,  //
+                                     0,           0, 0, -1, 0, 0,           1, 0}
+            : std::array<double, 16>{1 / half_w_, 0, 0, 0, 0, 1 / half_h_, 0, 0,  //
+                                     0,           0, 1, 0, 0, 0,           0, 1};
+  const std::array<double, 16> w2c = worldToCamera();
+  std::array<double, 16> m{};
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      for (int k = 0; k < 4; ++k)
+        m[size_t(4 * r + c)] += w2c[size_t(4 * r + k)] * proj[size_t(4 * k + c)];
+    }
+  }
+  return m;
+}
+
 Ray CameraRays::generate(double fx, double fy) const {
   // Film coordinates in [-1, 1], +x right, +y up (pixel rows grow downwards).
   const double sx = 2.0 * fx / camera_.width_px - 1.0;

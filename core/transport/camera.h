@@ -1,6 +1,8 @@
 // Primary-ray generation for the pinhole and orthographic cameras of scene.h.
 #pragma once
 
+#include <array>
+
 #include "core/math/vec3.h"
 #include "core/transport/scene.h"
 
@@ -29,6 +31,14 @@ class CameraRays {
   const Vec3& forward() const { return forward_; }
   const Vec3& right() const { return right_; }
   const Vec3& up() const { return up_; }
+
+  /// The camera for compositing packages, in OpenEXR's standard attributes' convention (what
+  /// Nuke reads as exr/worldToCamera and exr/worldToNDC): row-vector 4x4 matrices (p' = p M,
+  /// m[4 * row + column]); camera space looks down -z with +x right and +y up; NDC x and y run
+  /// over [-1, 1] across the image's width and height (after dividing by w: for a perspective
+  /// camera w = -z, and z_ndc = 1 / -z; an orthographic camera keeps w = 1 and z).
+  std::array<double, 16> worldToCamera() const;
+  std::array<double, 16> worldToNdc() const;
 
  private:
   Camera camera_;

@@ -10,11 +10,15 @@
 
 namespace cloudbake {
 
-/// The layers in file order: beauty unprefixed (R, G, B, A), then `sun`, `sky`, `single`,
-/// `multiple` (each R, G, B). Images are copied.
+/// The layers in file order: the cloud element unprefixed (R, G, B, A: premultiplied, RGB =
+/// sun + sky, A = coverage), `background` (what is seen through the cloud), `beauty` (the two
+/// added), then `sun`, `sky`, `single`, `multiple` (each R, G, B). Images are copied.
 std::vector<ExrLayer> renderLayersToExr(const RenderLayers& layers);
 /// The same, moving the images.
 std::vector<ExrLayer> renderLayersToExr(RenderLayers&& layers);
+
+/// Their names in file order ("" first).
+const std::vector<std::string>& renderLayerNames();
 
 /// Reads those layers back in file order (a cached view); InputError naming the path when one
 /// is missing.

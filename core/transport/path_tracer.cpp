@@ -365,6 +365,7 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
         const PathSample& a = acc[size_t(y - t.y0) * tw + (x - t.x0)];
         store(out.beauty, x, y, a.sun + a.sky + a.background, inv_spp);
         out.beauty.at(x, y)[3] = static_cast<float>(a.alpha * inv_spp);
+        store(out.background, x, y, a.background, inv_spp);
         store(out.sun, x, y, a.sun, inv_spp);
         store(out.sky, x, y, a.sky, inv_spp);
         store(out.single, x, y, a.single, inv_spp);

@@ -53,11 +53,12 @@ struct PathTracerOptions {
 /// sources), plus what is seen directly behind the cloud (the sky through it), which is in
 /// beauty only. beauty.rgb = sun + sky + background = single + multiple + background.
 struct RenderLayers {
-  Image beauty;    ///< 4 channels
-  Image sun;       ///< 3 channels
-  Image sky;       ///< 3 channels
-  Image single;    ///< 3 channels
-  Image multiple;  ///< 3 channels
+  Image beauty;      ///< 4 channels: everything the camera sees, and the coverage
+  Image background;  ///< 3 channels: what is seen through the cloud (the sky times T)
+  Image sun;         ///< 3 channels
+  Image sky;         ///< 3 channels
+  Image single;      ///< 3 channels
+  Image multiple;    ///< 3 channels
 };
 
 /// Renders one view by path tracing. Throws InputError for invalid medium/camera/options.

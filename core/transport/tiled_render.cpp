@@ -57,6 +57,7 @@ bool renderTiles(int width, int height, int tile_size, int threads, const Progre
 RenderLayers makeRenderLayers(int width, int height) {
   RenderLayers out;
   out.beauty = Image(width, height, 4);
+  out.background = Image(width, height, 3);
   out.sun = Image(width, height, 3);
   out.sky = Image(width, height, 3);
   out.single = Image(width, height, 3);

@@ -276,7 +276,7 @@ const Image& layer(const std::vector<ExrLayer>& layers, const std::string& name)
 std::string describePixel(const std::vector<ExrLayer>& layers, int64_t p) {
   std::string s;
   for (const ExrLayer& l : layers) {
-    s += " " + (l.name.empty() ? std::string("beauty") : l.name) + "=(";
+    s += " " + (l.name.empty() ? std::string("cloud") : l.name) + "=(";
     for (int c = 0; c < l.image.channels; ++c) {
       s += (c ? ", " : "") + std::to_string(l.image.data[size_t(p * l.image.channels + c)]);
     }
@@ -288,12 +288,12 @@ std::string describePixel(const std::vector<ExrLayer>& layers, int64_t p) {
 // Per pixel (deterministic methods) or as image means (Monte Carlo methods): value <= bound(pixel).
 void expectBounded(const std::string& what, const std::vector<ExrLayer>& layers, const Image& im,
                    const std::function<double(double alpha)>& bound, bool means_only) {
-  const Image& beauty = layer(layers, "");
+  const Image& cloud = layer(layers, "");  // its alpha is the pixel's coverage
   const int64_t n = int64_t(im.width) * im.height;
   double sum = 0, sum_bound = 0, worst = 0;
   int64_t worst_pixel = 0;
   for (int64_t p = 0; p < n; ++p) {
-    const double alpha = beauty.data[size_t(p * beauty.channels + 3)];
+    const double alpha = cloud.data[size_t(p * cloud.channels + 3)];
     const double b = bound(alpha);
     sum_bound += b;
     for (int c = 0; c < 3; ++c) {
@@ -321,10 +321,10 @@ Ratios ratiosTo(const std::vector<ExrLayer>& layers, const std::string& name, do
   Ratios r;
   if (!(bound > 0)) return r;
   const Image& im = layer(layers, name);
-  const Image& beauty = layer(layers, "");
+  const Image& cloud = layer(layers, "");  // its alpha is the pixel's coverage
   double sum = 0, sum_bound = 0;
   for (int64_t p = 0; p < int64_t(im.width) * im.height; ++p) {
-    const double alpha = double(beauty.data[size_t(p * beauty.channels + 3)]);
+    const double alpha = double(cloud.data[size_t(p * cloud.channels + 3)]);
     sum_bound += 3 * bound * alpha;
     for (int c = 0; c < 3; ++c) {
       const double v = im.data[size_t(p * im.channels + c)];
@@ -358,8 +358,8 @@ void checkImages(const std::vector<ExrLayer>& layers, const Bounds& b, bool mont
       [&](double alpha) { return ceiling * (alpha + tol); }, monte_carlo);
   if (b.sun_max == 0) {
     expectBounded(
-        "beauty (furnace)", layers, layer(layers, ""), [&](double) { return b.sky_max * 1.02; },
-        monte_carlo);
+        "beauty (furnace)", layers, layer(layers, "beauty"),
+        [&](double) { return b.sky_max * 1.02; }, monte_carlo);
   }
 }
 

@@ -79,6 +79,17 @@ PixelMask cloudMask(const ExrContents& ref, double min_alpha, const std::string&
   return mask;
 }
 
+// Files of this version hold the cloud element unprefixed (premultiplied) and the beauty as a
+// layer; older files, and other renderers', hold the beauty unprefixed. Layers are compared by
+// meaning: "beauty", and "cloud" where a file has one.
+void nameLayers(ExrContents* c) {
+  auto plain = c->layers.find("");
+  if (plain == c->layers.end()) return;
+  Image image = std::move(plain->second);
+  c->layers.erase(plain);
+  c->layers[c->layers.count("beauty") ? "cloud" : "beauty"] = std::move(image);
+}
+
 // sun + sky of one file, when it has both.
 void addScattered(ExrContents* c) {
   auto sun = c->layers.find("sun"), sky = c->layers.find("sky");
@@ -101,8 +112,9 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand(
       "compare",
-      "Compare a rendered view with a reference of the same view: per layer (beauty, sun, sky, "
-      "single, multiple, and scattered = sun + sky) the means and the relative RMSE "
+      "Compare a rendered view with a reference of the same view: per layer (beauty, cloud, "
+      "background, sun, sky, single, multiple, and scattered = sun + sky) the means and the "
+      "relative RMSE "
       "sqrt(mean((x - r)^2)) / mean(r) over pixels and RGB");
   cmd->add_option("test", opt->test, "the EXR to judge")->required();
   cmd->add_option("reference", opt->ref, "the reference EXR (e.g. a converged pathtrace)")
@@ -127,6 +139,8 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
     if (!mask.empty() && mask.size() != size_t(ref.width) * ref.height) {
       throw InputError("--mask-from: " + opt->mask_from + " differs in size from " + opt->ref);
     }
+    nameLayers(&test);
+    nameLayers(&ref);
     addScattered(&test);
     addScattered(&ref);
     nlohmann::json out = nlohmann::json::object();
@@ -134,7 +148,7 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
     for (const auto& [name, image] : ref.layers) {
       auto it = test.layers.find(name);
       if (it == test.layers.end()) continue;
-      const std::string label = name.empty() ? "beauty" : name;
+      const std::string& label = name;
       const LayerStats s =
           compareLayer(it->second, image, mask, opt->test + " layer '" + label + "'");
       out[label] = {

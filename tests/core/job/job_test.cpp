@@ -329,6 +329,12 @@ TEST(RunShot, WritesViewsAndVdbAsCloudbakeRender) {
     EXPECT_TRUE(exr.layers.count(layer)) << layer;
   }
   EXPECT_EQ(exr.attributes.at("cloudbake:view"), "front");
+  // What a compositor needs in the header: the camera (OpenEXR's standard matrices) and the sun.
+  EXPECT_TRUE(exr.matrices.count("worldToCamera"));
+  EXPECT_TRUE(exr.matrices.count("worldToNDC"));
+  EXPECT_TRUE(exr.attributes.count("cloudbake:sun_direction"));
+  EXPECT_TRUE(exr.attributes.count("cloudbake:sun_irradiance"));
+  for (const char* layer : {"background", "beauty"}) EXPECT_TRUE(exr.layers.count(layer)) << layer;
   VdbFileReader vdb(r.files[1].path);
   EXPECT_EQ(vdb.grids().at(0).name, "density");
   EXPECT_EQ(stages.front(), "build");

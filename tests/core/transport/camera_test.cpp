@@ -40,6 +40,42 @@ TEST(Camera, PerspectiveCentreCornersAndOrientation) {
   EXPECT_NEAR(top.d.z / top.d.y, std::tan(kPi / 6) * 0.5, 1e-12);
 }
 
+// p (a point) through a row-vector 4x4 matrix, divided by w.
+Vec3 transformPoint(const std::array<double, 16>& m, const Vec3& p) {
+  double out[4];
+  for (int c = 0; c < 4; ++c) {
+    out[c] =
+        p.x * m[size_t(c)] + p.y * m[size_t(4 + c)] + p.z * m[size_t(8 + c)] + m[size_t(12 + c)];
+  }
+  return Vec3(out[0], out[1], out[2]) / out[3];
+}
+
+// The matrices compositing packages read: the camera looks down -z with +x right and +y up,
+// and a point seen through a film position lands at that position's NDC (-1..1 across the
+// width and the height), for both camera types.
+TEST(Camera, WorldToCameraAndNdcFollowOpenExrConventions) {
+  for (const Camera::Type type : {Camera::Type::kPerspective, Camera::Type::kOrthographic}) {
+    Camera c = baseCamera();
+    c.type = type;
+    c.width = 3;
+    const CameraRays rays(c);
+    const Vec3 ahead = transformPoint(rays.worldToCamera(), c.look_at);
+    EXPECT_NEAR(ahead.x, 0, 1e-12);
+    EXPECT_NEAR(ahead.y, 0, 1e-12);
+    EXPECT_NEAR(ahead.z, -5, 1e-12);
+    const Vec3 upward = transformPoint(rays.worldToCamera(), c.position + Vec3(0.3, 0, 1));
+    EXPECT_NEAR(upward.y, 1, 1e-12);    // world +z (the up vector) is camera +y
+    EXPECT_NEAR(upward.x, 0.3, 1e-12);  // world +x is to the right
+    for (const auto& [fx, fy] :
+         {std::pair{0.0, 0.0}, std::pair{200.0, 100.0}, std::pair{50.0, 80.0}}) {
+      const Ray r = rays.generate(fx, fy);
+      const Vec3 ndc = transformPoint(rays.worldToNdc(), r.o + r.d * 7.0);
+      EXPECT_NEAR(ndc.x, 2 * fx / 200 - 1, 1e-9) << fx << " " << fy;
+      EXPECT_NEAR(ndc.y, 1 - 2 * fy / 100, 1e-9) << fx << " " << fy;
+    }
+  }
+}
+
 TEST(Camera, OrthographicIsParallelWithHorizontalWidth) {
   Camera c = baseCamera();
   c.type = Camera::Type::kOrthographic;

@@ -199,25 +199,49 @@ TEST(PathTracer, LayersAddUp) {
   EXPECT_GT(multiple_total, 0);
 }
 
-TEST(PathTracer, LayersWrittenAsOneMultiLayerExr) {
+// The EXR is compositing-ready: the cloud premultiplied in RGBA (RGB = sun + sky, A = coverage),
+// the background seen through it in its own layer, the full beauty kept; and `cloud over` a
+// plate of the constant sky reproduces the beauty (Nuke's over: A + (1 - a) B), as does cloud +
+// background.
+TEST(PathTracer, LayersWrittenAsOneCompositingReadyExr) {
   Sun sun;
   sun.irradiance = Rgb(1, 2, 3);
   PathTracerOptions opt;
   opt.samples_per_pixel = 2;
+  const Rgb sky(0.1, 0.2, 0.3);
   const RenderLayers l =
       renderPathTraced(sphereMedium(3.0, 0.9, std::make_shared<IsotropicPhase>()), sun,
-                       constantSky(Rgb(0.1)), perspectiveCamera(12), opt);
+                       constantSky(sky), perspectiveCamera(12), opt);
   const std::string path =
       ::testing::TempDir() + "/cloudbake_layers_" + std::to_string(::getpid()) + ".exr";
   writeRenderLayers(path, l, {{"cloudbake:method", "pathtrace"}});
   const ExrContents in = readExr(path);
   EXPECT_EQ(in.channel_names.at(""), (std::vector<std::string>{"R", "G", "B", "A"}));
-  EXPECT_EQ(in.layers.at("").data, l.beauty.data);
   EXPECT_EQ(in.layers.at("sun").data, l.sun.data);
   EXPECT_EQ(in.layers.at("sky").data, l.sky.data);
   EXPECT_EQ(in.layers.at("single").data, l.single.data);
   EXPECT_EQ(in.layers.at("multiple").data, l.multiple.data);
+  EXPECT_EQ(in.layers.at("background").data, l.background.data);
   EXPECT_EQ(in.attributes.at("cloudbake:method"), "pathtrace");
+  const Image& cloud = in.layers.at("");
+  const Image& background = in.layers.at("background");
+  const Image& beauty = in.layers.at("beauty");
+  double covered = 0;
+  for (int y = 0; y < cloud.height; ++y) {
+    for (int x = 0; x < cloud.width; ++x) {
+      const float a = cloud.at(x, y)[3];
+      EXPECT_EQ(a, l.beauty.at(x, y)[3]);
+      covered += a;
+      for (int c = 0; c < 3; ++c) {
+        const double premult = cloud.at(x, y)[c];
+        EXPECT_NEAR(premult, l.sun.at(x, y)[c] + l.sky.at(x, y)[c], 1e-6);
+        EXPECT_NEAR(beauty.at(x, y)[c], l.beauty.at(x, y)[c], 1e-6);
+        EXPECT_NEAR(premult + background.at(x, y)[c], beauty.at(x, y)[c], 1e-5);
+        EXPECT_NEAR(premult + (1 - a) * sky[c], beauty.at(x, y)[c], 1e-5);  // cloud over plate
+      }
+    }
+  }
+  EXPECT_GT(covered, 1.0);  // the cloud covers part of the frame
   std::remove(path.c_str());
 }
 
