@@ -26,4 +26,6 @@ done
 echo "run-example: cloudbake-server on $address (log: $log)"
 
 "$build/client/cloudctl" --server "$address" submit "$root/examples/perlin_cloud.json" --out "$out"
-echo "run-example: outputs are in $out (side.exr: linear radiance, bake.vdb: density)"
+"$build/tools/cloudbake/cloudbake" preview "$out/side.exr" --out "$out/side.png" >/dev/null
+echo "run-example: outputs are in $out (side.exr: linear radiance, the cloud premultiplied over its"
+echo "  background and beauty layers; bake.vdb: the baked light; side.png: a preview to look at)"

@@ -2,6 +2,8 @@
 
 #include <png.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 
 #include "core/error.h"
@@ -39,6 +41,40 @@ void writePng(const std::string& path, int width, int height, int channels,
     throw InputError(path + ": cannot write PNG: " + message);
   }
   png_image_free(&image);
+}
+
+namespace {
+
+uint8_t srgbByte(double linear) {
+  const double c = std::clamp(linear, 0.0, 1.0);
+  const double s = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+  return static_cast<uint8_t>(std::lround(s * 255.0));
+}
+
+double luminanceOf(const float* p) { return 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]; }
+
+}  // namespace
+
+double writePreviewPng(const std::string& path, const Image& image, double exposure) {
+  if (image.channels < 3 || image.width < 1 || image.height < 1) {
+    throw InputError(path + ": a preview needs an RGB image, got " +
+                     std::to_string(image.channels) + " channel(s)");
+  }
+  const size_t n = size_t(image.width) * image.height;
+  if (!(exposure > 0)) {
+    std::vector<double> lum(n);
+    for (size_t p = 0; p < n; ++p) lum[p] = luminanceOf(&image.data[p * image.channels]);
+    const size_t k = std::min(n - 1, size_t(0.99 * double(n)));
+    std::nth_element(lum.begin(), lum.begin() + std::ptrdiff_t(k), lum.end());
+    exposure = lum[k] > 0 && std::isfinite(lum[k]) ? 0.8 / lum[k] : 1.0;
+  }
+  std::vector<uint8_t> px(n * 3);
+  for (size_t p = 0; p < n; ++p) {
+    for (int c = 0; c < 3; ++c)
+      px[p * 3 + c] = srgbByte(exposure * image.data[p * image.channels + c]);
+  }
+  writePng(path, image.width, image.height, 3, px);
+  return exposure;
 }
 
 }  // namespace cloudbake

@@ -19,6 +19,8 @@ void addCompareCommand(CLI::App& app, int* exit_code);
 void addBakeSliceCommand(CLI::App& app, int* exit_code);
 /// `cloudbake methods`: the registry's methods, knobs and generated docs (cmd_methods.cpp).
 void addMethodsCommand(CLI::App& app, int* exit_code);
+/// `cloudbake preview`: an sRGB PNG of an EXR's layer (cmd_preview.cpp).
+void addPreviewCommand(CLI::App& app, int* exit_code);
 /// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
 void addRenderCommand(CLI::App& app, int* exit_code);
 

@@ -37,6 +37,7 @@ int main(int argc, char** argv) {
   addPhaseCommand(app, &exit_code);
   addRenderCommand(app, &exit_code);
   addCompareCommand(app, &exit_code);
+  addPreviewCommand(app, &exit_code);
   addBakeSliceCommand(app, &exit_code);
   addMethodsCommand(app, &exit_code);
 

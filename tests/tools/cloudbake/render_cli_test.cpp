@@ -349,6 +349,33 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   EXPECT_NE(r.err.find("none.exr: file not found"), std::string::npos) << r.err;
 }
 
+// Previews of any EXR: the beauty by default, any layer by name, a clear error for a layer the
+// file lacks (listing what it has) and exit 3 for a missing file.
+TEST_F(RenderCli, PreviewWritesAPngOfAnyLayer) {
+  json j = slab();
+  j["views"][0]["resolution"] = {8, 8};
+  j["bake"]["samples"] = 1;
+  ASSERT_EQ(
+      run("render '" + writeShot("p.json", j).string() + "' --out '" + dir_.string() + "' --quiet")
+          .rc,
+      0);
+  const std::string exr = (dir_ / (j["views"][0]["name"].get<std::string>() + ".exr")).string();
+  CliResult r = run("preview '" + exr + "' --out '" + (dir_ / "b.png").string() + "'");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out).at("layer"), "beauty");
+  EXPECT_GT(fs::file_size(dir_ / "b.png"), 50u);
+  r = run("preview '" + exr + "' --layer sun --exposure 3 --out '" + (dir_ / "s.png").string() +
+          "'");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out).at("exposure"), 3.0);
+  r = run("preview '" + exr + "' --layer nope --out '" + (dir_ / "n.png").string() + "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--layer: "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("it has: cloud, background, beauty"), std::string::npos) << r.err;
+  r = run("preview '" + (dir_ / "none.exr").string() + "' --out x.png");
+  EXPECT_EQ(r.rc, 3);
+}
+
 // A mistyped subcommand is named, with the nearest command (CLI11 said "A subcommand is
 // required").
 TEST_F(RenderCli, MistypedCommandIsNamedWithTheNearestOne) {

@@ -1,0 +1,69 @@
+// `cloudbake preview`: an sRGB PNG of any layer of any EXR (a view of this tool, of the server,
+// or of another renderer), to look at a result without re-rendering it.
+#include <cstdio>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/error.h"
+#include "core/io/exr_io.h"
+#include "core/io/png_writer.h"
+#include "tools/cloudbake/commands.h"
+
+namespace cloudbake::tool {
+namespace {
+
+// The layer to show: the one asked for, else the beauty (a layer of this version's files; the
+// unprefixed RGB of older files and other renderers').
+const Image& pickLayer(const ExrContents& exr, const std::string& layer, const std::string& path) {
+  const std::string name = !layer.empty() ? layer : exr.layers.count("beauty") ? "beauty" : "";
+  auto it = exr.layers.find(name == "cloud" ? "" : name);
+  if (it == exr.layers.end() || it->second.channels < 3) {
+    std::string have;
+    for (const auto& [n, image] : exr.layers) {
+      if (image.channels >= 3) have += (have.empty() ? "" : ", ") + (n.empty() ? "cloud" : n);
+    }
+    throw InputError("--layer: " + path + " has no RGB layer '" + name + "' (it has: " + have +
+                     ")");
+  }
+  return it->second;
+}
+
+}  // namespace
+
+void addPreviewCommand(CLI::App& app, int* exit_code) {
+  struct Options {
+    std::string exr, out, layer;
+    double exposure = 0;
+  };
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand(
+      "preview",
+      "Write an sRGB PNG preview of an EXR's layer (default: the beauty); prints "
+      "{\"png\",\"layer\",\"exposure\"} as one JSON line");
+  cmd->add_option("exr", opt->exr,
+                  "the EXR (any view this tool or the server wrote, or another "
+                  "renderer's)")
+      ->required();
+  cmd->add_option("--out", opt->out, "PNG file to write")->required();
+  cmd->add_option("--layer", opt->layer,
+                  "layer to show: beauty (default), cloud (the premultiplied element), "
+                  "background, sun, sky, single, multiple");
+  cmd->add_option("--exposure", opt->exposure,
+                  "radiance multiplier (default: auto, the 99th percentile of luminance at 0.8), "
+                  "so previews of different files compare")
+      ->check(CLI::PositiveNumber);
+  cmd->callback([opt, exit_code] {
+    const ExrContents exr = readExr(opt->exr);
+    const Image& image = pickLayer(exr, opt->layer, opt->exr);
+    const double exposure = writePreviewPng(opt->out, image, opt->exposure);
+    const std::string layer =
+        opt->layer.empty() ? (exr.layers.count("beauty") ? "beauty" : "") : opt->layer;
+    std::printf(
+        "%s\n",
+        nlohmann::json{{"png", opt->out}, {"layer", layer}, {"exposure", exposure}}.dump().c_str());
+    *exit_code = kOk;
+  });
+}
+
+}  // namespace cloudbake::tool
