@@ -360,7 +360,9 @@ std::string upload(Client& c, const std::string& path, bool quiet) {
 
 // ---- fetch -------------------------------------------------------------------------------
 
-/// Downloads one output to DIR/<name>, resuming DIR/<name>.part, verifying size and SHA-256.
+/// Downloads one output to DIR/<name>, resuming DIR/<name>.part, verifying size and SHA-256. A
+/// file already there with the same size and SHA-256 (the unchanged bake.vdb of a RenderView of
+/// the same job) is kept as it is, without a download.
 std::string fetchOne(Client& c, const std::string& job, const v1::OutputFile& file,
                      const std::string& dir) {
   std::error_code ec;
@@ -373,6 +375,10 @@ std::string fetchOne(Client& c, const std::string& job, const v1::OutputFile& fi
     throw CliError{ExitCode::kFailure, "server sent an unsafe output name '" + file.name() + "'"};
   }
   const fs::path final_path = fs::path(dir) / file.name();
+  if (fs::is_regular_file(final_path, ec) && fs::file_size(final_path, ec) == file.size() &&
+      cloudbake::sha256File(final_path.string()) == file.sha256()) {
+    return final_path.string();
+  }
   const fs::path part = final_path.string() + ".part";
   uint64_t offset = fs::exists(part) ? fs::file_size(part) : 0;
   if (offset > file.size()) {
@@ -397,6 +403,11 @@ std::string fetchOne(Client& c, const std::string& job, const v1::OutputFile& fi
       offset += chunk.data().size();
     }
     out.close();
+    if (!out) {
+      throw CliError{ExitCode::kFailure,
+                     "fetch " + file.name() + ": cannot write " + part.string() +
+                         " (disk full or not writable); the partial file is kept for a resume"};
+    }
     check(reader->Finish(), "fetch " + file.name());
   }
   const std::string got = cloudbake::sha256File(part.string());

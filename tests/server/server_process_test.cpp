@@ -327,6 +327,7 @@ TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
   EXPECT_EQ(slurp(ws_.path("again/bake.vdb")), original);
   EXPECT_FALSE(fs::exists(ws_.path("again/bake.vdb.part")));
   // A stale .part that is not a prefix fails the checksum and is removed; a retry succeeds.
+  fs::remove(ws_.path("again/front.exr"));
   ws_.write("again/front.exr.part", "junk that is not a prefix");
   fetch = run(server_.cloudctl() + " fetch " + id + " --name front.exr --out " + ws_.path("again"));
   EXPECT_EQ(fetch.code, 1);
@@ -335,6 +336,13 @@ TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
   fetch = run(server_.cloudctl() + " fetch " + id + " --name front.exr --out " + ws_.path("again"));
   EXPECT_EQ(fetch.code, 0) << fetch.err;
   EXPECT_EQ(slurp(ws_.path("again/front.exr")), slurp(out + "/front.exr"));
+  // An identical file already there is kept, not downloaded again (its time stays put).
+  const fs::path kept = ws_.path("again/bake.vdb");
+  const auto old_time = fs::file_time_type::clock::now() - std::chrono::hours(24);
+  fs::last_write_time(kept, old_time);
+  fetch = run(server_.cloudctl() + " fetch " + id + " --out " + ws_.path("again"));
+  EXPECT_EQ(fetch.code, 0) << fetch.err;
+  EXPECT_EQ(fs::last_write_time(kept), old_time);
 
   // --json submit: the result on stdout, progress on stderr as JSON lines, never going back.
   const CmdResult js =
