@@ -99,8 +99,23 @@ class BakeClient:
     def cancel(self, job_id):
         return self.stub.CancelJob(pb.CancelJobRequest(job_id=job_id), timeout=self.timeout)
 
+    def render(self, job_id, views=None, sun_irradiance=None):
+        """RenderView: new views (a list of shot-format view objects) and/or a new sun colour
+        ([r, g, b]) of a finished job's shot, from the server's cache; returns the new Job."""
+        request = pb.RenderViewRequest(job_id=job_id)
+        if views is not None:
+            request.views_json = json.dumps(views)
+        if sun_irradiance is not None:
+            request.sun_irradiance.extend(sun_irradiance)
+        return self.stub.RenderView(request, timeout=self.timeout).job
+
     def fetch(self, job_id, output, out_dir):
-        """Downloads one output, resuming OUT/<name>.part; verifies size and SHA-256."""
+        """Downloads one output, resuming OUT/<name>.part; verifies size and SHA-256. Refuses
+        an output name that is not a plain file name (the rule cloudctl applies), so a server
+        cannot make the client write outside out_dir."""
+        if (not output.name or output.name in (".", "..") or "/" in output.name
+                or "\\" in output.name or "\0" in output.name):
+            raise IOError("server sent an unsafe output name %r" % output.name)
         os.makedirs(out_dir, exist_ok=True)
         final = os.path.join(out_dir, output.name)
         part = final + ".part"

@@ -127,6 +127,18 @@ def main():
         except grpc.RpcError as e:
             check(e.code() == grpc.StatusCode.INVALID_ARGUMENT and "shot.json" in e.details(),
                   "malformed shot -> INVALID_ARGUMENT naming shot.json (%s)" % e.details())
+        # RenderView: a new sun colour of the first job, from the cache.
+        job3 = client.wait(client.render(job.id, sun_irradiance=[2, 2, 2]).id)
+        check(job3.state == pb.SUCCEEDED, "RenderView with a new sun colour (%s)" % job3.error)
+        check([o.name for o in job3.outputs].count("front.exr") == 1, "RenderView wrote front.exr")
+        # Output names that would write outside the folder are refused before any download.
+        for name in ["../../x", "/etc/passwd", "..", "a/b", ""]:
+            try:
+                client.fetch(job.id, pb.OutputFile(name=name, size=1, sha256="0" * 64),
+                             os.path.join(work, "safe"))
+                check(False, "unsafe output name %r refused" % name)
+            except IOError as e:
+                check("unsafe output name" in str(e), "unsafe output name %r refused" % name)
         try:
             client.stub.GetJob(pb.GetJobRequest(job_id="j0000000000000000"))
             check(False, "unknown job rejected")
