@@ -102,6 +102,11 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
       ->envname("CLOUDBAKE_QUEUE_BOUND")
       ->check(CLI::Range(size_t(1), size_t(100000)))
       ->capture_default_str();
+  app.add_option("--max-job-seconds", o.max_job_seconds,
+                 "wall-clock seconds a job may run before it is stopped and FAILED (0: no limit)")
+      ->envname("CLOUDBAKE_MAX_JOB_SECONDS")
+      ->check(CLI::Range(0.0, 1e9))
+      ->capture_default_str();
   app.add_option("--max-upload-bytes", o.max_upload_bytes, "largest asset upload")
       ->envname("CLOUDBAKE_MAX_UPLOAD_BYTES")
       ->transform(CLI::AsSizeValue(false))

@@ -14,6 +14,7 @@
 #include "common/json_limits.h"
 #include "common/printable.h"
 #include "core/error.h"
+#include "core/format.h"
 #include "core/job/cache_key.h"
 #include "core/job/file_util.h"
 #include "core/job/run_shot.h"
@@ -104,6 +105,7 @@ struct JobManager::Job {
   double sun_tolerance_deg = 0;
   std::atomic<bool> cancel{false};
   bool shutdown = false;  // cancelled because the manager stops, not by a client
+  bool overtime = false;  // stopped by max_job_seconds (set under the manager's mutex)
   std::deque<JobEvent> events;
   uint64_t next_seq = 1;
   std::chrono::steady_clock::time_point started;
@@ -571,6 +573,12 @@ RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {
                       p.message == job->last_message ? std::string() : p.message);
       job->last_message = p.message;
     }
+    if (options_.max_job_seconds > 0 &&
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - job->started).count() >
+            options_.max_job_seconds) {
+      job->overtime = true;
+      return false;
+    }
     return !job->cancel.load();
   };
   return ro;
@@ -584,8 +592,16 @@ RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcom
     tbb::task_arena arena(threads);
     arena.execute([&] { result = runShot(job.shot, ro); });
   } catch (const Cancelled&) {
-    outcome->state = job.shutdown ? JobState::kFailed : JobState::kCancelled;
-    outcome->error = job.shutdown ? "interrupted by server shutdown; resubmit" : "cancelled";
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (job.overtime) {
+      outcome->state = JobState::kFailed;
+      outcome->error = "deadline exceeded: the job ran past this server's limit of " +
+                       exactNumber(options_.max_job_seconds) +
+                       " s per job (--max-job-seconds) and was stopped";
+    } else {
+      outcome->state = job.shutdown ? JobState::kFailed : JobState::kCancelled;
+      outcome->error = job.shutdown ? "interrupted by server shutdown; resubmit" : "cancelled";
+    }
   } catch (const InputError& e) {
     outcome->state = JobState::kFailed;
     outcome->error = clientPaths(e.what(), store_->inputDir(job.record.id));

@@ -52,6 +52,9 @@ struct JobManagerOptions {
   size_t queue_bound = 16;           ///< queued (not running) jobs; more: ResourceExhausted
   uint64_t cache_max_bytes = uint64_t(1) << 30;
   uint64_t max_upload_bytes = uint64_t(1) << 30;
+  /// Wall-clock seconds a job may run; past it the job is stopped (as a cancel, within about a
+  /// second) and FAILED, naming --max-job-seconds. 0: no limit.
+  double max_job_seconds = 86400;
   JobLimits limits;
 };
 

@@ -791,6 +791,27 @@ TEST_F(ServerTest, VoxelAndFrameLimitsNameTheField) {
   EXPECT_TRUE(limited.stop());
 }
 
+// A job that runs past --max-job-seconds is stopped within about a second of it and FAILED,
+// naming the flag; the runner is free for the next job.
+TEST(ServerQueue, JobPastItsTimeLimitIsStoppedAndFailed) {
+  Workspace ws;
+  ServerProc server(ws.path("state"));
+  ASSERT_TRUE(server.start({"--max-job-seconds=1"}));
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string id = submitDetached(server, ws.write("long.json", sphereShot(128, 8192)));
+  const Json s = waitFor(
+      server, id,
+      [](const Json& j) { return j.at("state") != "RUNNING" && j.at("state") != "QUEUED"; }, 30);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(s.at("state"), "FAILED");
+  EXPECT_NE(s.at("error").get<std::string>().find("--max-job-seconds"), std::string::npos) << s;
+  EXPECT_LT(seconds, 10.0);
+  const CmdResult next =
+      run(server.cloudctl() + " submit " + ws.write("tiny.json", sphereShot(8, 1)) + " --quiet");
+  EXPECT_EQ(next.code, 0) << next.err;
+}
+
 TEST(ServerQueue, FullQueueAnswersResourceExhausted) {
   Workspace ws;
   ServerProc server(ws.path("state"));
