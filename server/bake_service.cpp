@@ -59,6 +59,7 @@ grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
                                           grpc::ServerReader<v1::UploadAssetRequest>* reader,
                                           v1::UploadAssetResponse* reply) {
   return guarded("UploadAsset", [&] {
+    const StreamSlot slot(*this);
     v1::UploadAssetRequest msg;
     if (!reader->Read(&msg)) throw InputError("upload: no messages (expected a header first)");
     if (!msg.has_header()) throw InputError("upload: the first message must be a header");
@@ -107,9 +108,19 @@ grpc::Status BakeServiceImpl::SubmitJob(Ctx* ctx, const v1::SubmitJobRequest* re
   });
 }
 
+BakeServiceImpl::StreamSlot::StreamSlot(BakeServiceImpl& service) : service_(service) {
+  if (++service_.streams_ > service_.max_streams_) {
+    --service_.streams_;
+    throw ResourceExhaustedError("too many streams open on this server (limit " +
+                                 std::to_string(service_.max_streams_) +
+                                 ", --max-streams); retry later");
+  }
+}
+
 grpc::Status BakeServiceImpl::WatchJob(Ctx* ctx, const v1::WatchJobRequest* request,
                                        grpc::ServerWriter<v1::JobEvent>* writer) {
   return guarded("WatchJob", [&] {
+    const StreamSlot slot(*this);
     checkJobId(request->job_id());
     uint64_t after = request->after_seq();
     for (;;) {
@@ -172,6 +183,7 @@ grpc::Status BakeServiceImpl::CancelJob(Ctx*, const v1::CancelJobRequest* reques
 grpc::Status BakeServiceImpl::FetchResult(Ctx* ctx, const v1::FetchResultRequest* request,
                                           grpc::ServerWriter<v1::ResultChunk>* writer) {
   return guarded("FetchResult", [&] {
+    const StreamSlot slot(*this);
     checkJobId(request->job_id());
     uint32_t chunk = request->chunk_size() == 0 ? kDefaultChunk : request->chunk_size();
     if (chunk < kMinChunk || chunk > kMaxChunk) {

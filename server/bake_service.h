@@ -1,6 +1,9 @@
 // gRPC handlers of cloudbake.v1.BakeService: validate, convert, call core/job, map status.
 #pragma once
 
+#include <atomic>
+#include <cstddef>
+
 #include "cloudbake/v1/bake_service.grpc.pb.h"
 #include "core/job/job_manager.h"
 
@@ -9,7 +12,10 @@ namespace cloudbake::server {
 /// The handlers; the JobManager (queue, caches, store) is owned by the caller.
 class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
  public:
-  explicit BakeServiceImpl(JobManager& jobs) : jobs_(jobs) {}
+  /// `max_streams`: streaming calls (uploads, watches, fetches) open at once; more are answered
+  /// RESOURCE_EXHAUSTED, so a flood of watchers cannot take a thread each without bound.
+  explicit BakeServiceImpl(JobManager& jobs, size_t max_streams = 256)
+      : jobs_(jobs), max_streams_(max_streams) {}
   using Ctx = grpc::ServerContext;
   grpc::Status GetServerInfo(Ctx*, const v1::GetServerInfoRequest*, v1::ServerInfo*) override;
   grpc::Status UploadAsset(Ctx*, grpc::ServerReader<v1::UploadAssetRequest>*,
@@ -25,7 +31,21 @@ class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
   grpc::Status RenderView(Ctx*, const v1::RenderViewRequest*, v1::SubmitJobResponse*) override;
 
  private:
+  /// Holds one of the max_streams slots while a streaming call runs.
+  class StreamSlot {
+   public:
+    explicit StreamSlot(BakeServiceImpl& service);
+    ~StreamSlot() { --service_.streams_; }
+    StreamSlot(const StreamSlot&) = delete;
+    StreamSlot& operator=(const StreamSlot&) = delete;
+
+   private:
+    BakeServiceImpl& service_;
+  };
+
   JobManager& jobs_;
+  size_t max_streams_;
+  std::atomic<size_t> streams_{0};
 };
 
 }  // namespace cloudbake::server

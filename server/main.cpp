@@ -73,6 +73,7 @@ struct ServerFlags {
   uint64_t max_image_pixels = uint64_t(jobs.limits.max_image_pixels);
   uint64_t max_samples = uint64_t(jobs.limits.max_samples);
   unsigned max_views = unsigned(jobs.limits.max_views);
+  size_t max_streams = 256;
 };
 
 void addServiceOptions(CLI::App& app, ServerFlags* f) {
@@ -100,6 +101,12 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
   app.add_option("--queue-bound", o.queue_bound,
                  "queued jobs beyond which submits fail with RESOURCE_EXHAUSTED")
       ->envname("CLOUDBAKE_QUEUE_BOUND")
+      ->check(CLI::Range(size_t(1), size_t(100000)))
+      ->capture_default_str();
+  app.add_option("--max-streams", f->max_streams,
+                 "streaming calls (uploads, watches, fetches) open at once; more get "
+                 "RESOURCE_EXHAUSTED")
+      ->envname("CLOUDBAKE_MAX_STREAMS")
       ->check(CLI::Range(size_t(1), size_t(100000)))
       ->capture_default_str();
   app.add_option("--max-job-seconds", o.max_job_seconds,
@@ -202,7 +209,7 @@ int serve(const ServerFlags& f) {
     spdlog::error("cannot open state folder {}: {}", o.state_dir, e.what());
     return cloudbake::kFailure;
   }
-  cloudbake::server::BakeServiceImpl service(*jobs);
+  cloudbake::server::BakeServiceImpl service(*jobs, f.max_streams);
   int bound_port = 0;
   std::unique_ptr<grpc::Server> server = startServer(f.listen, &service, &bound_port);
   if (!server || bound_port == 0) {

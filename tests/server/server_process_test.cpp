@@ -812,6 +812,24 @@ TEST(ServerQueue, JobPastItsTimeLimitIsStoppedAndFailed) {
   EXPECT_EQ(next.code, 0) << next.err;
 }
 
+// Streams beyond --max-streams are answered RESOURCE_EXHAUSTED (exit 4, "retry later") instead
+// of each taking a server thread without bound (1000 watchers made 1017 threads).
+TEST(ServerQueue, StreamsBeyondTheBoundAreRefused) {
+  Workspace ws;
+  ServerProc server(ws.path("state"));
+  ASSERT_TRUE(server.start({"--max-streams=1"}));
+  const std::string id = submitDetached(server, ws.write("long.json", sphereShot(128, 8192)));
+  CmdResult first;
+  std::thread watcher([&] { first = run(server.cloudctl(60) + " watch " + id); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the first stream is open
+  const CmdResult second = run(server.cloudctl() + " watch " + id);
+  EXPECT_EQ(second.code, 4) << second.err;
+  EXPECT_NE(second.err.find("too many streams"), std::string::npos) << second.err;
+  EXPECT_EQ(run(server.cloudctl() + " cancel " + id).code, 0);
+  watcher.join();
+  EXPECT_EQ(first.code, 6) << first.err;  // the first watch saw the job cancelled
+}
+
 TEST(ServerQueue, FullQueueAnswersResourceExhausted) {
   Workspace ws;
   ServerProc server(ws.path("state"));
