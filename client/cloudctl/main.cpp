@@ -549,7 +549,23 @@ void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
     // Absolute or escaping paths are not sent unless asked for: the server rejects them,
     // naming the field.
     if (p.empty() || (outside && !a.allow_outside)) continue;
+    // Control characters: not sent either; the server's parser names the field for them.
+    if (std::any_of(p.begin(), p.end(), [](unsigned char ch) { return ch < 0x20 || ch == 0x7f; })) {
+      continue;
+    }
     const fs::path local = outside && rel.is_absolute() ? rel : base / rel;
+    // A path inside the folder may still lead out of it through a symbolic link: what would be
+    // sent is the file outside, which needs --allow-outside as any other (it sent /etc/passwd).
+    std::error_code ec;
+    const fs::path real = fs::weakly_canonical(local, ec);
+    const fs::path real_base = fs::weakly_canonical(base, ec);
+    const auto [end, unused] =
+        std::mismatch(real_base.begin(), real_base.end(), real.begin(), real.end());
+    if (!outside && !a.allow_outside && end != real_base.end()) {
+      throw CliError{ExitCode::kBadInput,
+                     a.shot + ": '" + p + "' leads outside the shot's folder (to " + real.string() +
+                         "); cloudctl submit --allow-outside uploads it"};
+    }
     if (!fs::exists(local)) {
       throw CliError{ExitCode::kNotFound,
                      a.shot + ": '" + p + "' (" + local.string() + "): file not found"};

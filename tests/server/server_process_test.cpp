@@ -609,6 +609,30 @@ void expectBadCases(const ServerProc& server, const Workspace& ws,
   }
 }
 
+// A symbolic link inside the shot's folder to a file outside it is an outside file: cloudctl
+// refuses to send it unless --allow-outside (it uploaded the link's target, e.g. /etc/passwd).
+TEST_F(ServerTest, SymlinkOutOfTheShotFolderNeedsAllowOutside) {
+  const std::string shot = ws_.write("linked/shot.json", sphereShot(8, 1));
+  const std::string good = ws_.write("good/g.json", sphereShot(8, 1));
+  ASSERT_EQ(
+      run(server_.cloudctl() + " submit " + good + " --quiet --out " + ws_.path("good/out")).code,
+      0);
+  fs::copy_file(ws_.path("good/out/bake.vdb"), ws_.path("secret.vdb"));
+  fs::create_symlink(ws_.path("secret.vdb"), ws_.path("linked/cloud.vdb"));
+  const std::string text =
+      replaced(replaced(slurp(shot),
+                        R"("volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})",
+                        R"("volume": {"vdb": {"path": "cloud.vdb"}})"),
+               R"("vdb": true, "vdb_voxel_size": 0.1)", R"("vdb": false)");
+  ws_.write("linked/shot.json", text);
+  const CmdResult refused = run(server_.cloudctl() + " submit " + shot + " --quiet");
+  EXPECT_EQ(refused.code, 2) << refused.err;
+  EXPECT_NE(refused.err.find("leads outside the shot's folder"), std::string::npos) << refused.err;
+  const CmdResult allowed =
+      run(server_.cloudctl() + " submit " + shot + " --allow-outside --quiet");
+  EXPECT_EQ(allowed.code, 0) << allowed.err;
+}
+
 TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
   const std::string base = sphereShot(8, 1);
   const std::string vol =
