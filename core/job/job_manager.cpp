@@ -35,6 +35,9 @@ double unixNow() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
+constexpr size_t kMaxAssets = 4096;  // files one job may name
+constexpr long kMaxAssetDepth = 32;  // folders in one asset path
+
 // A client-chosen asset path becomes a path under the job's input folder: it must stay inside.
 std::string checkAssetPath(const std::string& path, size_t index) {
   const std::string field = "assets[" + std::to_string(index) + "].path";
@@ -49,7 +52,35 @@ std::string checkAssetPath(const std::string& path, size_t index) {
   if (norm.empty() || *norm.begin() == ".." || norm == "." || norm.filename().empty()) {
     throw InputError(field + ": '" + path + "' escapes the shot's folder");
   }
+  // Each component is a folder the server creates: a bound keeps one request from making
+  // hundreds of thousands of them (1000 paths 500 folders deep made 477k).
+  if (std::distance(norm.begin(), norm.end()) > kMaxAssetDepth) {
+    throw InputError(field + ": '" + path.substr(0, 80) + "...' is nested deeper than " +
+                     std::to_string(kMaxAssetDepth) + " folders");
+  }
   return norm.string();
+}
+
+// Paths of which one is a folder of another ('a.vdb' and 'a.vdb/b'), or one path with two
+// contents, cannot all be placed: an error naming both, not the file system's failure (it was
+// INTERNAL). The same file named twice (a sequence repeating a frame) is fine.
+void checkAssetConflicts(const std::vector<std::string>& paths, const SubmitInput& input) {
+  std::vector<std::pair<std::string, size_t>> sorted;
+  for (size_t i = 0; i < paths.size(); ++i) sorted.push_back({paths[i], i});
+  std::sort(sorted.begin(), sorted.end());
+  for (size_t k = 1; k < sorted.size(); ++k) {
+    const auto& [a, i] = sorted[k - 1];
+    for (size_t m = k; m < sorted.size() && sorted[m].first.rfind(a, 0) == 0; ++m) {
+      const auto& [b, j] = sorted[m];
+      const bool same = b.size() == a.size();
+      if (same && input.assets[i].second == input.assets[j].second) continue;
+      if (same || b[a.size()] == '/') {
+        throw InputError("assets[" + std::to_string(j) + "].path: '" + b +
+                         "' conflicts with assets[" + std::to_string(i) + "].path '" + a +
+                         (same ? "' (one path, two contents)" : "' (a file, not a folder)"));
+      }
+    }
+  }
 }
 
 // Error messages reach clients: show paths under a job's input folder as the client wrote them
@@ -198,9 +229,18 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
   Prepared p;
   p.input = input;
   const std::string input_dir = (fs::path(dir) / "input").string();
+  if (input.assets.size() > kMaxAssets) {
+    throw InputError("assets: " + std::to_string(input.assets.size()) + " files, more than the " +
+                     std::to_string(kMaxAssets) + " a job may name");
+  }
+  std::vector<std::string> rels;
+  for (size_t i = 0; i < input.assets.size(); ++i) {
+    rels.push_back(checkAssetPath(input.assets[i].first, i));
+  }
+  checkAssetConflicts(rels, input);
   fs::create_directories(input_dir);
   for (size_t i = 0; i < input.assets.size(); ++i) {
-    const std::string rel = checkAssetPath(input.assets[i].first, i);
+    const std::string& rel = rels[i];
     const std::string& sha = input.assets[i].second;
     if (!isSha256Hex(sha)) {
       throw InputError("assets[" + std::to_string(i) + "].sha256: must be 64 lowercase hex digits");

@@ -426,6 +426,45 @@ TEST(JobStore, RecordsRoundTripAndIdsAreChecked) {
   fs::remove_all(dir);
 }
 
+// Asset paths a job cannot place are clear errors naming them (not INTERNAL from the file
+// system), and one request cannot make the server create folders without bound. Checked before
+// the assets are looked up, so none needs to be uploaded here.
+TEST(JobManager, AssetPathsAreBoundedAndConflictsNamed) {
+  const fs::path dir = freshDir("asset-paths");
+  JobManagerOptions o;
+  o.state_dir = dir.string();
+  JobManager jobs(o);
+  const std::string sha(64, 'a'), other(64, 'b');
+  auto errorFor = [&](std::vector<std::pair<std::string, std::string>> assets) {
+    SubmitInput in;
+    in.shot_json = "{}";
+    in.assets = std::move(assets);
+    try {
+      jobs.plan(in);
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(errorFor({{"a.vdb", sha}, {"a.vdb/b", sha}})
+                .find("assets[1].path: 'a.vdb/b' conflicts with assets[0].path 'a.vdb'"),
+            std::string::npos);
+  EXPECT_NE(errorFor({{"x/a.vdb", sha}, {"x/./a.vdb", other}}).find("one path, two contents"),
+            std::string::npos);
+  std::string deep;
+  for (int i = 0; i < 40; ++i) deep += "d/";
+  EXPECT_NE(errorFor({{deep + "a.vdb", sha}}).find("nested deeper than 32 folders"),
+            std::string::npos);
+  std::vector<std::pair<std::string, std::string>> many;
+  for (int i = 0; i < 5000; ++i) many.push_back({"f" + std::to_string(i) + ".vdb", sha});
+  EXPECT_NE(errorFor(many).find("more than the 4096"), std::string::npos);
+  // The same file named twice (a sequence repeating a frame) is no conflict: the error is the
+  // missing upload, not the path.
+  EXPECT_NE(errorFor({{"a.vdb", sha}, {"a.vdb", sha}}).find("has not been uploaded"),
+            std::string::npos);
+  fs::remove_all(dir);
+}
+
 TEST(JobManager, RunningJobFoundAfterACrashIsMarkedFailed) {
   const fs::path dir = freshDir("crash");
   {
