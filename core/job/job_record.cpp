@@ -3,11 +3,13 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <random>
 
 #include "common/json_limits.h"
+#include "common/printable.h"
 #include "core/job/file_util.h"
 
 namespace cloudbake {
@@ -114,16 +116,44 @@ void JobStore::save(const JobRecord& record) const {
   writeFileAtomic((fs::path(jobDir(record.id)) / "job.json").string(), toJson(record).dump(1));
 }
 
+namespace {
+
+// The reason (which names server paths) goes to the log; the client learns what happened.
+JobRecord unreadableRecord(const std::string& id) {
+  JobRecord r;
+  r.id = id;
+  r.state = JobState::kFailed;
+  r.stage = jobStateName(JobState::kFailed);
+  r.created = r.finished =
+      std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  r.error =
+      "the server could not read this job's record (it is corrupt; details in the server log): "
+      "its state and outputs are lost, resubmit the shot";
+  return r;
+}
+
+}  // namespace
+
 std::vector<JobRecord> JobStore::loadAll() const {
   std::vector<JobRecord> records;
   for (const auto& dir : fs::directory_iterator(root_)) {
     if (!dir.is_directory() || !isJobId(dir.path().filename().string())) continue;
     const fs::path file = dir.path() / "job.json";
+    std::error_code ec;
+    if (!fs::exists(file, ec)) {
+      // A job folder without a record was never acknowledged to a client (the record is
+      // durable before the client hears of the job).
+      spdlog::warn("job store: skipping {}: no job.json", dir.path().string());
+      continue;
+    }
     try {
       records.push_back(fromJson(parseJsonLimited(readWholeFile(file.string()), file.string())));
     } catch (const std::exception& e) {
-      // A job folder without a readable record was never acknowledged to a client.
-      spdlog::warn("job store: skipping {}: {}", dir.path().string(), e.what());
+      // A record that exists but cannot be read belonged to a job a client may know of: it is
+      // reported FAILED with the reason rather than vanishing.
+      spdlog::error("job store: {}: unreadable record: {}", dir.path().string(),
+                    printable(e.what()));
+      records.push_back(unreadableRecord(dir.path().filename().string()));
     }
   }
   std::sort(records.begin(), records.end(), [](const JobRecord& a, const JobRecord& b) {

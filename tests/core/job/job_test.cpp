@@ -465,6 +465,28 @@ TEST(JobManager, AssetPathsAreBoundedAndConflictsNamed) {
   fs::remove_all(dir);
 }
 
+// A job whose record is corrupt is reported FAILED with the reason, not dropped silently; a
+// folder without any record (a submit that crashed before it was acknowledged) is skipped.
+TEST(JobStore, CorruptRecordIsReportedFailedNotDropped) {
+  const fs::path dir = freshDir("corrupt-record");
+  JobStore store((dir / "jobs").string());
+  JobRecord good;
+  good.id = newJobId();
+  good.state = JobState::kSucceeded;
+  store.save(good);
+  const std::string broken = newJobId();
+  fs::create_directories(store.jobDir(broken));
+  writeFileAtomic((fs::path(store.jobDir(broken)) / "job.json").string(), "{\"id\": \"x\", trunc");
+  fs::create_directories(store.jobDir(newJobId()));  // no record at all
+  const std::vector<JobRecord> all = store.loadAll();
+  ASSERT_EQ(all.size(), 2u);
+  const JobRecord& b = all[0].id == broken ? all[0] : all[1];
+  EXPECT_EQ(b.id, broken);
+  EXPECT_EQ(b.state, JobState::kFailed);
+  EXPECT_NE(b.error.find("could not read this job's record"), std::string::npos) << b.error;
+  fs::remove_all(dir);
+}
+
 TEST(JobManager, RunningJobFoundAfterACrashIsMarkedFailed) {
   const fs::path dir = freshDir("crash");
   {
