@@ -22,6 +22,7 @@ class AutoMethod final : public BakeMethod {
                       "scattering events per path, should the choice be `pathtrace`"),
         Knob::number("tolerance", 0, 1, std::nullopt, "",
                      "relative RMSE of the cloud's own light the choice must meet")
+            .exclusiveMax()
             .isRequired(),
     };
   }

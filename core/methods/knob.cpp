@@ -70,6 +70,11 @@ Knob& Knob::viewOnly() {
   return *this;
 }
 
+Knob& Knob::exclusiveMax() {
+  exclusive_max = true;
+  return *this;
+}
+
 Knob& Knob::withUnits(std::string u) {
   units = std::move(u);
   return *this;
@@ -173,7 +178,7 @@ std::string knobTypeDoc(const Knob& k) {
       return "integer " + boundText(k.min, true) + ".." + boundText(k.max, true);
     case Knob::Type::kNumber:
       return std::string("number ") + (k.exclusive_min ? "(" : "[") + boundText(k.min, false) +
-             ", " + boundText(k.max, false) + "]";
+             ", " + boundText(k.max, false) + (k.exclusive_max ? ")" : "]");
     case Knob::Type::kBoolean:
       return "boolean";
     case Knob::Type::kChoice: {

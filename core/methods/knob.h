@@ -24,6 +24,7 @@ struct Knob {
   Type type = Type::kNumber;
   double min = 0, max = 0;           ///< kInteger, kNumber: the closed range (but see below)
   bool exclusive_min = false;        ///< kNumber: `min` itself is not allowed
+  bool exclusive_max = false;        ///< kNumber: `max` itself is not allowed
   std::vector<std::string> choices;  ///< kChoice: the allowed strings
   KnobValue default_value;           ///< monostate: no fixed default; `default_doc` says what
   std::string default_doc;           ///< the default in words where it is derived
@@ -45,6 +46,7 @@ struct Knob {
   Knob& derivedDefault(std::string words);
   Knob& isRequired();
   Knob& viewOnly();
+  Knob& exclusiveMax();
   Knob& withUnits(std::string u);
 };
 

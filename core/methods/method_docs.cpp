@@ -29,8 +29,9 @@ Json knobTypeSchema(const Knob& k) {
     case Knob::Type::kInteger:
       return {{"type", "integer"}, {"minimum", int64_t(k.min)}, {"maximum", int64_t(k.max)}};
     case Knob::Type::kNumber: {
-      Json j = {{"type", "number"}, {"maximum", k.max}};
+      Json j = {{"type", "number"}};
       j[k.exclusive_min ? "exclusiveMinimum" : "minimum"] = k.min;
+      j[k.exclusive_max ? "exclusiveMaximum" : "maximum"] = k.max;
       return j;
     }
     case Knob::Type::kBoolean:

@@ -147,7 +147,7 @@ KnobValue parseKnob(const Object& o, const Knob& k, const Json& v) {
     case Knob::Type::kInteger:
       return r.integer(v, ptr, int64_t(k.min), int64_t(k.max));
     case Knob::Type::kNumber:
-      return r.numberIn(v, ptr, k.min, k.max, k.exclusive_min);
+      return r.numberIn(v, ptr, k.min, k.max, k.exclusive_min, k.exclusive_max);
     case Knob::Type::kBoolean:
       return r.boolean(v, ptr);
     case Knob::Type::kChoice: {

@@ -471,6 +471,22 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["bake"] = {{"method", "auto"}};
        },
        "/bake/tolerance: missing (required)"},
+      // A tolerance is a relative error below 1: 0, 1 and NaN are refused (issue 13).
+      {"auto tolerance 1",
+       [](json& j) {
+         j["bake"] = {{"method", "auto"}, {"tolerance", 1}};
+       },
+       "/bake/tolerance: must be in (0, 1), got 1"},
+      {"auto tolerance 0",
+       [](json& j) {
+         j["bake"] = {{"method", "auto"}, {"tolerance", 0}};
+       },
+       "/bake/tolerance: must be in (0, 1), got 0"},
+      {"auto tolerance NaN",
+       [](json& j) {
+         j["bake"] = {{"method", "auto"}, {"tolerance", "NaN"}};
+       },
+       "/bake/tolerance: must be a finite number"},
       {"unknown phase type",
        [](json& j) {
          j["medium"]["phase"] = {{"type", "rayleigh"}};
