@@ -15,6 +15,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
@@ -137,6 +138,7 @@ int jobExitCode(const v1::Job& j) {
 struct Client {
   std::string server;
   double timeout_s = 10;
+  double retry_s = 30;  // how long a submit retries a full queue or an unavailable server
   bool json = false;
   bool wait_for_server = false;
   std::shared_ptr<grpc::Channel> channel;
@@ -586,17 +588,40 @@ void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
   if (rewritten) req->set_shot_json(shot.dump(2));
 }
 
+/// SubmitJob, tried again with exponential backoff and jitter while the server's queue is full
+/// (RESOURCE_EXHAUSTED) or the server is briefly away (UNAVAILABLE), for --retry-seconds and
+/// never past --deadline; then the last answer stands.
+void submitWithRetries(Client& c, const SubmitArgs& a, const v1::SubmitJobRequest& req,
+                       v1::SubmitJobResponse* reply) {
+  using Clock = std::chrono::system_clock;
+  Clock::time_point give_up = Clock::now() + std::chrono::milliseconds(long(c.retry_s * 1000));
+  if (c.command_deadline) give_up = std::min(give_up, *c.command_deadline);
+  std::mt19937_64 rng(std::random_device{}());
+  for (double wait_s = 0.25;; wait_s = std::min(wait_s * 2, 8.0)) {
+    grpc::ClientContext ctx;
+    c.shortCall(&ctx);
+    const grpc::Status st = c.stub->SubmitJob(&ctx, req, reply);
+    const bool busy = st.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED ||
+                      st.error_code() == grpc::StatusCode::UNAVAILABLE;
+    const double sleep_s = wait_s * std::uniform_real_distribution<double>(0.5, 1.0)(rng);
+    const Clock::time_point next = Clock::now() + std::chrono::milliseconds(long(sleep_s * 1000));
+    if (!busy || next > give_up) {
+      checkShot(st, a.shot);
+      return;
+    }
+    std::this_thread::sleep_until(next);
+  }
+}
+
 v1::SubmitJobResponse sendSubmit(Client& c, const SubmitArgs& a, const v1::SubmitJobRequest& req) {
   // gRPC refuses a larger request as RESOURCE_EXHAUSTED, which reads as "server busy, retry":
   // said here for what it is.
   if (req.ByteSizeLong() > kMaxRequestBytes) {
     throw tooLarge(a.shot + ": shot", req.ByteSizeLong());
   }
-  grpc::ClientContext ctx;
-  c.shortCall(&ctx);
   v1::SubmitJobResponse reply;
   try {
-    checkShot(c.stub->SubmitJob(&ctx, req, &reply), a.shot);
+    submitWithRetries(c, a, req, &reply);
   } catch (CliError& e) {
     if (!a.allow_outside && e.message.find("is outside the allowed") != std::string::npos) {
       e.message += " (cloudctl submit --allow-outside uploads such files)";
@@ -864,6 +889,11 @@ void addGlobalOptions(CLI::App& app, Client* c, double* deadline_s) {
                  "exit 4 and the job goes on (default: none)")
       ->check(CLI::PositiveNumber);
   app.add_flag("--json", c->json, "machine-readable output on stdout (logs stay on stderr)");
+  app.add_option("--retry-seconds", c->retry_s,
+                 "how long submit retries when the server's queue is full or the server is "
+                 "briefly unavailable (exponential backoff with jitter; 0: no retry)")
+      ->check(CLI::Range(0.0, 86400.0))
+      ->capture_default_str();
   app.add_flag("--wait-for-server", c->wait_for_server,
                "keep trying to connect until --timeout instead of failing at once when the "
                "connection is refused (e.g. while the server starts)");

@@ -875,9 +875,19 @@ TEST(ServerQueue, FullQueueAnswersResourceExhausted) {
   waitFor(
       server, running, [](const Json& j) { return j.at("state") == "RUNNING"; }, 30);
   const std::string queued = submitDetached(server, long_shot);
-  const CmdResult full = run(server.cloudctl() + " submit " + long_shot + " --detach");
+  const CmdResult full =
+      run(server.cloudctl() + " --retry-seconds 0 submit " + long_shot + " --detach");
   EXPECT_EQ(full.code, 4) << full.err;  // kUnavailable: retry later
   EXPECT_NE(full.err.find("queue is full"), std::string::npos) << full.err;
+  // By default cloudctl retries a full queue with backoff for --retry-seconds, then gives up.
+  const auto t0 = std::chrono::steady_clock::now();
+  const CmdResult retried =
+      run(server.cloudctl() + " --retry-seconds 2 submit " + long_shot + " --detach");
+  const double retried_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(retried.code, 4) << retried.err;
+  EXPECT_GE(retried_s, 1.0);
+  EXPECT_LT(retried_s, 10.0);
   EXPECT_EQ(run(server.cloudctl() + " cancel " + queued).code, 0);
   EXPECT_EQ(status(server, queued).at("state"), "CANCELLED");
   EXPECT_EQ(run(server.cloudctl() + " cancel " + running).code, 0);
