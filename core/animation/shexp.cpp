@@ -30,23 +30,31 @@ ShCoefficients scaled(const ShCoefficients& g, int k) {
   return out;
 }
 
-}  // namespace
-
-ShCoefficients shExpReference(const ShCoefficients& g, int directions) {
-  const std::vector<Vec3> dirs = sphereDirections(directions);
+// The SH projection of exp(g(w)) by quadrature over the directions whose basis values are
+// `basis`; `transmittance` keeps g(w) <= 0 (g = -tau: a transmittance is at most 1).
+ShCoefficients projectExp(const ShCoefficients& g,
+                          const std::vector<std::array<double, kShCoefficients>>& basis,
+                          bool transmittance) {
   std::array<double, kShCoefficients> acc{};
-  for (const Vec3& w : dirs) {
-    const auto y = shBasis(w);
+  for (const auto& y : basis) {
     double f = 0;
     for (int i = 0; i < kShCoefficients; ++i) f += double(g[size_t(i)]) * y[size_t(i)];
-    const double e = std::exp(f);
+    const double e = std::exp(transmittance ? std::min(0.0, f) : f);
     for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += e * y[size_t(i)];
   }
   ShCoefficients out{};
   for (int i = 0; i < kShCoefficients; ++i) {
-    out[size_t(i)] = float(acc[size_t(i)] * 4 * kPi / double(dirs.size()));
+    out[size_t(i)] = float(acc[size_t(i)] * 4 * kPi / double(basis.size()));
   }
   return out;
+}
+
+}  // namespace
+
+ShCoefficients shExpReference(const ShCoefficients& g, int directions) {
+  std::vector<std::array<double, kShCoefficients>> basis;
+  for (const Vec3& w : sphereDirections(directions)) basis.push_back(shBasis(w));
+  return projectExp(g, basis, /*transmittance=*/false);
 }
 
 ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int directions) {
@@ -108,18 +116,7 @@ ShExp::Quadrature ShExp::makeQuadrature() {
 }
 
 ShCoefficients ShExp::projectTransmittance(const ShCoefficients& g) const {
-  std::array<double, kShCoefficients> acc{};
-  for (const auto& y : quadrature_) {
-    double f = 0;
-    for (int i = 0; i < kShCoefficients; ++i) f += double(g[size_t(i)]) * y[size_t(i)];
-    const double e = std::exp(std::min(0.0, f));  // -tau <= 0: a transmittance is at most 1
-    for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += e * y[size_t(i)];
-  }
-  ShCoefficients out{};
-  for (int i = 0; i < kShCoefficients; ++i) {
-    out[size_t(i)] = float(acc[size_t(i)] * 4 * kPi / double(quadrature_.size()));
-  }
-  return out;
+  return projectExp(g, quadrature_, /*transmittance=*/true);
 }
 
 ShCoefficients ShExp::operator()(const ShCoefficients& g_in) const {

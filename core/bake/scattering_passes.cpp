@@ -39,7 +39,7 @@ TransportScaling transportScaling(const Medium& medium) {
   TransportScaling ts;
   const Rgb g = medium.phase->meanCosine();
   const Rgb a = medium.albedo;
-  if (!(luminance(g) != 0)) {
+  if (luminance(g) == 0) {
     ts.albedo = a;
     return ts;
   }

@@ -27,10 +27,8 @@ void addPreview(const RunOptions& opt, const std::string& stem, const std::strin
                 RunResult& result) {
   const std::string png_name = stem + ".png";
   // The beauty (the cloud over what is seen through it), not the cloud element alone.
-  ExrContents exr = readExr(exr_path);
-  auto beauty = exr.layers.find("beauty");
-  writePreviewPng((fs::path(opt.out_dir) / png_name).string(),
-                  beauty != exr.layers.end() ? beauty->second : readExrRgb(exr_path),
+  const ExrContents exr = readExr(exr_path);
+  writePreviewPng((fs::path(opt.out_dir) / png_name).string(), exr.layers.at(beautyLayerName(exr)),
                   opt.png_exposure);
   result.files.push_back(describeOutput(opt.out_dir, png_name));
 }

@@ -221,9 +221,10 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   const Scene& lights = run.lights();
   const BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
-  // Progress weights: predicted seconds of each part (a cached bake is a file read).
-  const bool cached = run.hasCache() && run.lookup(run.keys().light).has_value();
-  const double bake_w = cached ? 0.02 * work.bake_seconds : work.bake_seconds;
+  // Progress weights: predicted seconds of each part. A bake found in the cache is not known
+  // before obtainBake looks (a lookup verifies the entry's checksums: not worth doing twice), so
+  // the bar then jumps over the bake's share.
+  const double bake_w = work.bake_seconds;
   std::vector<double> start(size_t(n_views) + 1, bake_w);
   for (int i = 0; i < n_views; ++i) {
     const Camera& c = lights.cameras[size_t(i)];

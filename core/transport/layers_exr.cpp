@@ -33,6 +33,10 @@ Image beautyRgb(const RenderLayers& layers) {
 
 }  // namespace
 
+std::string beautyLayerName(const ExrContents& exr) {
+  return exr.layers.count("beauty") ? "beauty" : "";
+}
+
 const std::vector<std::string>& renderLayerNames() {
   static const std::vector<std::string> kNames = {"",    "background", "beauty",  "sun",
                                                   "sky", "single",     "multiple"};

@@ -17,6 +17,10 @@ std::vector<ExrLayer> renderLayersToExr(const RenderLayers& layers);
 /// The same, moving the images.
 std::vector<ExrLayer> renderLayersToExr(RenderLayers&& layers);
 
+/// The layer of `exr` that holds the beauty: "beauty" in views of this layout, "" (unprefixed)
+/// in older views and other renderers' files.
+std::string beautyLayerName(const ExrContents& exr);
+
 /// Their names in file order ("" first).
 const std::vector<std::string>& renderLayerNames();
 

@@ -124,6 +124,9 @@ struct Variant {
 };
 
 void setPhase(json& shot, json phase) { shot["medium"]["phase"] = std::move(phase); }
+json mie(double reff, double veff) {
+  return {{"type", "mie"}, {"effective_radius_um", reff}, {"effective_variance", veff}};
+}
 void setSun(json& shot, json dir) { shot["lighting"]["sun"]["direction"] = std::move(dir); }
 
 std::vector<Variant> variants() {
@@ -171,14 +174,8 @@ std::vector<Variant> variants() {
        [](json& s) {
          setPhase(s, {{"type", "mie_approx"}, {"diameter_um", 50}});
        }},
-      {"mie_small",
-       [](json& s) {
-         setPhase(s, {{"type", "mie"}, {"effective_radius_um", 1}, {"effective_variance", 0.01}});
-       }},
-      {"mie_large",
-       [](json& s) {
-         setPhase(s, {{"type", "mie"}, {"effective_radius_um", 50}, {"effective_variance", 0.1}});
-       }},
+      {"mie_small", [](json& s) { setPhase(s, mie(1, 0.01)); }},
+      {"mie_large", [](json& s) { setPhase(s, mie(50, 0.1)); }},
       {"mie_ratio_0", [](json& s) { s["medium"]["phase"]["mie_ratio"] = 0; }},
       {"sun_zenith", sun({0, 0, 1})},
       {"sun_horizon", sun({1, 0, 0})},
@@ -427,14 +424,8 @@ TEST(ExtremesMatrix, OutOfRangeValuesAreClearErrorsNamingTheField) {
       {"/medium/phase/g", [](json& s) { s["medium"]["phase"]["g"] = -1; }},
       {"/medium/extinction", [](json& s) { s["medium"]["extinction"] = 1e7; }},
       {"/medium/albedo", [](json& s) { s["medium"]["albedo"] = 1.0000001; }},
-      {"/medium/phase/effective_variance",
-       [](json& s) {
-         setPhase(s, {{"type", "mie"}, {"effective_radius_um", 10}, {"effective_variance", 0.5}});
-       }},
-      {"/medium/phase/effective_radius_um",
-       [](json& s) {
-         setPhase(s, {{"type", "mie"}, {"effective_radius_um", 51}, {"effective_variance", 0.1}});
-       }},
+      {"/medium/phase/effective_variance", [](json& s) { setPhase(s, mie(10, 0.5)); }},
+      {"/medium/phase/effective_radius_um", [](json& s) { setPhase(s, mie(51, 0.1)); }},
       {"/lighting/sun/direction",
        [](json& s) {
          setSun(s, {0, 0, 0});

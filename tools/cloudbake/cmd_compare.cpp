@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/io/exr_io.h"
+#include "core/transport/layers_exr.h"
 #include "tools/cloudbake/commands.h"
 
 namespace cloudbake::tool {
@@ -87,7 +88,7 @@ void nameLayers(ExrContents* c) {
   if (plain == c->layers.end()) return;
   Image image = std::move(plain->second);
   c->layers.erase(plain);
-  c->layers[c->layers.count("beauty") ? "cloud" : "beauty"] = std::move(image);
+  c->layers[beautyLayerName(*c).empty() ? "beauty" : "cloud"] = std::move(image);
 }
 
 // sun + sky of one file, when it has both.

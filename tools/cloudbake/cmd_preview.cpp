@@ -8,25 +8,26 @@
 #include "core/error.h"
 #include "core/io/exr_io.h"
 #include "core/io/png_writer.h"
+#include "core/transport/layers_exr.h"
 #include "tools/cloudbake/commands.h"
 
 namespace cloudbake::tool {
 namespace {
 
-// The layer to show: the one asked for, else the beauty (a layer of this version's files; the
-// unprefixed RGB of older files and other renderers').
-const Image& pickLayer(const ExrContents& exr, const std::string& layer, const std::string& path) {
-  const std::string name = !layer.empty() ? layer : exr.layers.count("beauty") ? "beauty" : "";
-  auto it = exr.layers.find(name == "cloud" ? "" : name);
+// The layer to show, by its name in the file: the one asked for ("cloud" is the unprefixed
+// element), else the beauty.
+std::string pickLayer(const ExrContents& exr, const std::string& layer, const std::string& path) {
+  const std::string name = layer.empty() ? beautyLayerName(exr) : layer == "cloud" ? "" : layer;
+  auto it = exr.layers.find(name);
   if (it == exr.layers.end() || it->second.channels < 3) {
     std::string have;
     for (const auto& [n, image] : exr.layers) {
       if (image.channels >= 3) have += (have.empty() ? "" : ", ") + (n.empty() ? "cloud" : n);
     }
-    throw InputError("--layer: " + path + " has no RGB layer '" + name + "' (it has: " + have +
+    throw InputError("--layer: " + path + " has no RGB layer '" + layer + "' (it has: " + have +
                      ")");
   }
-  return it->second;
+  return name;
 }
 
 }  // namespace
@@ -55,10 +56,9 @@ void addPreviewCommand(CLI::App& app, int* exit_code) {
       ->check(CLI::PositiveNumber);
   cmd->callback([opt, exit_code] {
     const ExrContents exr = readExr(opt->exr);
-    const Image& image = pickLayer(exr, opt->layer, opt->exr);
-    const double exposure = writePreviewPng(opt->out, image, opt->exposure);
-    const std::string layer =
-        opt->layer.empty() ? (exr.layers.count("beauty") ? "beauty" : "") : opt->layer;
+    const std::string name = pickLayer(exr, opt->layer, opt->exr);
+    const double exposure = writePreviewPng(opt->out, exr.layers.at(name), opt->exposure);
+    const std::string layer = opt->layer.empty() ? "beauty" : opt->layer;
     std::printf(
         "%s\n",
         nlohmann::json{{"png", opt->out}, {"layer", layer}, {"exposure", exposure}}.dump().c_str());
