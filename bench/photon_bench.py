@@ -5,7 +5,8 @@ For each scene (bench/scenes/*.json, both views, --res x 3/4 --res pixels) it re
 reference with `pathtrace` twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/) and
 each photon configuration once, and prints
 
-  scene | photons | order | lattice | bake s | s/view | peak MiB | rel. RMSE | bias | ref. noise
+  scene | photons | order | zonal | lattice | bake s | s/view | peak MiB | rel. RMSE | bias |
+  ref. noise
 
 - rel. RMSE: of the cloud's own light (`scattered` = sun + sky layers) over the cloud's pixels
   (reference alpha >= --cloud-alpha), against the mean of the two references, averaged over the
@@ -19,8 +20,8 @@ Scenes: perlin, bunny, disney (Disney's cloud, Walt Disney Animation Studios, CC
 0.85 as in bench/scenes). The bunny and Disney scenes need ../shared/data and are skipped without.
 
 Usage: bench/photon_bench.py [--build build] [--threads 2] [--res 160] [--ref-spp 1024]
-                             [--scenes perlin,bunny,disney] [--sweep default|order|quick]
-                             [--work DIR]
+                             [--samples 16] [--scenes perlin,bunny,disney]
+                             [--sweep default|order|zonal|quick] [--work DIR]
 """
 import argparse
 import json
@@ -36,13 +37,16 @@ from cloudbake_shot_paths import path_slots  # noqa: E402  (the keys of a shot t
 
 SCENES = {"perlin": "perlin_cloud.json", "bunny": "bunny_cloud.json",
           "disney": "disney_cloud.json"}
-# (photons, order, lattice) per sweep: the knobs grow together along "default", one at a time
-# along "order".
+# (photons, order, lattice, zonal_order) per sweep: the knobs grow together along "default",
+# the order alone along "order", the zonal terms alone along "zonal".
 SWEEPS = {
-    "default": [(1 << 16, 2, 48), (1 << 18, 3, 64), (1 << 20, 4, 80), (1 << 21, 6, 96)],
-    "order": [(1 << 20, 1, 64), (1 << 20, 2, 64), (1 << 20, 3, 64), (1 << 20, 5, 64),
-              (1 << 20, 8, 64)],
-    "quick": [(1 << 15, 2, 32), (1 << 17, 4, 48)],
+    "default": [(1 << 16, 2, 48, 16), (1 << 18, 3, 64, 24), (1 << 20, 4, 96, 24),
+                (1 << 21, 4, 128, 24)],
+    "order": [(1 << 20, 1, 64, 0), (1 << 20, 2, 64, 0), (1 << 20, 3, 64, 0), (1 << 20, 5, 64, 0),
+              (1 << 20, 8, 64, 0)],
+    "zonal": [(1 << 18, 3, 64, 0), (1 << 18, 3, 64, 8), (1 << 18, 3, 64, 16),
+              (1 << 18, 3, 64, 32)],
+    "quick": [(1 << 15, 2, 32, 16), (1 << 17, 4, 48, 24)],
 }
 
 
@@ -95,6 +99,9 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--res", type=int, default=160)
     ap.add_argument("--ref-spp", type=int, default=1024)
+    # Rays per pixel of the photon views: the reference averages over each pixel's area, so one
+    # ray through its centre would count the aliasing of thin edges as error.
+    ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--cloud-alpha", type=float, default=0.05)
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--sweep", default="default", choices=sorted(SWEEPS))
@@ -103,9 +110,9 @@ def main():
     args.work = args.work or tempfile.mkdtemp(prefix="photon_bench.")
     cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
                                                             "cloudbake")
-    print("| scene | photons | order | lattice | bake s | s/view | peak MiB | rel. RMSE | bias | "
-          "ref. noise |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| scene | photons | order | zonal | lattice | bake s | s/view | peak MiB | rel. RMSE | "
+          "bias | ref. noise |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for scene in args.scenes.split(","):
         shot = load_scene(scene, args.res)
         if shot is None:
@@ -123,11 +130,13 @@ def main():
         for v in views:
             a, b = (os.path.join(r, v + ".exr") for r in refs)
             ref_noise.append(compare(cloudbake, a, b, a, args.cloud_alpha)["rel_rmse"] / 2)
-        for photons, order, lattice in SWEEPS[args.sweep]:
+        for photons, order, lattice, zonal in SWEEPS[args.sweep]:
             s = json.loads(json.dumps(shot))
             s["bake"] = {"method": "photon", "photons": photons, "order": order,
-                         "light_resolution": lattice}
-            out = os.path.join(args.work, scene, "%d-%d-%d" % (photons, order, lattice))
+                         "light_resolution": lattice, "zonal_order": zonal,
+                         "samples": args.samples}
+            out = os.path.join(args.work, scene, "%d-%d-%d-%d-%d" % (
+                photons, order, lattice, zonal, args.samples))
             stats = render(cloudbake, s, out, args.threads)
             errs, biases = [], []
             for v in views:
@@ -138,8 +147,8 @@ def main():
                 errs.append(sum(r["rel_rmse"] for r in rows) / 2)
                 biases.append(sum(r["mean"] / r["reference_mean"] - 1 for r in rows) / 2)
             view_s = steps(stats, "view")
-            print("| %s | %d | %d | %d | %.2f | %.3f | %.0f | %.4f | %+.4f | %.4f |" %
-                  (scene, photons, order, lattice, sum(steps(stats, "bake")),
+            print("| %s | %d | %d | %d | %d | %.2f | %.3f | %.0f | %.4f | %+.4f | %.4f |" %
+                  (scene, photons, order, zonal, lattice, sum(steps(stats, "bake")),
                    sum(view_s) / max(1, len(view_s)), stats["peak_rss_mib"],
                    sum(errs) / len(errs), sum(biases) / len(biases),
                    sum(ref_noise) / len(ref_noise)), flush=True)

@@ -23,6 +23,7 @@ namespace bake_grids {
 std::string photonSh(int i) { return "ms_sh_" + std::to_string(i); }
 std::string photonSkySh(int i) { return "ms_sky_sh_" + std::to_string(i); }
 std::string photonSkyDirectSh(int i) { return "ss_sky_sh_" + std::to_string(i); }
+std::string photonZonal(int l) { return "ms_zonal_" + std::to_string(l); }
 }  // namespace bake_grids
 
 namespace {
@@ -49,6 +50,11 @@ void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions
   if (o.order < 1 || o.order > kMaxShDegree) {
     throw InputError("order: must be in 1.." + str(kMaxShDegree) + ", got " + str(o.order));
   }
+  if (o.zonal_order != 0 && (o.zonal_order <= o.order || o.zonal_order > kMaxZonalDegree)) {
+    throw InputError("zonal_order: must be 0 (none) or in " + str(o.order + 1) + ".." +
+                     str(kMaxZonalDegree) + " (above order " + str(o.order) + "), got " +
+                     str(o.zonal_order));
+  }
   if (!(o.step >= 0) || !std::isfinite(o.step)) {
     throw InputError("step: must be finite and >= 0 (0: half a lattice voxel), got " + str(o.step));
   }
@@ -57,15 +63,39 @@ void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions
 /// Per-voxel SH moments of a radiance field, summed as fixed-point integers.
 class PhotonTally {
  public:
-  PhotonTally(const BakeGrid& grid, int order, double photon_weight)
+  /// Degrees 0..order in full and, when zonal_order > order, the zonal degrees order + 1 ..
+  /// zonal_order about `axis` (unit).
+  PhotonTally(const BakeGrid& grid, int order, double photon_weight, int zonal_order = 0,
+              const Vec3& axis = Vec3(0, 0, 1))
       : grid_(grid),
-        ncoef_(shCount(order)),
+        ncoef_(shCount(order) + std::max(0, zonal_order - order)),
         order_(order),
+        top_(std::max(order, zonal_order)),
+        axis_(axis),
         photon_weight_(photon_weight),
         counts_(grid.voxelCount() * size_t(ncoef_) * 3, 0) {}
 
   int order() const { return order_; }
+  /// The highest degree kept: zonal_order when it is above order.
+  int topDegree() const { return top_; }
   int coefficients() const { return ncoef_; }
+  /// The coefficients of degree l: [first, last) of the index range.
+  void degreeRange(int l, int* first, int* last) const {
+    *first = l <= order_ ? l * l : shCount(order_) + (l - order_ - 1);
+    *last = l <= order_ ? (l + 1) * (l + 1) : *first + 1;
+  }
+
+  /// The basis at direction of travel d: full SH to order, then the zonal terms
+  /// sqrt((2l + 1) / (4 pi)) P_l(d . axis).
+  void basis(const Vec3& d, double* y) const {
+    shBasisUpTo(order_, d, y);
+    if (top_ <= order_) return;
+    double p[kMaxZonalDegree + 1];
+    legendreP(top_, std::clamp(dot(d, axis_), -1.0, 1.0), p);
+    double* z = y + shCount(order_);
+    for (int l = order_ + 1; l <= top_; ++l) z[l - order_ - 1] = zonalNorm(l) * p[l];
+  }
+  static double zonalNorm(int l) { return std::sqrt((2 * l + 1) / (4 * kPi)); }
   /// The raw fixed-point sum of coefficient i, channel c, at voxel v (a common scale).
   double count(size_t v, int i, int c) const {
     return double(counts_[(v * size_t(ncoef_) + size_t(i)) * 3 + size_t(c)]);
@@ -73,8 +103,8 @@ class PhotonTally {
 
   /// Adds the segment p + t d, t in [0, len], carrying weight `beta`, to the voxels it crosses.
   void addSegment(const Vec3& p, const Vec3& d, double len, const Rgb& beta) {
-    double y[shCount(kMaxShDegree)];
-    shBasisUpTo(order_, d, y);
+    double y[shCount(kMaxShDegree) + kMaxZonalDegree];
+    basis(d, y);
     const double h = grid_.voxel_size;
     Rgb b = beta / photon_weight_ * (kFixedScale / h);
     walkVoxels(p, d, len, [&](size_t voxel, double l) {
@@ -91,11 +121,14 @@ class PhotonTally {
 
   /// Writes the radiance coefficients (sum of weight x length x Y_i / voxel volume / photons'
   /// normalisation already in photon_weight) to channels name(i).
+  /// The zonal terms go to photonZonal(l).
   void store(BakedLight* bake, std::string (*name)(int)) const {
     const double h = grid_.voxel_size;
     const double unit = photon_weight_ * h / kFixedScale / (h * h * h);
     for (int i = 0; i < ncoef_; ++i) {
-      BakeChannel& ch = bake->add(name(i), 3);
+      const int first_zonal = shCount(order_);
+      BakeChannel& ch = bake->add(
+          i < first_zonal ? name(i) : bake_grids::photonZonal(order_ + 1 + i - first_zonal), 3);
       for (size_t v = 0; v < grid_.voxelCount(); ++v) {
         for (int c = 0; c < 3; ++c) {
           ch.data[v * 3 + c] = float(double(counts_[(v * size_t(ncoef_) + i) * 3 + c]) * unit);
@@ -148,6 +181,8 @@ class PhotonTally {
   const BakeGrid& grid_;
   int ncoef_;
   int order_;
+  int top_;
+  Vec3 axis_;
   double photon_weight_;
   std::vector<int64_t> counts_;
 };
@@ -289,7 +324,7 @@ void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter&
 PhotonErrorEstimate estimateErrors(const PhotonTally& full, const PhotonTally& odd,
                                    const std::vector<Rgb>& p_l, const std::vector<float>& density) {
   double noise_num = 0, noise_den = 0, top = 0, all = 0;
-  const int order = full.order();
+  const int last = full.topDegree();
   for (size_t v = 0; v < density.size(); ++v) {
     const double w = density[v];
     if (!(w > 0)) continue;
@@ -297,13 +332,14 @@ PhotonErrorEstimate estimateErrors(const PhotonTally& full, const PhotonTally& o
       const double f = full.count(v, 0, c), o = odd.count(v, 0, c);
       noise_num += w * (f - 2 * o) * (f - 2 * o);  // (even - odd)^2
       noise_den += w * f * f;
-      for (int l = 0; l <= order; ++l) {
+      for (int l = 0; l <= last; ++l) {
         double sum = 0;
-        for (int i = l * l; i < (l + 1) * (l + 1); ++i)
-          sum += full.count(v, i, c) * full.count(v, i, c);
+        int first, end;
+        full.degreeRange(l, &first, &end);
+        for (int i = first; i < end; ++i) sum += full.count(v, i, c) * full.count(v, i, c);
         const double pl = p_l[size_t(l)][c];
         all += w * pl * pl * sum;
-        if (l >= std::max(1, order - 1)) top += w * pl * pl * sum;  // order 1: degree 1
+        if (l >= std::max(1, last - 1)) top += w * pl * pl * sum;  // order 1: degree 1
       }
     }
   }
@@ -374,13 +410,13 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   const double sky_share = options.sky ? 0.35 : 0.0;
   {
     const SunEmitter sun(box, sun_dir, options.photons);
-    PhotonTally tally(bake.grid, options.order, sun.weight());
+    PhotonTally tally(bake.grid, options.order, sun.weight(), options.zonal_order, -sun_dir);
     PhotonTally odd(bake.grid, 0, sun.weight());
     tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally, nullptr, &odd,
                  stage(0.25, 0.75 - sky_share, "sun photons"));
     tally.store(&bake, bake_grids::photonSh);
     const PhotonErrorEstimate e = estimateErrors(
-        tally, odd, phaseLegendreCoefficients(*medium.phase, options.order), bake.density);
+        tally, odd, phaseLegendreCoefficients(*medium.phase, tally.topDegree()), bake.density);
     bake.metadata["cloudbake:tally_noise"] = str(e.tally_noise);
     bake.metadata["cloudbake:truncation"] = str(e.truncation);
   }
@@ -396,6 +432,8 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
   bake.metadata["cloudbake:angular_model"] = "sh";
   bake.metadata["cloudbake:photon_order"] = str(options.order);
+  bake.metadata["cloudbake:photon_zonal_order"] =
+      str(options.zonal_order > options.order ? options.zonal_order : 0);
   bake.metadata["cloudbake:photons"] = str(options.photons);
   bake.metadata["cloudbake:step"] = str(options.step);
   bake.metadata["cloudbake:extinction"] = str(medium.extinction);

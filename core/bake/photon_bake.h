@@ -23,7 +23,15 @@ std::string photonSkySh(int i);
 /// Vec3 (RGB): the same for sky light not yet scattered (the sky seen through the cloud): its
 /// convolution with the phase is the sky's single scattering, view-dependent for any phase.
 std::string photonSkyDirectSh(int i);
+/// Vec3 (RGB): the zonal coefficient of degree l (order < l <= zonal_order) of the radiance of
+/// sunlight scattered at least once, about the axis along which sunlight travels (-sun
+/// direction): integral of L(w) sqrt((2l + 1) / (4 pi)) P_l(w . axis) over directions of travel,
+/// per unit sun irradiance. The forward peak of scattered sunlight lies about that axis.
+std::string photonZonal(int l);
 }  // namespace bake_grids
+
+/// The highest degree of the zonal terms of a photon tally (PhotonBakeOptions::zonal_order).
+constexpr int kMaxZonalDegree = 64;
 
 /// Knobs of method `photon` (docs/shot-format.md).
 struct PhotonBakeOptions {
@@ -33,6 +41,10 @@ struct PhotonBakeOptions {
   int64_t photons = 1 << 18;
   /// Highest spherical-harmonic degree of the tally, [1, 8]: (order + 1)^2 coefficients.
   int order = 3;
+  /// Highest degree of the extra zonal terms about the sun's axis, 0 (none) or in
+  /// (order, kMaxZonalDegree]: the degrees the full expansion truncates, kept where the forward
+  /// peak of scattered sunlight puts most of them (zonal_order - order coefficients more).
+  int zonal_order = 24;
   uint64_t seed = 1;  ///< photon streams: the same bake at any thread count
   /// Ray-march step of the view renders, world units; 0: half a lattice voxel.
   double step = 0;
@@ -47,9 +59,9 @@ struct PhotonErrorEstimate {
   /// difference over RMS of the fluence (the difference of two independent halves has the
   /// variance of their sum). Per voxel: a view averages several, so its noise is lower.
   double tally_noise = 0;
-  /// The truncation: the RMS over directions of what degrees order - 1 and order add to the
-  /// in-scattered light (its Funk-Hecke convolution with the phase, order L against L - 2),
-  /// over that of all of it.
+  /// The truncation: the RMS over directions of what the two highest degrees the tally keeps
+  /// (the zonal ones when it has them) add to the in-scattered light (its Funk-Hecke
+  /// convolution with the phase, L against L - 2), over that of all of it.
   double truncation = 0;
 };
 
@@ -62,7 +74,8 @@ std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degre
 /// Bakes `medium` for a sun in direction `sun_dir` (unit, towards the sun): the lattice, the
 /// sun_transmittance grid (exact single scattering at render time), sky_visibility when
 /// options.sky, the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
-/// scattered at least once, and photonSkyDirectSh(i) of the sky light that has not. Photons are
+/// scattered at least once, photonZonal(l) of the sunlight's zonal degrees above the order, and
+/// photonSkyDirectSh(i) of the sky light that has not. Photons are
 /// emitted per unit sun irradiance over the lattice's shadow (and per unit radiance of a uniform
 /// sky from its bounding sphere), tracked by decomposition tracking through the medium's own
 /// density (core/transport/tracking.h), scatter with the albedo and the exact phase function

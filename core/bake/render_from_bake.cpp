@@ -26,7 +26,9 @@
 //                       missing) only the isotropic part;
 //                       "sh" (method photon): J_ms = E sum over l, m of p_l L_lm(x) Y_lm(-d),
 //                       the Funk-Hecke convolution of the photons' radiance tally ms_sh_* with
-//                       the phase's Legendre coefficients p_l, clamped at 0; the sky's tallies
+//                       the phase's Legendre coefficients p_l, plus, with ms_zonal_<l>, the
+//                       zonal degrees about the sun's axis, p_l Z_l sqrt((2l + 1) / (4 pi))
+//                       P_l(d . sun), clamped at 0; the sky's tallies
 //                       ms_sky_sh_* (scattered) and ss_sky_sh_* (unscattered: the sky's single
 //                       scattering, replacing the ambient term) likewise, per unit sky radiance;
 //   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere;
@@ -273,6 +275,16 @@ class BakeMarcher {
       for (int l = 0; l <= sh_order_; ++l) {
         for (int i = l * l; i < (l + 1) * (l + 1); ++i) s.shw[i] = phase_l_[size_t(l)] * y[i];
       }
+      if (zonal_order_ > sh_order_) {
+        // The zonal terms about the axis of travel of sunlight, -sun: Y_l0 there at -d is
+        // sqrt((2l + 1) / (4 pi)) P_l(d . sun).
+        double p[kMaxZonalDegree + 1];
+        legendreP(zonal_order_, std::clamp(dot(ray.d, sun_dir_), -1.0, 1.0), p);
+        Rgb* z = s.shw + shCount(sh_order_);
+        for (int l = sh_order_ + 1; l <= zonal_order_; ++l) {
+          z[l - sh_order_ - 1] = phase_l_[size_t(l)] * (std::sqrt((2 * l + 1) * kInv4Pi) * p[l]);
+        }
+      }
     }
     // Block space: w = index + 1, so the support of the trilinear field, index in (-1, n),
     // is w in (0, n + 1).
@@ -334,7 +346,8 @@ class BakeMarcher {
     Rgb sky_ss;                           // integral of T_v sigma_t J_sky (photon tally)
     double sky_sh[kShCoefficients] = {};  // integrals of T_v sigma_t T_sky,i (Eq. 5)
     Rgb sky_ms_sh[kShCoefficients];       // precomputed: integrals of T_v sigma_t f T_sky,i
-    Rgb shw[shCount(kMaxShDegree)];       // photon tallies: p_l Y_lm(-d) per coefficient
+    // Photon tallies: p_l Y_lm(-d) per coefficient, then the zonal terms'.
+    Rgb shw[shCount(kMaxShDegree) + kMaxZonalDegree];
     bool done = false;
   };
 
@@ -368,7 +381,28 @@ class BakeMarcher {
         ssky_sh_.push_back(channel(bake, bake_grids::photonSkyDirectSh(i).c_str(), 3, true, ""));
       }
     }
-    phase_l_ = phaseLegendreCoefficients(*medium.phase, order);
+    zonal_order_ = photonZonalOrder(bake, order);
+    for (int l = order + 1; l <= zonal_order_; ++l) {
+      msh_.push_back(channel(bake, bake_grids::photonZonal(l).c_str(), 3, true, ""));
+    }
+    phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order, zonal_order_));
+  }
+
+  // cloudbake:photon_zonal_order: 0 (absent: none) or in (order, kMaxZonalDegree].
+  static int photonZonalOrder(const BakedLight& bake, int order) {
+    const auto it = bake.metadata.find("cloudbake:photon_zonal_order");
+    if (it == bake.metadata.end()) return 0;
+    int zonal = -1;
+    try {
+      zonal = std::stoi(it->second);
+    } catch (const std::exception&) {
+      zonal = -1;
+    }
+    if (zonal != 0 && (zonal <= order || zonal > kMaxZonalDegree)) {
+      throw InputError("bake: metadata cloudbake:photon_zonal_order must be 0 or in " +
+                       str(order + 1) + ".." + str(kMaxZonalDegree));
+    }
+    return zonal;
   }
 
   // Sum over coefficients of w_i L_i(x) per channel, clamped at 0: a truncated expansion can
@@ -689,6 +723,7 @@ class BakeMarcher {
   std::optional<SkyShScatter> sky_sh_;
   std::optional<SkyShScatter> sky_unit_sh_;  // precomputed with Co_sky: the unit sky's Eq. 5
   int sh_order_ = 0;                         // photon tallies' degree (0: none)
+  int zonal_order_ = 0;                      // their zonal terms' top degree (0: none)
   std::vector<const float*> msh_, msky_sh_, ssky_sh_;
   std::vector<Rgb> phase_l_;
   Rgb albedo_;

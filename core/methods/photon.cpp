@@ -1,5 +1,8 @@
 #include "core/methods/photon.h"
 
+#include <algorithm>
+
+#include "core/error.h"
 #include "core/format.h"
 #include "core/math/sh_basis.h"
 #include "core/methods/common.h"
@@ -18,6 +21,10 @@ std::vector<Knob> photonKnobs() {
       Knob::integer("order", 1, kMaxShDegree, d.order,
                     "highest spherical-harmonic degree of the tallied radiance: (order + 1)^2 "
                     "coefficients per voxel and colour channel"),
+      Knob::integer("zonal_order", 0, kMaxZonalDegree, d.zonal_order,
+                    "highest degree of the extra zonal terms of the sunlight's tally about the "
+                    "sun's axis, where its forward peak lies (0: none; else above order): "
+                    "zonal_order - order coefficients more per voxel and colour channel"),
   };
 }
 
@@ -35,12 +42,21 @@ class PhotonMethod final : public BakeMethod {
         "participating media using photon maps\" (SIGGRAPH); Evans 1998, \"The spherical "
         "harmonics discrete ordinate method for three-dimensional atmospheric radiative "
         "transfer\" (J. Atmos. Sci. 55), for radiance fields in spherical harmonics";
-    info_.version = 2;
+    info_.version = 3;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = photonKnobs();
   }
   const MethodInfo& info() const override { return info_; }
+
+  void validate(const ShotSpec& shot, const std::string& source) const override {
+    const PhotonBakeOptions o = photonBakeOptions(shot);
+    if (o.zonal_order != 0 && o.zonal_order <= o.order) {
+      throw InputError(source + ": /bake/zonal_order: must be 0 (none) or above order " +
+                       std::to_string(o.order) + " (the zonal terms add degrees order + 1 .. " +
+                       "zonal_order), got " + std::to_string(o.zonal_order));
+    }
+  }
 
   nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {
     // The photons scatter with the albedo and the phase: the whole medium is baked.
@@ -56,7 +72,12 @@ class PhotonMethod final : public BakeMethod {
                              "single scattering)"
                            : "") +
                     ", tallied in spherical harmonics to degree " + std::to_string(o.order) + " (" +
-                    std::to_string(shCount(o.order)) + " coefficients per voxel)");
+                    std::to_string(shCount(o.order)) + " coefficients per voxel)" +
+                    (o.zonal_order > o.order
+                         ? ", and the sunlight's in zonal terms about the sun's axis "
+                           "to degree " +
+                               std::to_string(o.zonal_order)
+                         : std::string()));
     return lightBakePlan(shot, keys, lookup, std::move(lines));
   }
 
@@ -65,9 +86,10 @@ class PhotonMethod final : public BakeMethod {
     const PhotonBakeOptions o = photonBakeOptions(shot);
     // Per voxel: the fixed-point counts (two floats' worth each) and the stored floats, RGB,
     // per coefficient and per tally, plus the lattice's own grids.
-    const double tallies = o.sky ? 3 : 1;  // sun; sky scattered and unscattered
+    const double sky_tallies = o.sky ? 2 : 0;  // sky scattered and unscattered
+    const double zonal = std::max(0, o.zonal_order - o.order);
     checkLatticeVoxels(
-        o.light_resolution, 3 + tallies * shCount(o.order) * 3 * 3,
+        o.light_resolution, 3 + ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3,
         "a photon bake lattice with its tallies of " + std::to_string(shCount(o.order)) +
             " spherical-harmonic coefficients (/bake/order " + std::to_string(o.order) + ")",
         limits, source);
@@ -80,7 +102,8 @@ class PhotonMethod final : public BakeMethod {
     LightBakeWork work;
     work.bake_seconds =
         latticeSeconds(o.light_resolution) + 5.7e-6 * double(o.photons) * (o.sky ? 2 : 1);
-    work.view_seconds_per_ray = 4.8e-6 * double(shCount(o.order)) / 16.0;
+    work.view_seconds_per_ray =
+        4.8e-6 * double(shCount(o.order) + std::max(0, o.zonal_order - o.order)) / 16.0;
     runLightBake(
         run,
         [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {
@@ -106,6 +129,7 @@ PhotonBakeOptions photonBakeOptions(const ShotSpec& shot) {
   o.light_resolution = int(k.integer("light_resolution"));
   o.photons = k.integer("photons");
   o.order = int(k.integer("order"));
+  o.zonal_order = int(k.integer("zonal_order"));
   o.step = k.optionalNumber("step").value_or(0.0);
   o.sky = needsSky(shot);
   o.seed = shot.bake.seed;

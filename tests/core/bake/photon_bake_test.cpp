@@ -74,6 +74,12 @@ TEST(PhotonBake, SameBakeOnOneAndTwoThreads) {
     EXPECT_NE(one.find(bake_grids::photonSkySh(i)), nullptr) << i;
   }
   EXPECT_EQ(one.find(bake_grids::photonSh(shCount(2))), nullptr);
+  const int zonal = PhotonBakeOptions{}.zonal_order;
+  EXPECT_NE(one.find(bake_grids::photonZonal(3)), nullptr);
+  EXPECT_NE(one.find(bake_grids::photonZonal(zonal)), nullptr);
+  EXPECT_EQ(one.find(bake_grids::photonZonal(zonal + 1)), nullptr);
+  EXPECT_EQ(one.find(bake_grids::photonZonal(2)), nullptr);
+  EXPECT_EQ(one.metadata.at("cloudbake:photon_zonal_order"), std::to_string(zonal));
   PhotonBakeOptions no_sky = small(2000);
   no_sky.sky = false;
   const BakedLight b = bakePhoton(m, Vec3(0, 0, 1), no_sky);
@@ -117,7 +123,7 @@ TEST(PhotonBake, WhiteFurnaceSeesTheSky) {
 
 // The photons' multiply scattered sunlight against the path tracer's, same scene.
 double multipleError(const Medium& m, const Vec3& to_sun, int order, int64_t photons,
-                     int lattice = 32) {
+                     int lattice = 32, int zonal_order = 0) {
   Sun sun;
   sun.direction = to_sun;
   sun.irradiance = Rgb(1.0);
@@ -128,6 +134,7 @@ double multipleError(const Medium& m, const Vec3& to_sun, int order, int64_t pho
   PhotonBakeOptions o = small(photons, order);
   o.sky = false;
   o.light_resolution = lattice;
+  o.zonal_order = zonal_order;
   const BakedLight bake = bakePhoton(m, to_sun, o);
   const RenderLayers l = renderFromBake(bake, m, sun, Sky{}, cam, {});
   const double r = cloudMean(ref, ref.multiple);
@@ -153,14 +160,26 @@ TEST(PhotonBake, ErrorFallsWithTheOrderForAForwardPeak) {
   EXPECT_LT(e6, 0.1);
 }
 
+// The zonal terms about the sun's axis keep the forward peak that a low order truncates: the
+// same order 2 with them is closer to the path tracer than order 6 without.
+TEST(PhotonBake, ZonalTermsKeepTheForwardPeak) {
+  const Medium hg = sphere(4, Rgb(0.95), std::make_shared<HenyeyGreensteinPhase>(0.8));
+  const Vec3 behind = normalize(Vec3(0.15, 1, 0.1));
+  const double e2 = std::abs(multipleError(hg, behind, 2, 200000));
+  const double z2 = std::abs(multipleError(hg, behind, 2, 200000, 32, 24));
+  EXPECT_LT(z2, 0.5 * e2) << "order 2: " << e2 << ", with zonal terms to 24: " << z2;
+  EXPECT_LT(z2, 0.05);
+}
+
 // The bake's own error estimates: the tally's noise falls as 1 / sqrt(photons), the truncation
 // as the order grows.
 TEST(PhotonBake, ErrorEstimatesFallAsPhotonsAndOrderGrow) {
   const Medium m = sphere(4, Rgb(0.95), std::make_shared<HenyeyGreensteinPhase>(0.8));
   const Vec3 sun = normalize(Vec3(1, 0, 0.3));
-  auto estimate = [&](int64_t photons, int order, const char* key) {
+  auto estimate = [&](int64_t photons, int order, const char* key, int zonal_order = 0) {
     PhotonBakeOptions o = small(photons, order);
     o.sky = false;
+    o.zonal_order = zonal_order;
     const BakedLight b = bakePhoton(m, sun, o);
     return std::stod(b.metadata.at(key));
   };
@@ -173,6 +192,9 @@ TEST(PhotonBake, ErrorEstimatesFallAsPhotonsAndOrderGrow) {
   const double t6 = estimate(80000, 6, "cloudbake:truncation");
   EXPECT_GT(t2, 0);
   EXPECT_LT(t6, t2) << t2 << " -> " << t6;
+  const double z24 = estimate(80000, 2, "cloudbake:truncation", 24);
+  EXPECT_GT(z24, 0);
+  EXPECT_LT(z24, t6) << "order 2 with zonal terms to 24: " << z24 << ", order 6: " << t6;
 }
 
 TEST(PhotonBake, CancelsAndNamesBadInput) {
@@ -186,6 +208,11 @@ TEST(PhotonBake, CancelsAndNamesBadInput) {
   expectErrorNaming([&] { bakePhoton(m, up, o); }, "order");
   o.order = kMaxShDegree + 1;
   expectErrorNaming([&] { bakePhoton(m, up, o); }, "order");
+  for (int zonal : {2, 1, kMaxZonalDegree + 1}) {  // not above order 2, or too high
+    o = small();
+    o.zonal_order = zonal;
+    expectErrorNaming([&] { bakePhoton(m, up, o); }, "zonal_order");
+  }
   o = small();
   o.photons = 0;
   expectErrorNaming([&] { bakePhoton(m, up, o); }, "photons");

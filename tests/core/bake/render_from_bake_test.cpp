@@ -594,6 +594,45 @@ TEST(BakeRender, AnalyticTermsThroughABox) {
   }
 }
 
+// The single scattering of a slab seen from the sun's side on a coarse lattice (one mean free
+// path per voxel): p a (1 - exp(-2 tau)) / 2 for any density profile along the sun. Views
+// interpolate the transmittance to the sun between voxel centres; measured 1.3 % low here.
+// Interpolating the optical depth instead (exact inside the slab) measured 5.4 % low: the
+// density's ramp at the lit face, where most light scatters, makes the optical depth convex there.
+TEST(BakeRender, SingleScatteringOfACoarseSlab) {
+  const double h = 1.0 / 16, extinction = 16;  // one mean free path per voxel
+  BakedLight bake = boxBake(Vec3(-0.5, -0.5, 0), Vec3(0.5, 0.5, 0.5), h, 2, 1.0, Vec3(0, 0, 1),
+                            extinction, false);
+  // The lattice's own column optical depth above each centre (exact for its trilinear density).
+  const BakeGrid& g = bake.grid;
+  std::vector<float>& tsun = bake.channels[bake_grids::kSunTransmittance].data;
+  double tau_total = 0;
+  for (int j = 0; j < g.ny; ++j) {
+    for (int i = 0; i < g.nx; ++i) {
+      double tau = 0;
+      for (int k = g.nz - 1; k >= 0; --k) {
+        if (k + 1 < g.nz) {
+          tau += extinction * h * 0.5 *
+                 (bake.density[g.index(i, j, k)] + bake.density[g.index(i, j, k + 1)]);
+        }
+        tsun[g.index(i, j, k)] = float(std::exp(-tau));
+      }
+      if (i == g.nx / 2 && j == g.ny / 2) tau_total = tau;
+    }
+  }
+  const Camera down = orthoCamera(Vec3(0, 0, 3), Vec3(0, 0, 0.25), Vec3(0, 1, 0), 0.4, 4);
+  BakeRenderOptions o;
+  o.step = h / 16;  // the march's own quadrature error well below the one tested
+  const RenderLayers l =
+      renderFromBake(bake, medium(extinction, 1.0, std::make_shared<IsotropicPhase>()),
+                     sunOf(bake, Rgb(1.0)), Sky{}, down, o);
+  const double expected = kInv4Pi * 0.5 * (1 - std::exp(-2 * tau_total));
+  EXPECT_NEAR(tau_total, 8.0, 1e-6);
+  for (int y = 0; y < 4; ++y) {
+    for (int x = 0; x < 4; ++x) EXPECT_NEAR(l.single.at(x, y)[0], expected, 0.02 * expected);
+  }
+}
+
 TEST(BakeRender, RejectsBadInput) {
   const BakedLight good =
       boxBake(Vec3(-0.5, -0.5, 0), Vec3(0.5, 0.5, 0.5), 1.0 / 8, 1, 1.0, Vec3(0, 0, 1), 1, false);

@@ -43,6 +43,13 @@ TEST(PhotonKnobs, ParsedAndValidated) {
   EXPECT_TRUE(o.sky);
   expectRejected(R"({"method": "photon", "order": 9})", "/bake/order");
   expectRejected(R"({"method": "photon", "order": 0})", "/bake/order");
+  EXPECT_EQ(o.zonal_order, PhotonBakeOptions{}.zonal_order);
+  EXPECT_EQ(photonBakeOptions(parseShot(shot(R"({"method": "photon", "zonal_order": 0})"), ""))
+                .zonal_order,
+            0);
+  expectRejected(R"({"method": "photon", "order": 5, "zonal_order": 5})", "/bake/zonal_order");
+  expectRejected(R"({"method": "photon", "zonal_order": 65})", "/bake/zonal_order");
+  expectRejected(R"({"method": "photon", "zonal_order": -1})", "/bake/zonal_order");
   expectRejected(R"({"method": "photon", "photons": 10})", "/bake/photons");
   expectRejected(R"({"method": "photon", "photons": "many"})", "/bake/photons");
   expectRejected(R"({"method": "photon", "light_resolution": 4})", "/bake/light_resolution");
