@@ -5,8 +5,8 @@ For each scene (bench/scenes/*.json, both views, --res x 3/4 --res pixels) it re
 reference with `pathtrace` twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/) and
 each photon configuration once, and prints
 
-  scene | photons | order | zonal | lattice | bake s | s/view | peak MiB | rel. RMSE | bias |
-  ref. noise
+  scene | photons | order | zonal | lattice | tally | bake s | s/view | peak MiB | rel. RMSE |
+  bias | ref. noise
 
 - rel. RMSE: of the cloud's own light (`scattered` = sun + sky layers) over the cloud's pixels
   (reference alpha >= --cloud-alpha), against the mean of the two references, averaged over the
@@ -21,7 +21,7 @@ Scenes: perlin, bunny, disney (Disney's cloud, Walt Disney Animation Studios, CC
 
 Usage: bench/photon_bench.py [--build build] [--threads 2] [--res 160] [--ref-spp 1024]
                              [--samples 16] [--scenes perlin,bunny,disney]
-                             [--sweep default|order|zonal|quick] [--work DIR]
+                             [--sweep default|order|zonal|lattice|quick] [--work DIR]
 """
 import argparse
 import json
@@ -37,16 +37,17 @@ from cloudbake_shot_paths import path_slots  # noqa: E402  (the keys of a shot t
 
 SCENES = {"perlin": "perlin_cloud.json", "bunny": "bunny_cloud.json",
           "disney": "disney_cloud.json"}
-# (photons, order, lattice, zonal_order) per sweep: the knobs grow together along "default",
-# the order alone along "order", the zonal terms alone along "zonal".
+# (photons, order, light_resolution, tally_resolution, zonal_order) per sweep: the knobs grow
+# together along "default" (its second row is the method's defaults), the order alone along
+# "order", the zonal terms alone along "zonal", the lattices alone along "lattice".
 SWEEPS = {
-    "default": [(1 << 16, 2, 48, 16), (1 << 18, 3, 64, 24), (1 << 20, 4, 96, 24),
-                (1 << 21, 4, 128, 24)],
-    "order": [(1 << 20, 1, 64, 0), (1 << 20, 2, 64, 0), (1 << 20, 3, 64, 0), (1 << 20, 5, 64, 0),
-              (1 << 20, 8, 64, 0)],
-    "zonal": [(1 << 18, 3, 64, 0), (1 << 18, 3, 64, 8), (1 << 18, 3, 64, 16),
-              (1 << 18, 3, 64, 32)],
-    "quick": [(1 << 15, 2, 32, 16), (1 << 17, 4, 48, 24)],
+    "default": [(1 << 17, 3, 64, 32, 24), (1 << 19, 3, 128, 48, 24), (1 << 21, 4, 192, 48, 24),
+                (1 << 22, 4, 192, 48, 24)],
+    "order": [(1 << 20, o, 64, 64, 0) for o in (1, 2, 3, 5, 8)],
+    "zonal": [(1 << 18, 3, 64, 64, z) for z in (0, 8, 16, 32)],
+    "lattice": [(1 << 20, 4, 96, 96, 24), (1 << 20, 4, 192, 96, 24), (1 << 20, 4, 192, 64, 24),
+                (1 << 20, 4, 192, 48, 24), (1 << 20, 4, 192, 32, 24)],
+    "quick": [(1 << 15, 2, 32, 32, 16), (1 << 17, 4, 64, 32, 24)],
 }
 
 
@@ -110,9 +111,9 @@ def main():
     args.work = args.work or tempfile.mkdtemp(prefix="photon_bench.")
     cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
                                                             "cloudbake")
-    print("| scene | photons | order | zonal | lattice | bake s | s/view | peak MiB | rel. RMSE | "
-          "bias | ref. noise |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| scene | photons | order | zonal | lattice | tally | bake s | s/view | peak MiB | "
+          "rel. RMSE | bias | ref. noise |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for scene in args.scenes.split(","):
         shot = load_scene(scene, args.res)
         if shot is None:
@@ -130,13 +131,13 @@ def main():
         for v in views:
             a, b = (os.path.join(r, v + ".exr") for r in refs)
             ref_noise.append(compare(cloudbake, a, b, a, args.cloud_alpha)["rel_rmse"] / 2)
-        for photons, order, lattice, zonal in SWEEPS[args.sweep]:
+        for photons, order, lattice, tally, zonal in SWEEPS[args.sweep]:
             s = json.loads(json.dumps(shot))
             s["bake"] = {"method": "photon", "photons": photons, "order": order,
-                         "light_resolution": lattice, "zonal_order": zonal,
-                         "samples": args.samples}
-            out = os.path.join(args.work, scene, "%d-%d-%d-%d-%d" % (
-                photons, order, lattice, zonal, args.samples))
+                         "light_resolution": lattice, "tally_resolution": tally,
+                         "zonal_order": zonal, "samples": args.samples}
+            out = os.path.join(args.work, scene, "%d-%d-%d-%d-%d-%d" % (
+                photons, order, lattice, tally, zonal, args.samples))
             stats = render(cloudbake, s, out, args.threads)
             errs, biases = [], []
             for v in views:
@@ -147,8 +148,8 @@ def main():
                 errs.append(sum(r["rel_rmse"] for r in rows) / 2)
                 biases.append(sum(r["mean"] / r["reference_mean"] - 1 for r in rows) / 2)
             view_s = steps(stats, "view")
-            print("| %s | %d | %d | %d | %d | %.2f | %.3f | %.0f | %.4f | %+.4f | %.4f |" %
-                  (scene, photons, order, zonal, lattice, sum(steps(stats, "bake")),
+            print("| %s | %d | %d | %d | %d | %d | %.2f | %.3f | %.0f | %.4f | %+.4f | %.4f |" %
+                  (scene, photons, order, zonal, lattice, tally, sum(steps(stats, "bake")),
                    sum(view_s) / max(1, len(view_s)), stats["peak_rss_mib"],
                    sum(errs) / len(errs), sum(biases) / len(biases),
                    sum(ref_noise) / len(ref_noise)), flush=True)

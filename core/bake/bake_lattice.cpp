@@ -13,21 +13,22 @@ BakedLight makeBakeLattice(const DensityField& field, int resolution) {
   return makeBakeLatticeOver(field, field.bounds(), resolution);
 }
 
-BakedLight makeBakeLatticeOver(const DensityField& field, const Bounds3& b, int resolution) {
+BakeGrid bakeLatticeGeometry(const Bounds3& b, int resolution, const std::string& what,
+                             const char* knob) {
   if (resolution < 8 || resolution > 1024) {
-    throw InputError("light_resolution: must be in [8, 1024], got " + std::to_string(resolution));
+    throw InputError(std::string(knob) + ": must be in [8, 1024], got " +
+                     std::to_string(resolution));
   }
   if (b.empty() || !isFinite(b.min) || !isFinite(b.max)) {
-    throw InputError("volume: '" + field.describe() + "' has empty or infinite bounds");
+    throw InputError("volume: '" + what + "' has empty or infinite bounds");
   }
   const Vec3 ext = b.extent();
   const double longest = maxComponent(ext);
   if (!(longest > 0)) {
-    throw InputError("volume: '" + field.describe() + "' has zero extent; nothing to bake");
+    throw InputError("volume: '" + what + "' has zero extent; nothing to bake");
   }
   const double h = longest / resolution;
-  BakedLight bake;
-  BakeGrid& g = bake.grid;
+  BakeGrid g;
   g.voxel_size = h;
   // Voxels covering the bounds, plus one empty voxel of margin on every face, centred on the
   // bounds so the cloud sits in the middle of the lattice.
@@ -38,16 +39,23 @@ BakedLight makeBakeLatticeOver(const DensityField& field, const Bounds3& b, int 
     total *= uint64_t(n[a]);
   }
   if (total > kMaxBakeVoxels) {
-    throw InputError("light_resolution: " + std::to_string(resolution) + " gives a lattice of " +
-                     std::to_string(n[0]) + "x" + std::to_string(n[1]) + "x" +
-                     std::to_string(n[2]) + " voxels, more than the limit of " +
+    throw InputError(std::string(knob) + ": " + std::to_string(resolution) +
+                     " gives a lattice of " + std::to_string(n[0]) + "x" + std::to_string(n[1]) +
+                     "x" + std::to_string(n[2]) + " voxels, more than the limit of " +
                      std::to_string(kMaxBakeVoxels));
   }
   g.nx = n[0];
   g.ny = n[1];
   g.nz = n[2];
-  const Vec3 center = b.center();
-  g.origin = center - Vec3(g.nx - 1, g.ny - 1, g.nz - 1) * (0.5 * h);
+  g.origin = b.center() - Vec3(g.nx - 1, g.ny - 1, g.nz - 1) * (0.5 * h);
+  return g;
+}
+
+BakedLight makeBakeLatticeOver(const DensityField& field, const Bounds3& b, int resolution) {
+  BakedLight bake;
+  bake.grid = bakeLatticeGeometry(b, resolution, field.describe());
+  const BakeGrid& g = bake.grid;
+  const double h = g.voxel_size;
   bake.density.assign(g.voxelCount(), 0.f);
   bake.metadata["cloudbake:light_resolution"] = std::to_string(resolution);
 

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "core/bake/baked_light.h"
 #include "core/volume/density_field.h"
@@ -22,6 +23,11 @@ constexpr uint64_t kMaxBakeVoxels = uint64_t(1) << 25;
 /// "light_resolution" otherwise, or when the lattice would exceed kMaxBakeVoxels. Parallel
 /// over z slices with one density lookup per thread; deterministic.
 BakedLight makeBakeLattice(const DensityField& field, int resolution);
+
+/// The geometry alone of such a lattice over world `bounds` (`what` describes the volume in
+/// errors, `knob` names the resolution's field): InputError as makeBakeLattice.
+BakeGrid bakeLatticeGeometry(const Bounds3& bounds, int resolution, const std::string& what,
+                             const char* knob = "light_resolution");
 
 /// The same over explicit world `bounds` instead of the field's own (e.g. the union of the
 /// frames of an animation, so every frame lands on one lattice).

@@ -41,6 +41,14 @@ BakeChannel& BakedLight::add(const std::string& name, int components) {
   return c;
 }
 
+BakeChannel& BakedLight::addOnTallyGrid(const std::string& name, int components) {
+  BakeChannel& c = channels[name];
+  c.components = components;
+  c.on_tally_grid = true;
+  c.data.assign(tally_grid.voxelCount() * size_t(components), 0.f);
+  return c;
+}
+
 void BakedLight::addMeanRadiance() {
   const BakeChannel* sun = find(bake_grids::kSunTransmittance);
   const BakeChannel* co = find(bake_grids::kMultipleFluence);
@@ -61,25 +69,39 @@ void BakedLight::trimToSupport() {
   for (size_t v = 0; v < support.size(); ++v) {
     if (support[v]) continue;
     for (auto& [name, c] : channels) {
-      if (c.data.size() != grid.voxelCount() * size_t(c.components)) continue;
+      if (c.on_tally_grid || c.data.size() != grid.voxelCount() * size_t(c.components)) continue;
       for (int e = 0; e < c.components; ++e) c.data[v * size_t(c.components) + size_t(e)] = 0;
     }
   }
 }
 
-void BakedLight::validate(const std::string& what) const {
-  const BakeGrid& g = grid;
+namespace {
+
+void validateLattice(const std::string& what, const char* which, const BakeGrid& g) {
   if (g.nx < 1 || g.ny < 1 || g.nz < 1 || !(g.voxel_size > 0) || !std::isfinite(g.voxel_size) ||
       !isFinite(g.origin)) {
     std::ostringstream os;
-    os << what << ": lattice " << g.nx << "x" << g.ny << "x" << g.nz << " of voxel size "
+    os << what << ": " << which << " " << g.nx << "x" << g.ny << "x" << g.nz << " of voxel size "
        << g.voxel_size << " is not usable (needs >= 1 voxel per axis, a finite size > 0)";
     throw InputError(os.str());
+  }
+}
+
+}  // namespace
+
+void BakedLight::validate(const std::string& what) const {
+  validateLattice(what, "lattice", grid);
+  for (const auto& [name, c] : channels) {
+    if (c.on_tally_grid) {
+      validateLattice(what, "tally lattice", tally_grid);
+      break;
+    }
   }
   if (!isFinite(sun_direction) || std::abs(length(sun_direction) - 1) > 1e-6) {
     throw InputError(what + ": sun direction is not a unit vector");
   }
   auto fail = [&](const std::string& name, size_t v, const std::string& problem) {
+    const BakeGrid& g = name == bake_grids::kDensity ? grid : gridOf(channels.at(name));
     const int i = int(v % size_t(g.nx)), j = int((v / size_t(g.nx)) % size_t(g.ny)),
               k = int(v / (size_t(g.nx) * size_t(g.ny)));
     const Vec3 p = g.center(i, j, k);
@@ -88,14 +110,14 @@ void BakedLight::validate(const std::string& what) const {
        << p.x << ", " << p.y << ", " << p.z << "): " << problem;
     throw InputError(os.str());
   };
-  auto checkSize = [&](const std::string& name, size_t size, int components) {
+  auto checkSize = [&](const std::string& name, size_t size, int components, const BakeGrid& g) {
     if (size != g.voxelCount() * size_t(components)) {
       throw InputError(what + ": grid '" + name + "' has " + std::to_string(size) +
                        " values, the lattice needs " +
                        std::to_string(g.voxelCount() * size_t(components)));
     }
   };
-  checkSize(bake_grids::kDensity, density.size(), 1);
+  checkSize(bake_grids::kDensity, density.size(), 1, grid);
   for (size_t v = 0; v < density.size(); ++v) {
     const float d = density[v];
     if (!std::isfinite(d)) fail(bake_grids::kDensity, v, "value is not finite");
@@ -106,13 +128,13 @@ void BakedLight::validate(const std::string& what) const {
       throw InputError(what + ": grid '" + name + "' has " + std::to_string(c.components) +
                        " components per voxel (1 or 3 expected)");
     }
-    checkSize(name, c.data.size(), c.components);
+    checkSize(name, c.data.size(), c.components, gridOf(c));
     const bool unit_range = name == bake_grids::kSunTransmittance ||
                             name == bake_grids::kSkyVisibility || name == bake_grids::kMieRatio;
     const bool non_negative = name == bake_grids::kMultipleFluence ||
                               name == bake_grids::kSkyMultipleFluence || name == bake_grids::kCd;
     const bool direction = name == bake_grids::kLightDir;
-    const size_t n = g.voxelCount();
+    const size_t n = gridOf(c).voxelCount();
     for (size_t v = 0; v < n; ++v) {
       const float* x = &c.data[v * size_t(c.components)];
       for (int e = 0; e < c.components; ++e) {

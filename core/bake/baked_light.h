@@ -50,6 +50,8 @@ std::vector<uint8_t> densitySupport(const BakeGrid& grid, const std::vector<floa
 /// One grid of a bake: `components` floats per voxel (1 or 3), interleaved, in BakeGrid order.
 struct BakeChannel {
   int components = 1;
+  /// On BakedLight::tally_grid rather than BakedLight::grid (method photon's tallies).
+  bool on_tally_grid = false;
   std::vector<float> data;
 };
 
@@ -60,6 +62,10 @@ struct BakeChannel {
 /// medium, statistics, code version; keys "cloudbake:*").
 struct BakedLight {
   BakeGrid grid;
+  /// The lattice of the channels with on_tally_grid (method photon's radiance tallies): the same
+  /// bounds as `grid`, usually coarser, so the smooth scattered light costs fewer voxels than the
+  /// density and the transmittance to the sun need. Empty (no voxels) when no channel uses it.
+  BakeGrid tally_grid;
   std::string method;  ///< "single" or "pointcloud"
   Vec3 sun_direction{0, 0, 1};
   std::map<std::string, std::string> metadata;
@@ -70,6 +76,10 @@ struct BakedLight {
   const BakeChannel* find(const std::string& name) const;
   /// Adds (or replaces) a zero-filled channel of grid.voxelCount() * components floats.
   BakeChannel& add(const std::string& name, int components);
+  /// The same on tally_grid.
+  BakeChannel& addOnTallyGrid(const std::string& name, int components);
+  /// The lattice channel `c` lies on.
+  const BakeGrid& gridOf(const BakeChannel& c) const { return c.on_tally_grid ? tally_grid : grid; }
 
   /// Adds (or replaces) Cd = (sun_transmittance + Co) / (4 pi) per channel, the mean radiance
   /// arriving per unit E for an isotropic preview; a missing grid counts as 0.
@@ -78,7 +88,8 @@ struct BakedLight {
   /// Zeroes every light channel outside the support of the density (voxels within one voxel,
   /// in the 26-neighbourhood, of a voxel with density > 0): trilinear lookups never read them
   /// with a non-zero density weight, and a .vdb file stores only that support, so a bake and its
-  /// file read back are identical. Bake methods call it last.
+  /// file read back are identical. Bake methods call it last. Channels on tally_grid keep their
+  /// values (a file stores their non-zero voxels).
   void trimToSupport();
 
   /// Throws InputError("<what>: grid '<name>': ...") naming the grid and the first bad voxel

@@ -25,9 +25,8 @@ openvdb::math::Transform::Ptr latticeTransform(const BakeGrid& g) {
 }
 
 template <typename GridT, typename Get>
-typename GridT::Ptr makeGrid(const BakedLight& b, const std::vector<uint8_t>& mask,
+typename GridT::Ptr makeGrid(const BakeGrid& g, const std::vector<uint8_t>& mask,
                              const std::string& name, Get&& get) {
-  const BakeGrid& g = b.grid;
   auto grid = GridT::create(openvdb::zeroVal<typename GridT::ValueType>());
   grid->setName(name);
   grid->setTransform(latticeTransform(g));
@@ -41,6 +40,17 @@ typename GridT::Ptr makeGrid(const BakedLight& b, const std::vector<uint8_t>& ma
   return grid;
 }
 
+std::vector<uint8_t> nonZeroVoxels(const BakeChannel& c) {
+  const size_t n = c.data.size() / size_t(c.components);
+  std::vector<uint8_t> mask(n, 0);
+  for (size_t v = 0; v < n; ++v) {
+    for (int e = 0; e < c.components; ++e) {
+      if (c.data[v * size_t(c.components) + size_t(e)] != 0) mask[v] = 1;
+    }
+  }
+  return mask;
+}
+
 }  // namespace
 
 void writeBakedLight(const std::string& path, const BakedLight& bake) {
@@ -49,21 +59,27 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
   if (bake.density.size() != g.voxelCount()) {
     throw InputError(path + ": bake density does not match its lattice");
   }
-  const std::vector<uint8_t> mask = densitySupport(g, bake.density);
+  const std::vector<uint8_t> support = densitySupport(g, bake.density);
   openvdb::GridPtrVec grids;
-  auto density = makeGrid<openvdb::FloatGrid>(bake, mask, bake_grids::kDensity,
+  auto density = makeGrid<openvdb::FloatGrid>(g, support, bake_grids::kDensity,
                                               [&](size_t v) { return bake.density[v]; });
   density->setGridClass(openvdb::GRID_FOG_VOLUME);
   grids.push_back(density);
+  bool tallies = false;
   for (const auto& [name, c] : bake.channels) {
-    if (c.data.size() != g.voxelCount() * size_t(c.components)) {
+    const BakeGrid& cg = bake.gridOf(c);
+    if (c.data.size() != cg.voxelCount() * size_t(c.components)) {
       throw InputError(path + ": bake grid '" + name + "' does not match its lattice");
     }
+    tallies = tallies || c.on_tally_grid;
+    // The lattice's grids store the density's support (trimToSupport zeroed the rest); the
+    // tallies' coarser lattice stores its non-zero voxels, so a file reads back as the bake.
+    const std::vector<uint8_t> mask = c.on_tally_grid ? nonZeroVoxels(c) : support;
     if (c.components == 1) {
       grids.push_back(
-          makeGrid<openvdb::FloatGrid>(bake, mask, name, [&](size_t v) { return c.data[v]; }));
+          makeGrid<openvdb::FloatGrid>(cg, mask, name, [&](size_t v) { return c.data[v]; }));
     } else if (c.components == 3) {
-      auto grid = makeGrid<openvdb::Vec3SGrid>(bake, mask, name, [&](size_t v) {
+      auto grid = makeGrid<openvdb::Vec3SGrid>(cg, mask, name, [&](size_t v) {
         return openvdb::Vec3s(c.data[3 * v], c.data[3 * v + 1], c.data[3 * v + 2]);
       });
       // light_dir is a direction: a DCC's transform of the volume must rotate it (with the
@@ -91,6 +107,12 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
       "per unit sun irradiance");
   put("cloudbake:lattice",
       std::to_string(g.nx) + " " + std::to_string(g.ny) + " " + std::to_string(g.nz));
+  meta.removeMeta("cloudbake:tally_lattice");
+  if (tallies) {
+    const BakeGrid& t = bake.tally_grid;
+    put("cloudbake:tally_lattice",
+        std::to_string(t.nx) + " " + std::to_string(t.ny) + " " + std::to_string(t.nz));
+  }
   writeVdbFileAtomically(path, grids, meta);
 }
 
@@ -119,12 +141,33 @@ void readBakeMetadata(const std::string& path, const std::map<std::string, std::
       uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) > (uint64_t(1) << 31)) {
     throw InputError(path + ": malformed cloudbake:lattice metadata");
   }
+  auto tl = meta.find("cloudbake:tally_lattice");
+  if (tl != meta.end()) {
+    std::istringstream t(tl->second);
+    BakeGrid& tg = bake->tally_grid;
+    if (!(t >> tg.nx >> tg.ny >> tg.nz) || tg.nx < 1 || tg.ny < 1 || tg.nz < 1 ||
+        uint64_t(tg.nx) * uint64_t(tg.ny) * uint64_t(tg.nz) > (uint64_t(1) << 31)) {
+      throw InputError(path + ": malformed cloudbake:tally_lattice metadata");
+    }
+  }
   for (const auto& [k, v] : meta) {
     if (k != "cloudbake:method" && k != "cloudbake:sun_direction" && k != "cloudbake:lattice" &&
-        k != "cloudbake:units" && k != "cloudbake:version") {
+        k != "cloudbake:tally_lattice" && k != "cloudbake:units" && k != "cloudbake:version") {
       bake->metadata[k] = v;
     }
   }
+}
+
+// A lattice's voxel size and origin from a grid's transform.
+void placeLattice(const std::string& path, const openvdb::GridBase& grid, BakeGrid* g) {
+  const openvdb::math::Transform& xform = grid.transform();
+  if (!xform.isLinear() || !xform.hasUniformScale()) {
+    throw InputError(path + ": grid '" + grid.getName() +
+                     "' does not have a uniform linear transform");
+  }
+  g->voxel_size = xform.voxelSize()[0];
+  const openvdb::Vec3d o = xform.indexToWorld(openvdb::Coord(0, 0, 0));
+  g->origin = Vec3(o.x(), o.y(), o.z());
 }
 
 // The density grid's transform, which places the lattice (voxel size and origin); every other
@@ -137,20 +180,20 @@ const openvdb::math::Transform& readLatticePlacement(const std::string& path,
     if (grid->getName() == bake_grids::kDensity) density_grid = grid;
   }
   if (!density_grid) throw InputError(path + ": no 'density' grid");
-  const openvdb::math::Transform& xform = density_grid->transform();
-  if (!xform.isLinear() || !xform.hasUniformScale()) {
-    throw InputError(path + ": grid 'density' does not have a uniform linear transform");
-  }
-  g->voxel_size = xform.voxelSize()[0];
-  const openvdb::Vec3d o = xform.indexToWorld(openvdb::Coord(0, 0, 0));
-  g->origin = Vec3(o.x(), o.y(), o.z());
-  return xform;
+  placeLattice(path, *density_grid, g);
+  return density_grid->transform();
 }
 
 // Copies one grid's active voxels into the bake's dense lattice: the density, or a 1- or
 // 3-component channel of the grid's name.
-void readGridVoxels(const std::string& path, const openvdb::GridBase::Ptr& grid, BakedLight* bake) {
-  const BakeGrid& g = bake->grid;
+void readGridVoxels(const std::string& path, const openvdb::GridBase::Ptr& grid, BakedLight* bake,
+                    bool on_tally_grid) {
+  const BakeGrid& g = on_tally_grid ? bake->tally_grid : bake->grid;
+  auto add = [&](int components) -> std::vector<float>& {
+    return (on_tally_grid ? bake->addOnTallyGrid(grid->getName(), components)
+                          : bake->add(grid->getName(), components))
+        .data;
+  };
   const std::string name = grid->getName();
   auto place = [&](const openvdb::Coord& c) -> size_t {
     if (c.x() < 0 || c.y() < 0 || c.z() < 0 || c.x() >= g.nx || c.y() >= g.ny || c.z() >= g.nz) {
@@ -165,14 +208,14 @@ void readGridVoxels(const std::string& path, const openvdb::GridBase::Ptr& grid,
   };
   if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(grid)) {
     std::vector<float>* out = &bake->density;
-    if (name != bake_grids::kDensity) out = &bake->add(name, 1).data;
+    if (name != bake_grids::kDensity) out = &add(1);
     for (auto it = f->cbeginValueOn(); it; ++it) {
       noTiles(it);
       (*out)[place(it.getCoord())] = *it;
     }
   } else if (auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(grid)) {
     if (name == bake_grids::kDensity) throw InputError(path + ": grid 'density' is not float");
-    std::vector<float>& out = bake->add(name, 3).data;
+    std::vector<float>& out = add(3);
     for (auto it = v->cbeginValueOn(); it; ++it) {
       noTiles(it);
       const size_t i = place(it.getCoord());
@@ -195,12 +238,23 @@ BakedLight readBakedLight(const std::string& path) {
   readBakeMetadata(path, contents.metadata, &bake);
   const openvdb::math::Transform& xform = readLatticePlacement(path, contents.grids, &bake.grid);
   bake.density.assign(bake.grid.voxelCount(), 0.f);
+  // Grids off the density's transform are tallies, on one transform of their own.
+  const openvdb::math::Transform* tally_xform = nullptr;
   for (const auto& grid : contents.grids) {
-    if (grid->transform() != xform) {
-      throw InputError(path + ": grid '" + grid->getName() +
-                       "' is not on the density grid's transform");
+    const bool on_tally_grid = grid->transform() != xform;
+    if (on_tally_grid) {
+      if (bake.tally_grid.voxelCount() == 0 || grid->getName() == bake_grids::kDensity ||
+          (tally_xform && grid->transform() != *tally_xform)) {
+        throw InputError(path + ": grid '" + grid->getName() +
+                         "' is neither on the density grid's transform nor on the tally "
+                         "lattice's (cloudbake:tally_lattice)");
+      }
+      if (!tally_xform) {
+        tally_xform = &grid->transform();
+        placeLattice(path, *grid, &bake.tally_grid);
+      }
     }
-    readGridVoxels(path, grid, &bake);
+    readGridVoxels(path, grid, &bake, on_tally_grid);
   }
   bake.validate(path);
   return bake;

@@ -47,6 +47,10 @@ void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions
   if (o.photons < 1 || o.photons >= (int64_t(1) << 31)) {
     throw InputError("photons: must be in 1..2147483647, got " + str(o.photons));
   }
+  if (o.tally_resolution != 0 && (o.tally_resolution < 8 || o.tally_resolution > 1024)) {
+    throw InputError("tally_resolution: must be 0 (light_resolution) or in [8, 1024], got " +
+                     str(o.tally_resolution));
+  }
   if (o.order < 1 || o.order > kMaxShDegree) {
     throw InputError("order: must be in 1.." + str(kMaxShDegree) + ", got " + str(o.order));
   }
@@ -127,7 +131,7 @@ class PhotonTally {
     const double unit = photon_weight_ * h / kFixedScale / (h * h * h);
     for (int i = 0; i < ncoef_; ++i) {
       const int first_zonal = shCount(order_);
-      BakeChannel& ch = bake->add(
+      BakeChannel& ch = bake->addOnTallyGrid(
           i < first_zonal ? name(i) : bake_grids::photonZonal(order_ + 1 + i - first_zonal), 3);
       for (size_t v = 0; v < grid_.voxelCount(); ++v) {
         for (int c = 0; c < 3; ++c) {
@@ -351,17 +355,38 @@ PhotonErrorEstimate estimateErrors(const PhotonTally& full, const PhotonTally& o
 
 // Cd = (sun_transmittance + fluence of the scattered sunlight) / (4 pi), the fluence being
 // sqrt(4 pi) times coefficient 0 (Y_00 = 1 / sqrt(4 pi)): the isotropic DCC preview.
+// The tally lies on the tally lattice: read at each voxel centre of the bake's lattice.
 void addPhotonMeanRadiance(BakedLight* bake) {
   const BakeChannel* t = bake->find(bake_grids::kSunTransmittance);
   const BakeChannel* l0 = bake->find(bake_grids::photonSh(0));
   BakeChannel& cd = bake->add(bake_grids::kCd, 3);
   const double inv4pi = 1 / (4 * kPi);
-  for (size_t v = 0; v < bake->grid.voxelCount(); ++v) {
-    for (int c = 0; c < 3; ++c) {
-      const double fluence = l0 ? std::max(0.0, kSqrt4Pi * l0->data[v * 3 + c]) : 0.0;
-      cd.data[v * 3 + c] = float(((t ? t->data[v] : 0.0) + fluence) * inv4pi);
+  const BakeGrid& g = bake->grid;
+  parallelFor(0, g.nz, [&](int k) {
+    for (int j = 0; j < g.ny; ++j) {
+      for (int i = 0; i < g.nx; ++i) {
+        const size_t v = g.index(i, j, k);
+        float l[3] = {0, 0, 0};
+        if (l0) sampleTrilinear(bake->gridOf(*l0), l0->data.data(), 3, g.center(i, j, k), l);
+        for (int c = 0; c < 3; ++c) {
+          const double fluence = std::max(0.0, kSqrt4Pi * l[c]);
+          cd.data[v * 3 + c] = float(((t ? t->data[v] : 0.0) + fluence) * inv4pi);
+        }
+      }
     }
-  }
+  });
+}
+
+// The bake's density at the tally lattice's voxel centres: the weights of the error estimates.
+std::vector<float> densityOnTallyGrid(const BakedLight& bake) {
+  const BakeGrid& t = bake.tally_grid;
+  std::vector<float> out(t.voxelCount());
+  for (int k = 0; k < t.nz; ++k)
+    for (int j = 0; j < t.ny; ++j)
+      for (int i = 0; i < t.nx; ++i) {
+        out[t.index(i, j, k)] = sampleTrilinear(bake.grid, bake.density.data(), t.center(i, j, k));
+      }
+  return out;
 }
 
 }  // namespace
@@ -405,25 +430,30 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   }
   bake.metadata["cloudbake:seconds_lattice"] = str(secondsSince(t0));
   t0 = std::chrono::steady_clock::now();
+  const int tally_resolution =
+      options.tally_resolution > 0 ? options.tally_resolution : options.light_resolution;
+  bake.tally_grid = bakeLatticeGeometry(medium.density->bounds(), tally_resolution,
+                                        medium.density->describe(), "tally_resolution");
   const auto grid = medium.density->trackingGrid({medium.extinction, 0});
   const Bounds3 box = bake.grid.bounds();
   const double sky_share = options.sky ? 0.35 : 0.0;
   {
     const SunEmitter sun(box, sun_dir, options.photons);
-    PhotonTally tally(bake.grid, options.order, sun.weight(), options.zonal_order, -sun_dir);
-    PhotonTally odd(bake.grid, 0, sun.weight());
+    PhotonTally tally(bake.tally_grid, options.order, sun.weight(), options.zonal_order, -sun_dir);
+    PhotonTally odd(bake.tally_grid, 0, sun.weight());
     tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally, nullptr, &odd,
                  stage(0.25, 0.75 - sky_share, "sun photons"));
     tally.store(&bake, bake_grids::photonSh);
-    const PhotonErrorEstimate e = estimateErrors(
-        tally, odd, phaseLegendreCoefficients(*medium.phase, tally.topDegree()), bake.density);
+    const PhotonErrorEstimate e =
+        estimateErrors(tally, odd, phaseLegendreCoefficients(*medium.phase, tally.topDegree()),
+                       densityOnTallyGrid(bake));
     bake.metadata["cloudbake:tally_noise"] = str(e.tally_noise);
     bake.metadata["cloudbake:truncation"] = str(e.truncation);
   }
   if (options.sky) {
     const SkyEmitter sky(box, options.photons);
-    PhotonTally tally(bake.grid, options.order, sky.weight());
-    PhotonTally direct(bake.grid, options.order, sky.weight());
+    PhotonTally tally(bake.tally_grid, options.order, sky.weight());
+    PhotonTally direct(bake.tally_grid, options.order, sky.weight());
     tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally, &direct, nullptr,
                  stage(1.0 - sky_share, sky_share, "sky photons"));
     tally.store(&bake, bake_grids::photonSkySh);
@@ -435,6 +465,7 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   bake.metadata["cloudbake:photon_zonal_order"] =
       str(options.zonal_order > options.order ? options.zonal_order : 0);
   bake.metadata["cloudbake:photons"] = str(options.photons);
+  bake.metadata["cloudbake:tally_resolution"] = str(tally_resolution);
   bake.metadata["cloudbake:step"] = str(options.step);
   bake.metadata["cloudbake:extinction"] = str(medium.extinction);
   bake.metadata["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";

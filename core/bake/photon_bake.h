@@ -35,10 +35,14 @@ constexpr int kMaxZonalDegree = 64;
 
 /// Knobs of method `photon` (docs/shot-format.md).
 struct PhotonBakeOptions {
-  /// Lattice voxels along the longest side of the volume's bounds, [8, 1024].
-  int light_resolution = 64;
+  /// Lattice voxels along the longest side of the volume's bounds, [8, 1024]: the density and
+  /// the transmittance to the sun, which the exact single scattering of every view reads.
+  int light_resolution = 128;
+  /// The tallies' lattice over the same bounds, [8, 1024], or 0 for light_resolution: the
+  /// scattered light is smooth, so a coarser lattice gathers more photons per voxel.
+  int tally_resolution = 48;
   /// Photons from the sun, and as many from the sky when it is not black, [1, 2^31).
-  int64_t photons = 1 << 18;
+  int64_t photons = 1 << 19;
   /// Highest spherical-harmonic degree of the tally, [1, 8]: (order + 1)^2 coefficients.
   int order = 3;
   /// Highest degree of the extra zonal terms about the sun's axis, 0 (none) or in

@@ -124,21 +124,27 @@ void validateOptions(const BakeRenderOptions& o, double voxel_size) {
 }
 
 /// The channel `name` with `components` floats per voxel, or nullptr when absent (or, with
-/// `required`, InputError).
+/// `required`, InputError); InputError too when it is not on the lattice `on_tally_grid` says.
 const float* channel(const BakedLight& bake, const char* name, int components, bool required,
-                     const std::string& why) {
+                     const std::string& why, bool on_tally_grid = false) {
   const auto it = bake.channels.find(name);
   if (it == bake.channels.end()) {
     if (required) throw InputError(std::string("bake: grid '") + name + "' is missing" + why);
     return nullptr;
   }
   const BakeChannel& ch = it->second;
-  const size_t expected = bake.grid.voxelCount() * size_t(components);
+  const BakeGrid& g = bake.gridOf(ch);
+  const size_t expected = g.voxelCount() * size_t(components);
   if (ch.components != components || ch.data.size() != expected) {
     throw InputError(std::string("bake: grid '") + name + "': expected " + str(components) +
-                     " component(s) and " + str(expected) + " values for the " + str(bake.grid.nx) +
-                     "x" + str(bake.grid.ny) + "x" + str(bake.grid.nz) + " lattice, got " +
-                     str(ch.components) + " and " + str(ch.data.size()));
+                     " component(s) and " + str(expected) + " values for the " + str(g.nx) + "x" +
+                     str(g.ny) + "x" + str(g.nz) + " lattice, got " + str(ch.components) + " and " +
+                     str(ch.data.size()));
+  }
+  if (ch.on_tally_grid != on_tally_grid) {
+    throw InputError(
+        std::string("bake: grid '") + name + "' must lie on the " +
+        (on_tally_grid ? "tally lattice (cloudbake:tally_lattice)" : "bake's lattice"));
   }
   return ch.data.data();
 }
@@ -192,6 +198,7 @@ struct Corners {
 /// Where a lookup reads the lattice: inside (all eight voxels exist; the common case) by the
 /// lower corner's offset and the fractions, otherwise by explicit corners.
 struct Cell {
+  Vec3 u;  // index coordinates of the point
   bool interior = false;
   size_t base = 0;
   float fx = 0, fy = 0, fz = 0;
@@ -208,6 +215,103 @@ inline float lerp3(const float* p, size_t sx, size_t sy, size_t sz, float fx, fl
   return c0 + fz * (c1 - c0);
 }
 
+/// Trilinear lookups on one lattice by index coordinates (voxel centres at integers); voxels
+/// outside it read as zero.
+class LatticeReader {
+ public:
+  explicit LatticeReader(const BakeGrid& g)
+      : nx_(g.nx),
+        ny_(g.ny),
+        nz_(g.nz),
+        stride_y_(size_t(g.nx)),
+        stride_z_(size_t(g.nx) * size_t(g.ny)) {}
+
+  /// Finds the cell of index point u.
+  void locate(const Vec3& u, Cell* cell) const {
+    cell->u = u;
+    if (u.x >= 0 && u.y >= 0 && u.z >= 0 && u.x < nx_ - 1 && u.y < ny_ - 1 && u.z < nz_ - 1) {
+      const int i = int(u.x), j = int(u.y), k = int(u.z);
+      cell->interior = true;
+      cell->base = size_t(k) * stride_z_ + size_t(j) * stride_y_ + size_t(i);
+      cell->fx = float(u.x - i);
+      cell->fy = float(u.y - j);
+      cell->fz = float(u.z - k);
+    } else {
+      cell->interior = false;
+      corners(u, &cell->corners);
+    }
+  }
+
+  float read(const float* data, const Cell& c) const {
+    if (c.interior) return lerp3(data + c.base, 1, stride_y_, stride_z_, c.fx, c.fy, c.fz);
+    float v = 0;
+    for (int q = 0; q < 8; ++q) v += c.corners.weight[q] * data[c.corners.offset[q]];
+    return v;
+  }
+
+  /// Reads a 3-component (interleaved) channel.
+  void read3(const float* data, const Cell& c, float out[3]) const {
+    if (c.interior) {
+      const float* p = data + 3 * c.base;
+      for (int k = 0; k < 3; ++k) {
+        out[k] = lerp3(p + k, 3, 3 * stride_y_, 3 * stride_z_, c.fx, c.fy, c.fz);
+      }
+      return;
+    }
+    out[0] = out[1] = out[2] = 0;
+    for (int q = 0; q < 8; ++q) {
+      const float wq = c.corners.weight[q];
+      const float* v = data + 3 * c.corners.offset[q];
+      out[0] += wq * v[0];
+      out[1] += wq * v[1];
+      out[2] += wq * v[2];
+    }
+  }
+
+ private:
+  /// Corner offsets and weights of the trilinear lookup at index point u.
+  void corners(const Vec3& u, Corners* c) const {
+    size_t o[3][2];
+    float f[3][2];
+    const int n[3] = {nx_, ny_, nz_};
+    const size_t stride[3] = {1, stride_y_, stride_z_};
+    for (int a = 0; a < 3; ++a) {
+      double fl = std::floor(u[a]);
+      fl = std::min(std::max(fl, -1.0), double(n[a] - 1));
+      const int i0 = int(fl);
+      const float t = float(std::min(std::max(u[a] - fl, 0.0), 1.0));
+      int lo = i0, hi = i0 + 1;
+      float wlo = 1 - t, whi = t;
+      if (lo < 0) {
+        lo = 0;
+        wlo = 0;
+      }
+      if (hi > n[a] - 1) {
+        hi = n[a] - 1;
+        whi = 0;
+      }
+      o[a][0] = size_t(lo) * stride[a];
+      o[a][1] = size_t(hi) * stride[a];
+      f[a][0] = wlo;
+      f[a][1] = whi;
+    }
+    int q = 0;
+    for (int k = 0; k < 2; ++k) {
+      for (int j = 0; j < 2; ++j) {
+        const float wjk = f[2][k] * f[1][j];
+        const size_t ojk = o[2][k] + o[1][j];
+        for (int i = 0; i < 2; ++i, ++q) {
+          c->offset[q] = ojk + o[0][i];
+          c->weight[q] = wjk * f[0][i];
+        }
+      }
+    }
+  }
+
+  int nx_, ny_, nz_;
+  size_t stride_y_, stride_z_;
+};
+
 /// Per-pixel sums of the layers (radiance per the lights' units).
 struct PixelSum {
   Rgb sun_single, multiple, sky, sky_multiple, background;
@@ -220,6 +324,7 @@ class BakeMarcher {
   BakeMarcher(const BakedLight& bake, const Medium& medium, const Sun& sun, const SkyLight& sky,
               const Rgb& sky_mean, const Vec3& sun_dir, double step, double min_transmittance)
       : grid_(bake.grid),
+        lattice_(bake.grid),
         density_(bake.density.data()),
         sky_(sky),
         lut_(*medium.phase),
@@ -366,26 +471,47 @@ class BakeMarcher {
                        " for angular model 'sh'");
     }
     sh_order_ = order;
-    for (int i = 0; i < shCount(order); ++i) {
-      msh_.push_back(channel(bake, bake_grids::photonSh(i).c_str(), 3, true, ""));
-    }
+    useTallyLattice(bake);
+    const bool on = tally_.has_value();
+    auto tally = [&](const std::string& name) {
+      return channel(bake, name.c_str(), 3, true, "", on);
+    };
+    for (int i = 0; i < shCount(order); ++i) msh_.push_back(tally(bake_grids::photonSh(i)));
     if (!sky.black() && bake.find(bake_grids::photonSkySh(0))) {
       for (int i = 0; i < shCount(order); ++i) {
-        msky_sh_.push_back(channel(bake, bake_grids::photonSkySh(i).c_str(), 3, true, ""));
+        msky_sh_.push_back(tally(bake_grids::photonSkySh(i)));
       }
     }
     // The sky's single scattering from the tally of its unscattered light, for the view's
     // direction and the whole phase, instead of the isotropic ambient term.
     if (!sky.black() && bake.find(bake_grids::photonSkyDirectSh(0))) {
       for (int i = 0; i < shCount(order); ++i) {
-        ssky_sh_.push_back(channel(bake, bake_grids::photonSkyDirectSh(i).c_str(), 3, true, ""));
+        ssky_sh_.push_back(tally(bake_grids::photonSkyDirectSh(i)));
       }
     }
     zonal_order_ = photonZonalOrder(bake, order);
     for (int l = order + 1; l <= zonal_order_; ++l) {
-      msh_.push_back(channel(bake, bake_grids::photonZonal(l).c_str(), 3, true, ""));
+      msh_.push_back(tally(bake_grids::photonZonal(l)));
     }
     phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order, zonal_order_));
+  }
+
+  // Where the tallies lie on a lattice of their own: its reader, and the map from the bake
+  // lattice's index coordinates to its own.
+  void useTallyLattice(const BakedLight& bake) {
+    const BakeChannel* first = bake.find(bake_grids::photonSh(0));
+    if (!first || !first->on_tally_grid) return;
+    const BakeGrid& t = bake.tally_grid;
+    tally_.emplace(t);
+    tally_scale_ = grid_.voxel_size / t.voxel_size;
+    tally_offset_ = (grid_.origin - t.origin) / t.voxel_size;
+  }
+
+  // The cell of the tallies at the point of the bake lattice's cell c.
+  const Cell& tallyCell(const Cell& c, Cell* buf) const {
+    if (!tally_) return c;
+    tally_->locate(c.u * tally_scale_ + tally_offset_, buf);
+    return *buf;
   }
 
   // cloudbake:photon_zonal_order: 0 (absent: none) or in (order, kMaxZonalDegree].
@@ -409,9 +535,10 @@ class BakeMarcher {
   // dip below zero where the true in-scattered radiance is small.
   Rgb shSource(const std::vector<const float*>& grids, const Cell& c, const Rgb* w) const {
     Rgb sum(0.0);
+    const LatticeReader& lattice = tally_ ? *tally_ : lattice_;
     for (size_t i = 0; i < grids.size(); ++i) {
       float v[3];
-      read3(grids[i], c, v);
+      lattice.read3(grids[i], c, v);
       sum += w[i] * Rgb(v[0], v[1], v[2]);
     }
     return Rgb(std::max(0.0, sum.x), std::max(0.0, sum.y), std::max(0.0, sum.z));
@@ -468,87 +595,10 @@ class BakeMarcher {
     }
   }
 
-  /// Corner offsets and weights of the trilinear lookup at block-space point w.
-  void corners(const Vec3& w, Corners* c) const {
-    size_t o[3][2];
-    float f[3][2];
-    const int n[3] = {nx_, ny_, nz_};
-    const size_t stride[3] = {1, stride_y_, stride_z_};
-    for (int a = 0; a < 3; ++a) {
-      const double u = w[a] - 1;  // index coordinates
-      double fl = std::floor(u);
-      fl = std::min(std::max(fl, -1.0), double(n[a] - 1));
-      const int i0 = int(fl);
-      const float t = float(std::min(std::max(u - fl, 0.0), 1.0));
-      int lo = i0, hi = i0 + 1;
-      float wlo = 1 - t, whi = t;
-      if (lo < 0) {
-        lo = 0;
-        wlo = 0;
-      }
-      if (hi > n[a] - 1) {
-        hi = n[a] - 1;
-        whi = 0;
-      }
-      o[a][0] = size_t(lo) * stride[a];
-      o[a][1] = size_t(hi) * stride[a];
-      f[a][0] = wlo;
-      f[a][1] = whi;
-    }
-    int q = 0;
-    for (int k = 0; k < 2; ++k) {
-      for (int j = 0; j < 2; ++j) {
-        const float wjk = f[2][k] * f[1][j];
-        const size_t ojk = o[2][k] + o[1][j];
-        for (int i = 0; i < 2; ++i, ++q) {
-          c->offset[q] = ojk + o[0][i];
-          c->weight[q] = wjk * f[0][i];
-        }
-      }
-    }
-  }
-
-  /// Finds the cell of block-space point w.
-  void locate(const Vec3& w, Cell* cell) const {
-    const double ux = w.x - 1, uy = w.y - 1, uz = w.z - 1;  // index coordinates
-    if (ux >= 0 && uy >= 0 && uz >= 0 && ux < nx_ - 1 && uy < ny_ - 1 && uz < nz_ - 1) {
-      const int i = int(ux), j = int(uy), k = int(uz);
-      cell->interior = true;
-      cell->base = size_t(k) * stride_z_ + size_t(j) * stride_y_ + size_t(i);
-      cell->fx = float(ux - i);
-      cell->fy = float(uy - j);
-      cell->fz = float(uz - k);
-    } else {
-      cell->interior = false;
-      corners(w, &cell->corners);
-    }
-  }
-
-  float read(const float* data, const Cell& c) const {
-    if (c.interior) return lerp3(data + c.base, 1, stride_y_, stride_z_, c.fx, c.fy, c.fz);
-    float v = 0;
-    for (int q = 0; q < 8; ++q) v += c.corners.weight[q] * data[c.corners.offset[q]];
-    return v;
-  }
-
-  /// Reads a 3-component (interleaved) channel.
-  void read3(const float* data, const Cell& c, float out[3]) const {
-    if (c.interior) {
-      const float* p = data + 3 * c.base;
-      for (int k = 0; k < 3; ++k) {
-        out[k] = lerp3(p + k, 3, 3 * stride_y_, 3 * stride_z_, c.fx, c.fy, c.fz);
-      }
-      return;
-    }
-    out[0] = out[1] = out[2] = 0;
-    for (int q = 0; q < 8; ++q) {
-      const float wq = c.corners.weight[q];
-      const float* v = data + 3 * c.corners.offset[q];
-      out[0] += wq * v[0];
-      out[1] += wq * v[1];
-      out[2] += wq * v[2];
-    }
-  }
+  /// Finds the cell of block-space point w on the bake's lattice.
+  void locate(const Vec3& w, Cell* cell) const { lattice_.locate(w - Vec3(1.0), cell); }
+  float read(const float* data, const Cell& c) const { return lattice_.read(data, c); }
+  void read3(const float* data, const Cell& c, float out[3]) const { lattice_.read3(data, c, out); }
 
   /// Precomputed's scattered sky light has the angular shape of the sky light the medium
   /// removes: radiance f L_sky (1 - T(x, w)) from direction w, with f = (Co_sky / 4 pi) / (1 - V)
@@ -572,9 +622,13 @@ class BakeMarcher {
 
   void source(const Cell& c, const Vec3& d, const Rgb* shw, Source* s) const {
     s->tsun = read(tsun_, c);
-    if (!msh_.empty()) s->ms = shSource(msh_, c, shw);
-    if (!ssky_sh_.empty()) s->ssky = shSource(ssky_sh_, c, shw);
-    if (!msky_sh_.empty()) s->csky = shSource(msky_sh_, c, shw);
+    if (!msh_.empty()) {
+      Cell buf;
+      const Cell& t = tallyCell(c, &buf);
+      s->ms = shSource(msh_, t, shw);
+      if (!ssky_sh_.empty()) s->ssky = shSource(ssky_sh_, t, shw);
+      if (!msky_sh_.empty()) s->csky = shSource(msky_sh_, t, shw);
+    }
     if (sky_sh_) {
       for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = float(read(sh_[size_t(i)], c));
     } else if (vsky_ && ssky_sh_.empty()) {
@@ -712,6 +766,10 @@ class BakeMarcher {
   }
 
   const BakeGrid& grid_;
+  LatticeReader lattice_;
+  std::optional<LatticeReader> tally_;  // photon's tallies on a lattice of their own
+  double tally_scale_ = 1;              // index on tally_ = index on the lattice x scale + offset
+  Vec3 tally_offset_;
   const float* density_;
   const float* tsun_ = nullptr;
   const float* vsky_ = nullptr;

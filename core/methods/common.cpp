@@ -159,7 +159,8 @@ Json bakeKnobMaterial(const BakeMethod& method, const ShotSpec& shot) {
 }
 
 void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const std::string& what,
-                        const MethodLimits& limits, const std::string& source) {
+                        const MethodLimits& limits, const std::string& source,
+                        const std::string& pointer) {
   if (limits.max_voxels == 0) return;
   // Counted as a cube with a margin: an upper bound, since the volume's bounds are not known
   // before its files are read.
@@ -167,7 +168,7 @@ void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const 
   if (n > double(limits.max_voxels)) {
     std::ostringstream os;
     os.precision(15);
-    os << source << ": /bake/light_resolution: " << what << " of up to (" << resolution
+    os << source << ": " << pointer << ": " << what << " of up to (" << resolution
        << " + 2)^3 gives " << n << " voxels, over this server's limit of " << limits.max_voxels
        << " (--max-voxels)";
     throw InputError(os.str());

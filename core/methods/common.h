@@ -35,9 +35,11 @@ nlohmann::json bakeKnobMaterial(const BakeMethod& method, const ShotSpec& shot);
 nlohmann::json wholeMediumLightKey(const BakeMethod& method, const ShotSpec& shot,
                                    const nlohmann::json& canonical);
 
-/// InputError unless (resolution + 2)^3 * floats_per_voxel * lattices fits max_voxels.
+/// InputError naming `pointer` (the resolution's knob) unless (resolution + 2)^3 *
+/// floats_per_voxel * lattices fits max_voxels.
 void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const std::string& what,
-                        const MethodLimits& limits, const std::string& source);
+                        const MethodLimits& limits, const std::string& source,
+                        const std::string& pointer = "/bake/light_resolution");
 
 /// InputError naming `pointer` and --max-points when `points` exceeds the server's limit.
 void checkPointCount(int64_t points, const std::string& pointer, const MethodLimits& limits,

@@ -21,6 +21,10 @@ std::vector<Knob> photonKnobs() {
       Knob::integer("order", 1, kMaxShDegree, d.order,
                     "highest spherical-harmonic degree of the tallied radiance: (order + 1)^2 "
                     "coefficients per voxel and colour channel"),
+      Knob::integer("tally_resolution", 0, 1024, d.tally_resolution,
+                    "voxels along the longest side of the tallies' lattice (0: "
+                    "light_resolution); the scattered light is smooth, so a coarser lattice "
+                    "than the transmittance's gathers more photons per voxel"),
       Knob::integer("zonal_order", 0, kMaxZonalDegree, d.zonal_order,
                     "highest degree of the extra zonal terms of the sunlight's tally about the "
                     "sun's axis, where its forward peak lies (0: none; else above order): "
@@ -51,6 +55,12 @@ class PhotonMethod final : public BakeMethod {
 
   void validate(const ShotSpec& shot, const std::string& source) const override {
     const PhotonBakeOptions o = photonBakeOptions(shot);
+    if (o.tally_resolution != 0 && o.tally_resolution < 8) {
+      throw InputError(source +
+                       ": /bake/tally_resolution: must be 0 (light_resolution) or in "
+                       "[8, 1024], got " +
+                       std::to_string(o.tally_resolution));
+    }
     if (o.zonal_order != 0 && o.zonal_order <= o.order) {
       throw InputError(source + ": /bake/zonal_order: must be 0 (none) or above order " +
                        std::to_string(o.order) + " (the zonal terms add degrees order + 1 .. " +
@@ -67,17 +77,20 @@ class PhotonMethod final : public BakeMethod {
                   const std::function<bool(const std::string&)>& lookup) const override {
     const PhotonBakeOptions o = photonBakeOptions(shot);
     std::vector<std::string> lines = lightBakePlanLines(shot, o.light_resolution);
-    lines.push_back("multiple scattering: " + std::to_string(o.photons) + " sun photons" +
-                    (o.sky ? " and as many sky photons (their unscattered light too: the sky's "
-                             "single scattering)"
-                           : "") +
-                    ", tallied in spherical harmonics to degree " + std::to_string(o.order) + " (" +
-                    std::to_string(shCount(o.order)) + " coefficients per voxel)" +
-                    (o.zonal_order > o.order
-                         ? ", and the sunlight's in zonal terms about the sun's axis "
-                           "to degree " +
-                               std::to_string(o.zonal_order)
-                         : std::string()));
+    lines.push_back(
+        "multiple scattering: " + std::to_string(o.photons) + " sun photons" +
+        (o.sky ? " and as many sky photons (their unscattered light too: the sky's "
+                 "single scattering)"
+               : "") +
+        ", tallied on a lattice of " +
+        std::to_string(o.tally_resolution > 0 ? o.tally_resolution : o.light_resolution) +
+        " voxels along the longest side in spherical harmonics to degree " +
+        std::to_string(o.order) + " (" + std::to_string(shCount(o.order)) +
+        " coefficients per voxel)" +
+        (o.zonal_order > o.order ? ", and the sunlight's in zonal terms about the sun's axis "
+                                   "to degree " +
+                                       std::to_string(o.zonal_order)
+                                 : std::string()));
     return lightBakePlan(shot, keys, lookup, std::move(lines));
   }
 
@@ -88,11 +101,15 @@ class PhotonMethod final : public BakeMethod {
     // per coefficient and per tally, plus the lattice's own grids.
     const double sky_tallies = o.sky ? 2 : 0;  // sky scattered and unscattered
     const double zonal = std::max(0, o.zonal_order - o.order);
+    // The bake's lattice: density, transmittance to the sun, sky visibility, Cd (RGB).
+    checkLatticeVoxels(o.light_resolution, 6, "a photon bake lattice", limits, source);
     checkLatticeVoxels(
-        o.light_resolution, 3 + ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3,
-        "a photon bake lattice with its tallies of " + std::to_string(shCount(o.order)) +
+        o.tally_resolution > 0 ? o.tally_resolution : o.light_resolution,
+        ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3,
+        "a photon tally lattice of " + std::to_string(shCount(o.order)) +
             " spherical-harmonic coefficients (/bake/order " + std::to_string(o.order) + ")",
-        limits, source);
+        limits, source,
+        o.tally_resolution > 0 ? "/bake/tally_resolution" : "/bake/light_resolution");
   }
 
   void run(MethodRun& run) const override {
@@ -130,6 +147,7 @@ PhotonBakeOptions photonBakeOptions(const ShotSpec& shot) {
   o.photons = k.integer("photons");
   o.order = int(k.integer("order"));
   o.zonal_order = int(k.integer("zonal_order"));
+  o.tally_resolution = int(k.integer("tally_resolution"));
   o.step = k.optionalNumber("step").value_or(0.0);
   o.sky = needsSky(shot);
   o.seed = shot.bake.seed;

@@ -67,7 +67,11 @@ json cheapBake(const std::string& method) {
             {"transfer_resolution", 12}};
   }
   if (method == "photon") {
-    return {{"method", method}, {"light_resolution", 8}, {"photons", 4000}, {"order", 2}};
+    return {{"method", method},
+            {"light_resolution", 8},
+            {"tally_resolution", 8},
+            {"photons", 4000},
+            {"order", 2}};
   }
   return {{"method", method}};
 }

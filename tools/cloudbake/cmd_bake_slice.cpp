@@ -42,6 +42,7 @@ struct SliceOptions {
 struct Slice {
   const BakedLight& bake;
   const std::vector<float>* data = nullptr;
+  std::shared_ptr<std::vector<float>> resampled = nullptr;  // a tally on the bake's lattice
   int components = 1;
   int a = 1, u = 0, v = 2;  // slice normal, image right and up
   int n[3] = {0, 0, 0};
@@ -75,6 +76,19 @@ Slice findSlice(const BakedLight& bake, const SliceOptions& opt) {
     }
     s.data = &c->data;
     s.components = c->components;
+    if (c->on_tally_grid) {
+      // Photon's tallies lie on their own lattice: shown as views read them, interpolated at
+      // the voxel centres of the bake's lattice.
+      const BakeGrid& g = bake.grid;
+      s.resampled = std::make_shared<std::vector<float>>(g.voxelCount() * size_t(c->components));
+      for (int k = 0; k < g.nz; ++k)
+        for (int j = 0; j < g.ny; ++j)
+          for (int i = 0; i < g.nx; ++i) {
+            sampleTrilinear(bake.tally_grid, c->data.data(), c->components, g.center(i, j, k),
+                            s.resampled->data() + g.index(i, j, k) * size_t(c->components));
+          }
+      s.data = s.resampled.get();
+    }
   }
   const BakeGrid& g = bake.grid;
   s.a = opt.axis[0] - 'x';

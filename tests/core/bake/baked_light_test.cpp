@@ -154,6 +154,44 @@ TEST_F(BakeFile, RoundTripsExactlyWithVdbConventions) {
   EXPECT_FLOAT_EQ(float(vdb.vec3At("Co", c).z), b.find("Co")->data[3 * b.grid.index(5, 4, 6) + 2]);
 }
 
+// Method photon's tallies on a coarser lattice of their own: they keep every value (no trim to
+// the density's support), a file stores them on their own transform and reads back the same,
+// and a size that does not match their lattice is refused naming the grid.
+TEST_F(BakeFile, TallyLatticeRoundTrips) {
+  BakedLight b = smallBake();
+  b.tally_grid.origin = Vec3(-0.875, 0.625, 2.125);
+  b.tally_grid.voxel_size = 0.5;
+  b.tally_grid.nx = b.tally_grid.ny = b.tally_grid.nz = 5;
+  BakeChannel& sh = b.addOnTallyGrid("ms_sh_0", 3);
+  ASSERT_EQ(sh.data.size(), size_t(5 * 5 * 5 * 3));
+  for (size_t i = 0; i < sh.data.size(); ++i) sh.data[i] = i % 7 == 0 ? 0.f : float(i) * 0.01f;
+  b.trimToSupport();
+  EXPECT_FLOAT_EQ(b.find("ms_sh_0")->data[3], 0.03f) << "a tally is not trimmed";
+  EXPECT_NO_THROW(b.validate("bake"));
+  const std::string file = path("tally.vdb");
+  writeBakedLight(file, b);
+  const BakedLight r = readBakedLight(file);
+  const BakeChannel* t = r.find("ms_sh_0");
+  ASSERT_NE(t, nullptr);
+  EXPECT_TRUE(t->on_tally_grid);
+  EXPECT_EQ(t->data, sh.data);
+  EXPECT_EQ(r.tally_grid.nx, 5);
+  EXPECT_NEAR(r.tally_grid.voxel_size, 0.5, 1e-12);
+  EXPECT_NEAR(length(r.tally_grid.origin - b.tally_grid.origin), 0, 1e-12);
+  EXPECT_FALSE(r.find(bake_grids::kSunTransmittance)->on_tally_grid);
+  EXPECT_EQ(r.find(bake_grids::kSunTransmittance)->data,
+            b.find(bake_grids::kSunTransmittance)->data);
+  VdbFileReader vdb(file);
+  EXPECT_EQ(vdb.fileMetadata().at("cloudbake:tally_lattice"), "5 5 5");
+
+  BakedLight bad = b;
+  bad.channels["ms_sh_0"].data.resize(10);
+  expectErrorNaming([&] { bad.validate("bake"); }, "grid 'ms_sh_0'");
+  BakedLight lost = b;
+  lost.tally_grid.nx = 0;
+  expectErrorNaming([&] { lost.validate("bake"); }, "tally lattice");
+}
+
 TEST_F(BakeFile, BadFilesAreRefusedNamingThePath) {
   const std::string missing = path("missing.vdb");
   expectErrorNaming([&] { readBakedLight(missing); }, missing);

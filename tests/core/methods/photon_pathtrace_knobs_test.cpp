@@ -49,6 +49,12 @@ TEST(PhotonKnobs, ParsedAndValidated) {
             0);
   expectRejected(R"({"method": "photon", "order": 5, "zonal_order": 5})", "/bake/zonal_order");
   expectRejected(R"({"method": "photon", "zonal_order": 65})", "/bake/zonal_order");
+  expectRejected(R"({"method": "photon", "tally_resolution": 4})", "/bake/tally_resolution");
+  expectRejected(R"({"method": "photon", "tally_resolution": 2048})", "/bake/tally_resolution");
+  EXPECT_EQ(
+      photonBakeOptions(parseShot(shot(R"({"method": "photon", "tally_resolution": 24})"), ""))
+          .tally_resolution,
+      24);
   expectRejected(R"({"method": "photon", "zonal_order": -1})", "/bake/zonal_order");
   expectRejected(R"({"method": "photon", "photons": 10})", "/bake/photons");
   expectRejected(R"({"method": "photon", "photons": "many"})", "/bake/photons");
@@ -56,19 +62,33 @@ TEST(PhotonKnobs, ParsedAndValidated) {
 }
 
 TEST(PhotonKnobs, LimitsNameTheLatticeAndTheOrder) {
-  const ShotSpec s = parseShot(shot(R"({"method": "photon", "order": 8})"), "");
   MethodLimits limits;
-  limits.max_voxels = 64 * 64 * 64;
-  try {
-    photonMethod().checkLimits(s, limits, "shot.json");
-    ADD_FAILURE() << "no error";
-  } catch (const InputError& e) {
-    const std::string m = e.what();
-    EXPECT_NE(m.find("/bake/light_resolution"), std::string::npos) << m;
-    EXPECT_NE(m.find("/bake/order 8"), std::string::npos) << m;
+  limits.max_voxels = 20000000;  // the bake's lattice at 128 fits, order 8's tallies do not
+  for (const char* knobs : {R"("order": 8)", R"("order": 8, "tally_resolution": 0)"}) {
+    const ShotSpec s = parseShot(shot(std::string(R"({"method": "photon", )") + knobs + "}"), "");
+    const bool own = photonBakeOptions(s).tally_resolution > 0;
+    try {
+      photonMethod().checkLimits(s, limits, "shot.json");
+      ADD_FAILURE() << knobs << ": no error";
+    } catch (const InputError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(own ? "/bake/tally_resolution" : "/bake/light_resolution"),
+                std::string::npos)
+          << m;
+      EXPECT_NE(m.find("/bake/order 8"), std::string::npos) << m;
+    }
+    limits.max_voxels = 0;  // no limit
+    EXPECT_NO_THROW(photonMethod().checkLimits(s, limits, "shot.json"));
+    limits.max_voxels = 20000000;
   }
-  limits.max_voxels = 0;  // no limit
-  EXPECT_NO_THROW(photonMethod().checkLimits(s, limits, "shot.json"));
+  const ShotSpec big =
+      parseShot(shot(R"({"method": "photon", "light_resolution": 1024, "order": 1})"), "");
+  try {
+    photonMethod().checkLimits(big, limits, "shot.json");
+    ADD_FAILURE() << "no error for light_resolution 1024";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/bake/light_resolution"), std::string::npos) << e.what();
+  }
 }
 
 TEST(PathtraceKnobs, TrackingAndMajorantCell) {
