@@ -16,11 +16,13 @@ each photon configuration once, and prints
   seeds, divided by sqrt(2) again for their mean (the floor under every rel. RMSE);
 - bake s, s/view, peak MiB: from each child's `cloudbake render --stats-json`.
 
-Scenes: perlin, bunny, disney (Disney's cloud, Walt Disney Animation Studios, CC-BY-SA 3.0; HG
-0.85 as in bench/scenes). The bunny and Disney scenes need ../shared/data and are skipped without.
+Scenes: perlin, bunny, disney (Disney's cloud, Walt Disney Animation Studios, CC-BY-SA 3.0),
+thin (an optically thin Perlin layer, seen from below against the sun and from above) and
+cumulus (a dense Perlin cumulus lit from behind, seen against the sun and from its lit side); HG
+0.85 as in bench/scenes. The bunny and Disney scenes need ../shared/data and are skipped without.
 
 Usage: bench/photon_bench.py [--build build] [--threads 2] [--res 160] [--ref-spp 1024]
-                             [--samples 16] [--scenes perlin,bunny,disney]
+                             [--samples 16] [--scenes perlin,bunny,disney,thin,cumulus]
                              [--sweep default|order|zonal|lattice|quick] [--work DIR]
 """
 import argparse
@@ -36,7 +38,8 @@ sys.path.insert(0, os.path.join(ROOT, "client", "python"))
 from cloudbake_shot_paths import path_slots  # noqa: E402  (the keys of a shot that name files)
 
 SCENES = {"perlin": "perlin_cloud.json", "bunny": "bunny_cloud.json",
-          "disney": "disney_cloud.json"}
+          "disney": "disney_cloud.json", "thin": "thin_layer.json",
+          "cumulus": "cumulus_backlit.json"}
 # (photons, order, light_resolution, tally_resolution, zonal_order) per sweep: the knobs grow
 # together along "default" (its second row is the method's defaults), the order alone along
 # "order", the zonal terms alone along "zonal", the lattices alone along "lattice".

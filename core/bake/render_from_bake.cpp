@@ -198,7 +198,8 @@ struct Corners {
 /// Where a lookup reads the lattice: inside (all eight voxels exist; the common case) by the
 /// lower corner's offset and the fractions, otherwise by explicit corners.
 struct Cell {
-  Vec3 u;  // index coordinates of the point
+  Vec3 u;        // index coordinates of the point
+  double t = 0;  // its distance along the view ray (set by the march)
   bool interior = false;
   size_t base = 0;
   float fx = 0, fy = 0, fz = 0;
@@ -442,6 +443,12 @@ class BakeMarcher {
   }
 
  private:
+  /// The tallies' in-scattered light at t = k x tally_dt_ along a ray.
+  struct TallyAnchor {
+    int64_t k = std::numeric_limits<int64_t>::min();
+    Rgb ms, ssky, csky;
+  };
+
   struct RayState {
     Vec3 w0, dw, d;
     double transmittance = 1;
@@ -453,6 +460,7 @@ class BakeMarcher {
     Rgb sky_ms_sh[kShCoefficients];       // precomputed: integrals of T_v sigma_t f T_sky,i
     // Photon tallies: p_l Y_lm(-d) per coefficient, then the zonal terms'.
     Rgb shw[shCount(kMaxShDegree) + kMaxZonalDegree];
+    TallyAnchor anchor[2];  // the last two tally anchors along the ray (tallySources)
     bool done = false;
   };
 
@@ -505,13 +513,44 @@ class BakeMarcher {
     tally_.emplace(t);
     tally_scale_ = grid_.voxel_size / t.voxel_size;
     tally_offset_ = (grid_.origin - t.origin) / t.voxel_size;
+    tally_dt_ = 0.5 * t.voxel_size;
   }
 
-  // The cell of the tallies at the point of the bake lattice's cell c.
-  const Cell& tallyCell(const Cell& c, Cell* buf) const {
-    if (!tally_) return c;
-    tally_->locate(c.u * tally_scale_ + tally_offset_, buf);
-    return *buf;
+  // The tallies' terms at distance t along the ray, interpolated linearly between anchors
+  // every tally_dt_ (half a tally voxel, as the march steps half a voxel of its own lattice):
+  // the tallies vary on their coarser lattice, and their coefficient reads are most of a
+  // sample's cost. Anchors lie at fixed distances along the ray, so an image does not depend on
+  // how the march splits it.
+  void tallySources(RayState* rs, double t, Rgb* ms, Rgb* ssky, Rgb* csky) const {
+    const double x = t / tally_dt_;
+    const double fk = std::floor(x);
+    const int64_t k = int64_t(fk);
+    const double f = x - fk;
+    TallyAnchor* a = anchor(rs, k, nullptr);
+    const TallyAnchor* b = anchor(rs, k + 1, a);
+    *ms = a->ms * (1 - f) + b->ms * f;
+    *ssky = a->ssky * (1 - f) + b->ssky * f;
+    *csky = a->csky * (1 - f) + b->csky * f;
+  }
+
+  // The ray's anchor k, evaluated unless one of its two slots holds it (not `keep`).
+  TallyAnchor* anchor(RayState* rs, int64_t k, const TallyAnchor* keep) const {
+    for (TallyAnchor& slot : rs->anchor) {
+      if (slot.k == k) return &slot;
+    }
+    TallyAnchor* slot = &rs->anchor[0] == keep              ? &rs->anchor[1]
+                        : &rs->anchor[1] == keep            ? &rs->anchor[0]
+                        : rs->anchor[0].k < rs->anchor[1].k ? &rs->anchor[0]
+                                                            : &rs->anchor[1];
+    Cell c;
+    lattice_.locate(rs->w0 + rs->dw * (double(k) * tally_dt_) - Vec3(1.0), &c);
+    Cell tc;
+    tally_->locate(c.u * tally_scale_ + tally_offset_, &tc);
+    slot->k = k;
+    slot->ms = shSource(msh_, tc, rs->shw);
+    slot->ssky = ssky_sh_.empty() ? Rgb(0.0) : shSource(ssky_sh_, tc, rs->shw);
+    slot->csky = msky_sh_.empty() ? Rgb(0.0) : shSource(msky_sh_, tc, rs->shw);
+    return slot;
   }
 
   // cloudbake:photon_zonal_order: 0 (absent: none) or in (order, kMaxZonalDegree].
@@ -620,14 +659,15 @@ class BakeMarcher {
     float tsh[kShCoefficients] = {};
   };
 
-  void source(const Cell& c, const Vec3& d, const Rgb* shw, Source* s) const {
+  void source(const Cell& c, RayState* rs, Source* s) const {
+    const Vec3& d = rs->d;
     s->tsun = read(tsun_, c);
-    if (!msh_.empty()) {
-      Cell buf;
-      const Cell& t = tallyCell(c, &buf);
-      s->ms = shSource(msh_, t, shw);
-      if (!ssky_sh_.empty()) s->ssky = shSource(ssky_sh_, t, shw);
-      if (!msky_sh_.empty()) s->csky = shSource(msky_sh_, t, shw);
+    if (tally_) {
+      tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
+    } else if (!msh_.empty()) {
+      s->ms = shSource(msh_, c, rs->shw);
+      if (!ssky_sh_.empty()) s->ssky = shSource(ssky_sh_, c, rs->shw);
+      if (!msky_sh_.empty()) s->csky = shSource(msky_sh_, c, rs->shw);
     }
     if (sky_sh_) {
       for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = float(read(sh_[size_t(i)], c));
@@ -717,6 +757,7 @@ class BakeMarcher {
     Cell* prev = &buf[0];
     Cell* cur = &buf[1];
     locate(s->w0 + s->dw * t0, prev);
+    prev->t = t0;
     double sigma_prev = extinction_ * read(density_, *prev);
     Source src_prev, src_cur;
     bool have_prev = false;  // src_prev computed (sources are read only next to density)
@@ -724,11 +765,12 @@ class BakeMarcher {
     for (int64_t i = 1; i <= n; ++i) {
       const double t = i == n ? t1 : t0 + double(i) * dt;
       locate(s->w0 + s->dw * t, cur);
+      cur->t = t;
       const double sigma = extinction_ * read(density_, *cur);
       const double delta = 0.5 * (sigma_prev + sigma) * dt;
       if (delta > 0) {
-        if (!have_prev) source(*prev, s->d, s->shw, &src_prev);
-        source(*cur, s->d, s->shw, &src_cur);
+        if (!have_prev) source(*prev, s, &src_prev);
+        source(*cur, s, &src_cur);
         double e, w0, w1;
         stepWeights(delta, &e, &w0, &w1);
         const double a0 = transmittance * w0, a1 = transmittance * w1;
@@ -770,6 +812,7 @@ class BakeMarcher {
   std::optional<LatticeReader> tally_;  // photon's tallies on a lattice of their own
   double tally_scale_ = 1;              // index on tally_ = index on the lattice x scale + offset
   Vec3 tally_offset_;
+  double tally_dt_ = 1;  // world units between the tallies' anchors along a ray
   const float* density_;
   const float* tsun_ = nullptr;
   const float* vsky_ = nullptr;

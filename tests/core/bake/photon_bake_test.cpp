@@ -194,6 +194,43 @@ TEST(PhotonBake, TallyLatticeCoarserThanTheBake) {
   EXPECT_EQ(b.metadata.at("cloudbake:tally_resolution"), "16");
 }
 
+// The tally's noise estimate (even against odd photons) against the noise measured between two
+// bakes of other seeds: RMS over the tally voxels, weighted by density, of the difference of
+// their fluences over sqrt(2), relative to the RMS fluence. They must agree within 1.5x.
+TEST(PhotonBake, TallyNoiseEstimateMatchesTheMeasuredNoise) {
+  const Medium m = sphere(4, Rgb(0.95), std::make_shared<HenyeyGreensteinPhase>(0.8));
+  const Vec3 sun = normalize(Vec3(1, 0, 0.3));
+  for (int64_t photons : {int64_t(20000), int64_t(160000)}) {
+    PhotonBakeOptions o = small(photons, 2);
+    o.sky = false;
+    o.light_resolution = 32;
+    o.tally_resolution = 16;
+    o.seed = 7;
+    const BakedLight a = bakePhoton(m, sun, o);
+    o.seed = 8;
+    const BakedLight b = bakePhoton(m, sun, o);
+    const std::vector<float>& fa = a.find(bake_grids::photonSh(0))->data;
+    const std::vector<float>& fb = b.find(bake_grids::photonSh(0))->data;
+    const BakeGrid& t = a.tally_grid;
+    double diff = 0, mean = 0;
+    for (int k = 0; k < t.nz; ++k)
+      for (int j = 0; j < t.ny; ++j)
+        for (int i = 0; i < t.nx; ++i) {
+          const size_t v = t.index(i, j, k);
+          const double w = sampleTrilinear(a.grid, a.density.data(), t.center(i, j, k));
+          for (int c = 0; c < 3; ++c) {
+            const double x = fa[3 * v + size_t(c)], y = fb[3 * v + size_t(c)];
+            diff += w * (x - y) * (x - y) / 2;
+            mean += w * (x * x + y * y) / 2;
+          }
+        }
+    const double measured = std::sqrt(diff / mean);
+    const double estimated = std::stod(a.metadata.at("cloudbake:tally_noise"));
+    EXPECT_GT(estimated, measured / 1.5) << photons << " photons, measured " << measured;
+    EXPECT_LT(estimated, measured * 1.5) << photons << " photons, measured " << measured;
+  }
+}
+
 // The bake's own error estimates: the tally's noise falls as 1 / sqrt(photons), the truncation
 // as the order grows.
 TEST(PhotonBake, ErrorEstimatesFallAsPhotonsAndOrderGrow) {
