@@ -9,7 +9,7 @@ build="${BUILD_DIR:-$root/build}"
 out="${OUT_DIR:-$root/out/perlin_cloud}"
 state="${STATE_DIR:-$root/out/server-state}"
 log="$root/out/server.log"
-mkdir -p "$out" "$state"
+mkdir -p "$out" "$state" "$(dirname "$log")"
 
 # Port 0: the OS picks a free port, which the server logs.
 "$build/server/cloudbake-server" --listen 127.0.0.1:0 --cache-dir "$state" >"$log" 2>&1 &
