@@ -96,7 +96,11 @@ grpc::Status BakeServiceImpl::SubmitJob(Ctx* ctx, const v1::SubmitJobRequest* re
   return guarded("SubmitJob", [&] {
     // A client that gave up while the request was queued gets no job it cannot learn about.
     if (ctx->IsCancelled()) return abandoned(ctx, "SubmitJob");
-    const SubmitInput input = fromProto(*request);
+    SubmitInput input = fromProto(*request);
+    // Staging many assets or planning a big shot can outlast the client's deadline: stop then.
+    input.abandoned = [ctx] {
+      return ctx->IsCancelled() || ctx->deadline() <= std::chrono::system_clock::now();
+    };
     if (request->dry_run()) {
       toProto(jobs_.plan(input), reply->mutable_plan());
     } else {

@@ -225,6 +225,17 @@ JobManager::~JobManager() {
   ::close(lock_fd_);  // releases the flock
 }
 
+namespace {
+
+void stopIfAbandoned(const SubmitInput& input, const char* when) {
+  if (input.abandoned && input.abandoned()) {
+    throw Cancelled(std::string("submit abandoned by its client (deadline passed or cancelled) ") +
+                    when);
+  }
+}
+
+}  // namespace
+
 JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::string& dir) {
   Prepared p;
   p.input = input;
@@ -240,6 +251,7 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
   checkAssetConflicts(rels, input);
   fs::create_directories(input_dir);
   for (size_t i = 0; i < input.assets.size(); ++i) {
+    stopIfAbandoned(input, "while its assets were staged");
     const std::string& rel = rels[i];
     const std::string& sha = input.assets[i].second;
     if (!isSha256Hex(sha)) {
@@ -252,6 +264,7 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
     }
     linkOrCopy(stored, (fs::path(input_dir) / rel).string());
   }
+  stopIfAbandoned(input, "before its shot was read");
   ParseOptions po;
   po.allowed_roots = {input_dir};
   po.source_name = "shot.json";
@@ -305,6 +318,7 @@ JobPlan JobManager::plan(const SubmitInput& input) {
     }
   } cleanup{dir};
   const Prepared p = prepare(input, dir);
+  stopIfAbandoned(input, "before its plan was made");
   JobPlan plan;
   plan.shot_name = p.shot.name;
   plan.method = p.shot.bake.method;

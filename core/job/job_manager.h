@@ -8,6 +8,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -66,6 +67,10 @@ struct SubmitInput {
   int samples = -1;                                         ///< override; -1: the shot's
   /// Reuse a cached render whose sun direction is within this angle (degrees; 0: exact only).
   double sun_tolerance_deg = 0;
+  /// Optional: true once the caller's client gave up (its deadline passed or it cancelled).
+  /// Staging assets and planning stop then with Cancelled, so a request nobody waits for does
+  /// not keep the server busy.
+  std::function<bool()> abandoned;
 };
 
 /// What a submit would do (dry run): per view whether its render is cached.

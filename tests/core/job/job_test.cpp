@@ -465,6 +465,39 @@ TEST(JobManager, AssetPathsAreBoundedAndConflictsNamed) {
   fs::remove_all(dir);
 }
 
+// A submit or dry run whose client gave up stops staging and planning with Cancelled, leaving no
+// temporary folder behind; one whose client still waits is unaffected.
+TEST(JobManager, AbandonedSubmitStopsAndCleansUp) {
+  const fs::path dir = freshDir("abandoned");
+  JobManagerOptions o;
+  o.state_dir = dir.string();
+  JobManager jobs(o);
+  SubmitInput in;
+  in.shot_json = R"({"version": 1, "name": "a",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": 2, "albedo": 0.9, "phase": {"type": "isotropic"}},
+    "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]}},
+    "bake": {"method": "single"},
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [8, 8]}]})";
+  int calls = 0;
+  in.abandoned = [&] { return ++calls > 0; };  // gone before the first asset is staged
+  in.assets = {{"a.vdb", std::string(64, 'a')}, {"b.vdb", std::string(64, 'b')}};
+  EXPECT_THROW(jobs.plan(in), Cancelled);  // not NotFound: no asset was looked up
+  EXPECT_EQ(calls, 1);
+  in.assets.clear();
+  calls = 0;
+  in.abandoned = [&] { return ++calls > 1; };  // gives up after the first check
+  EXPECT_THROW(jobs.plan(in), Cancelled);      // after the shot is read, before the plan
+  EXPECT_THROW(jobs.submit(in), Cancelled);
+  EXPECT_TRUE(jobs.list(std::nullopt, 10).empty());
+  const fs::path tmp = dir / "tmp";
+  EXPECT_TRUE(!fs::exists(tmp) || fs::is_empty(tmp));
+  in.abandoned = [] { return false; };
+  EXPECT_EQ(jobs.plan(in).method, "single");
+  fs::remove_all(dir);
+}
+
 // A job whose record is corrupt is reported FAILED with the reason, not dropped silently; a
 // folder without any record (a submit that crashed before it was acknowledged) is skipped.
 TEST(JobStore, CorruptRecordIsReportedFailedNotDropped) {
