@@ -100,7 +100,15 @@ void checkShotPoints(const ShotSpec& shot, int64_t max_points, const std::string
 void checkMeshVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::string& source) {
   const auto* m = std::get_if<MeshVolumeSpec>(&shot.volume);
   if (!m || max_voxels == 0) return;
-  const TriangleMesh mesh = readMesh(m->path);
+  // Read here before the scene builder reads it: its errors name the field as the builder's do.
+  TriangleMesh mesh;
+  try {
+    mesh = readMesh(m->path);
+  } catch (const MissingFileError& e) {
+    throw MissingFileError(source + ": /volume/mesh: " + e.what());
+  } catch (const InputError& e) {
+    throw InputError(source + ": /volume/mesh: " + e.what());
+  }
   Bounds3 b;
   b.min = b.max = mesh.vertices.at(0);
   for (const Vec3& v : mesh.vertices) {

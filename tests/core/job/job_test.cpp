@@ -56,6 +56,36 @@ TEST(VolumeLimits, CountsVoxelsAsTheBuildersAllocateThem) {
   EXPECT_TRUE(std::isinf(boxVoxels(Vec3(1, 1, 1), 1e-300)));
 }
 
+// A bad mesh read for the server's voxel limit names the field, as the scene builder's read does
+// in-process (it used to reach clients as a bare "<file>: mesh has no triangles").
+TEST(VolumeLimits, BadMeshNamesTheField) {
+  const fs::path dir = freshDir("bad-mesh");
+  const std::string obj = (dir / "empty.obj").string();
+  std::ofstream(obj) << "# no faces\nv 0 0 0\nv 1 0 0\n";
+  ShotSpec shot = parse(tinyShot());
+  MeshVolumeSpec mesh;
+  mesh.path = obj;
+  shot.volume = mesh;
+  try {
+    checkMeshVoxels(shot, 1000, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("shot.json: /volume/mesh: "), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("no triangles"), std::string::npos) << e.what();
+  }
+  mesh.path = (dir / "missing.obj").string();  // removed after the parse
+  shot.volume = mesh;
+  try {
+    checkMeshVoxels(shot, 1000, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("shot.json: /volume/mesh: "), std::string::npos)
+        << e.what();
+  }
+  fs::remove_all(dir);
+}
+
 TEST(VolumeLimits, ShotsOverTheLimitNameTheField) {
   const ShotSpec sphere = parse(tinyShot());  // bake.vdb of 8^3 = 512 voxels
   EXPECT_NO_THROW(checkShotVoxels(sphere, 512, "shot.json"));
