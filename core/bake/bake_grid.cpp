@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/math/parallel.h"
+
 namespace cloudbake {
 
 void sampleTrilinear(const BakeGrid& g, const float* data, int components, const Vec3& p,
@@ -38,6 +40,20 @@ float sampleTrilinear(const BakeGrid& grid, const float* data, const Vec3& p) {
   float v;
   sampleTrilinear(grid, data, 1, p, &v);
   return v;
+}
+
+std::vector<float> resampleTrilinear(const BakeGrid& from, const float* data, int components,
+                                     const BakeGrid& to) {
+  std::vector<float> out(to.voxelCount() * size_t(components));
+  parallelFor(0, to.nz, [&](int k) {
+    for (int j = 0; j < to.ny; ++j) {
+      for (int i = 0; i < to.nx; ++i) {
+        sampleTrilinear(from, data, components, to.center(i, j, k),
+                        out.data() + to.index(i, j, k) * size_t(components));
+      }
+    }
+  });
+  return out;
 }
 
 double marchTransmittance(const BakeGrid& grid, const float* density, double extinction,

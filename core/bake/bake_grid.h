@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "core/math/vec3.h"
 
@@ -41,6 +42,11 @@ void sampleTrilinear(const BakeGrid& grid, const float* data, int components, co
 
 /// Single-component convenience form of sampleTrilinear.
 float sampleTrilinear(const BakeGrid& grid, const float* data, const Vec3& p);
+
+/// A channel of `from` (`components` floats per voxel) read by sampleTrilinear at every voxel
+/// centre of `to`: to.voxelCount() * components values. Parallel, deterministic.
+std::vector<float> resampleTrilinear(const BakeGrid& from, const float* data, int components,
+                                     const BakeGrid& to);
 
 /// Transmittance exp(-extinction * integral of density) from `p` along unit direction `dir` to
 /// where the ray leaves the lattice, by ray marching the trilinear density with steps of at most

@@ -93,13 +93,8 @@ class PhotonTally {
   /// sqrt((2l + 1) / (4 pi)) P_l(d . axis).
   void basis(const Vec3& d, double* y) const {
     shBasisUpTo(order_, d, y);
-    if (top_ <= order_) return;
-    double p[kMaxZonalDegree + 1];
-    legendreP(top_, std::clamp(dot(d, axis_), -1.0, 1.0), p);
-    double* z = y + shCount(order_);
-    for (int l = order_ + 1; l <= top_; ++l) z[l - order_ - 1] = zonalNorm(l) * p[l];
+    if (top_ > order_) shZonal(order_ + 1, top_, dot(d, axis_), y + shCount(order_));
   }
-  static double zonalNorm(int l) { return std::sqrt((2 * l + 1) / (4 * kPi)); }
   /// The raw fixed-point sum of coefficient i, channel c, at voxel v (a common scale).
   double count(size_t v, int i, int c) const {
     return double(counts_[(v * size_t(ncoef_) + size_t(i)) * 3 + size_t(c)]);
@@ -361,32 +356,16 @@ void addPhotonMeanRadiance(BakedLight* bake) {
   const BakeChannel* l0 = bake->find(bake_grids::photonSh(0));
   BakeChannel& cd = bake->add(bake_grids::kCd, 3);
   const double inv4pi = 1 / (4 * kPi);
-  const BakeGrid& g = bake->grid;
-  parallelFor(0, g.nz, [&](int k) {
-    for (int j = 0; j < g.ny; ++j) {
-      for (int i = 0; i < g.nx; ++i) {
-        const size_t v = g.index(i, j, k);
-        float l[3] = {0, 0, 0};
-        if (l0) sampleTrilinear(bake->gridOf(*l0), l0->data.data(), 3, g.center(i, j, k), l);
-        for (int c = 0; c < 3; ++c) {
-          const double fluence = std::max(0.0, kSqrt4Pi * l[c]);
-          cd.data[v * 3 + c] = float(((t ? t->data[v] : 0.0) + fluence) * inv4pi);
-        }
-      }
+  const size_t voxels = bake->grid.voxelCount();
+  const std::vector<float> l =
+      l0 ? resampleTrilinear(bake->gridOf(*l0), l0->data.data(), 3, bake->grid)
+         : std::vector<float>(voxels * 3, 0.f);
+  for (size_t v = 0; v < voxels; ++v) {
+    for (int c = 0; c < 3; ++c) {
+      const double fluence = std::max(0.0, kSqrt4Pi * l[v * 3 + c]);
+      cd.data[v * 3 + c] = float(((t ? t->data[v] : 0.0) + fluence) * inv4pi);
     }
-  });
-}
-
-// The bake's density at the tally lattice's voxel centres: the weights of the error estimates.
-std::vector<float> densityOnTallyGrid(const BakedLight& bake) {
-  const BakeGrid& t = bake.tally_grid;
-  std::vector<float> out(t.voxelCount());
-  for (int k = 0; k < t.nz; ++k)
-    for (int j = 0; j < t.ny; ++j)
-      for (int i = 0; i < t.nx; ++i) {
-        out[t.index(i, j, k)] = sampleTrilinear(bake.grid, bake.density.data(), t.center(i, j, k));
-      }
-  return out;
+  }
 }
 
 }  // namespace
@@ -446,7 +425,7 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
     tally.store(&bake, bake_grids::photonSh);
     const PhotonErrorEstimate e =
         estimateErrors(tally, odd, phaseLegendreCoefficients(*medium.phase, tally.topDegree()),
-                       densityOnTallyGrid(bake));
+                       resampleTrilinear(bake.grid, bake.density.data(), 1, bake.tally_grid));
     bake.metadata["cloudbake:tally_noise"] = str(e.tally_noise);
     bake.metadata["cloudbake:truncation"] = str(e.truncation);
   }

@@ -8,6 +8,7 @@
 
 #include "core/bake/bake_progress.h"
 #include "core/bake/baked_light.h"
+#include "core/math/sh_basis.h"
 #include "core/phase/phase_function.h"
 #include "core/transport/scene.h"
 
@@ -29,9 +30,6 @@ std::string photonSkyDirectSh(int i);
 /// per unit sun irradiance. The forward peak of scattered sunlight lies about that axis.
 std::string photonZonal(int l);
 }  // namespace bake_grids
-
-/// The highest degree of the zonal terms of a photon tally (PhotonBakeOptions::zonal_order).
-constexpr int kMaxZonalDegree = 64;
 
 /// Knobs of method `photon` (docs/shot-format.md).
 struct PhotonBakeOptions {

@@ -198,8 +198,7 @@ struct Corners {
 /// Where a lookup reads the lattice: inside (all eight voxels exist; the common case) by the
 /// lower corner's offset and the fractions, otherwise by explicit corners.
 struct Cell {
-  Vec3 u;        // index coordinates of the point
-  double t = 0;  // its distance along the view ray (set by the march)
+  double t = 0;  // distance of the point along the view ray (set by the march)
   bool interior = false;
   size_t base = 0;
   float fx = 0, fy = 0, fz = 0;
@@ -229,7 +228,6 @@ class LatticeReader {
 
   /// Finds the cell of index point u.
   void locate(const Vec3& u, Cell* cell) const {
-    cell->u = u;
     if (u.x >= 0 && u.y >= 0 && u.z >= 0 && u.x < nx_ - 1 && u.y < ny_ - 1 && u.z < nz_ - 1) {
       const int i = int(u.x), j = int(u.y), k = int(u.z);
       cell->interior = true;
@@ -384,11 +382,11 @@ class BakeMarcher {
       if (zonal_order_ > sh_order_) {
         // The zonal terms about the axis of travel of sunlight, -sun: Y_l0 there at -d is
         // sqrt((2l + 1) / (4 pi)) P_l(d . sun).
-        double p[kMaxZonalDegree + 1];
-        legendreP(zonal_order_, std::clamp(dot(ray.d, sun_dir_), -1.0, 1.0), p);
-        Rgb* z = s.shw + shCount(sh_order_);
+        double z[kMaxZonalDegree];
+        shZonal(sh_order_ + 1, zonal_order_, dot(ray.d, sun_dir_), z);
         for (int l = sh_order_ + 1; l <= zonal_order_; ++l) {
-          z[l - sh_order_ - 1] = phase_l_[size_t(l)] * (std::sqrt((2 * l + 1) * kInv4Pi) * p[l]);
+          const int i = l - sh_order_ - 1;
+          s.shw[shCount(sh_order_) + i] = phase_l_[size_t(l)] * z[i];
         }
       }
     }
@@ -542,10 +540,10 @@ class BakeMarcher {
                         : &rs->anchor[1] == keep            ? &rs->anchor[0]
                         : rs->anchor[0].k < rs->anchor[1].k ? &rs->anchor[0]
                                                             : &rs->anchor[1];
-    Cell c;
-    lattice_.locate(rs->w0 + rs->dw * (double(k) * tally_dt_) - Vec3(1.0), &c);
+    // Index coordinates on the bake's lattice (block space minus one), then on the tallies'.
+    const Vec3 u = rs->w0 + rs->dw * (double(k) * tally_dt_) - Vec3(1.0);
     Cell tc;
-    tally_->locate(c.u * tally_scale_ + tally_offset_, &tc);
+    tally_->locate(u * tally_scale_ + tally_offset_, &tc);
     slot->k = k;
     slot->ms = shSource(msh_, tc, rs->shw);
     slot->ssky = ssky_sh_.empty() ? Rgb(0.0) : shSource(ssky_sh_, tc, rs->shw);

@@ -31,6 +31,18 @@ void legendreP(int degree, double x, double* p) {
   for (int l = 2; l <= degree; ++l) p[l] = ((2 * l - 1) * x * p[l - 1] - (l - 1) * p[l - 2]) / l;
 }
 
+void shZonal(int first, int last, double mu, double* y) {
+  static const struct ZonalNorms {
+    double k[kMaxZonalDegree + 1];
+    ZonalNorms() {
+      for (int l = 0; l <= kMaxZonalDegree; ++l) k[l] = std::sqrt((2 * l + 1) / (4 * kPi));
+    }
+  } norms;
+  double p[kMaxZonalDegree + 1];
+  legendreP(last, std::clamp(mu, -1.0, 1.0), p);
+  for (int l = first; l <= last; ++l) y[l - first] = norms.k[l] * p[l];
+}
+
 void shBasisUpTo(int degree, const Vec3& w, double* y) {
   const double z = std::clamp(w.z, -1.0, 1.0);
   const double s = std::sqrt(std::max(0.0, 1 - z * z));  // sin theta

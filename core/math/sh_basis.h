@@ -24,4 +24,12 @@ void shBasisUpTo(int degree, const Vec3& w, double* y);
 /// Legendre polynomials P_0..P_degree at x, written to p[0..degree].
 void legendreP(int degree, double x, double* p);
 
+/// The highest degree shZonal evaluates.
+constexpr int kMaxZonalDegree = 64;
+
+/// The zonal (m = 0) real orthonormal harmonics about an axis, Y_l0 = sqrt((2l + 1) / (4 pi))
+/// P_l(mu) with mu the cosine to the axis, for l = first..last (last <= kMaxZonalDegree),
+/// written to y[0..last - first].
+void shZonal(int first, int last, double mu, double* y);
+
 }  // namespace cloudbake

@@ -79,14 +79,8 @@ Slice findSlice(const BakedLight& bake, const SliceOptions& opt) {
     if (c->on_tally_grid) {
       // Photon's tallies lie on their own lattice: shown as views read them, interpolated at
       // the voxel centres of the bake's lattice.
-      const BakeGrid& g = bake.grid;
-      s.resampled = std::make_shared<std::vector<float>>(g.voxelCount() * size_t(c->components));
-      for (int k = 0; k < g.nz; ++k)
-        for (int j = 0; j < g.ny; ++j)
-          for (int i = 0; i < g.nx; ++i) {
-            sampleTrilinear(bake.tally_grid, c->data.data(), c->components, g.center(i, j, k),
-                            s.resampled->data() + g.index(i, j, k) * size_t(c->components));
-          }
+      s.resampled = std::make_shared<std::vector<float>>(
+          resampleTrilinear(bake.tally_grid, c->data.data(), c->components, bake.grid));
       s.data = s.resampled.get();
     }
   }

@@ -53,5 +53,33 @@ TEST(ShBasis, SatisfiesTheAdditionTheorem) {
   for (double v : ya) EXPECT_TRUE(std::isfinite(v));
 }
 
+// The zonal harmonics about an axis are the m = 0 members of the full basis with that axis as
+// its pole, and orthonormal up to high degree (the photon tally's zonal terms).
+TEST(ShBasis, ZonalHarmonicsAreTheMZeroMembers) {
+  for (double mu : {-0.9, -0.2, 0.0, 0.35, 0.99}) {
+    const Vec3 w(std::sqrt(1 - mu * mu), 0, mu);
+    double y[shCount(kMaxShDegree)], z[kMaxShDegree + 1];
+    shBasisUpTo(kMaxShDegree, w, y);
+    shZonal(0, kMaxShDegree, mu, z);
+    for (int l = 0; l <= kMaxShDegree; ++l) EXPECT_NEAR(z[l], y[l * l + l], 1e-12) << l;
+    double part[4];
+    shZonal(5, 8, mu, part);
+    for (int l = 5; l <= 8; ++l) EXPECT_DOUBLE_EQ(part[l - 5], z[l]);
+  }
+  // integral of Y_l0 Y_k0 over the sphere = 2 pi integral over mu: delta_lk, to degree 64.
+  constexpr int kSteps = 20000;
+  std::vector<double> gram(3, 0.0);
+  const int pairs[3][2] = {{64, 64}, {63, 64}, {40, 40}};
+  for (int s = 0; s < kSteps; ++s) {
+    const double mu = -1 + (s + 0.5) * 2.0 / kSteps;
+    double z[kMaxZonalDegree + 1];
+    shZonal(0, kMaxZonalDegree, mu, z);
+    for (int q = 0; q < 3; ++q) gram[q] += 2 * kPi * z[pairs[q][0]] * z[pairs[q][1]] * 2.0 / kSteps;
+  }
+  EXPECT_NEAR(gram[0], 1.0, 1e-3);
+  EXPECT_NEAR(gram[1], 0.0, 1e-3);
+  EXPECT_NEAR(gram[2], 1.0, 1e-3);
+}
+
 }  // namespace
 }  // namespace cloudbake
