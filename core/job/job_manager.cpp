@@ -317,8 +317,24 @@ JobPlan JobManager::plan(const SubmitInput& input) {
       fs::remove_all(dir, ec);
     }
   } cleanup{dir};
-  const Prepared p = prepare(input, dir);
+  Prepared p = prepare(input, dir);
   stopIfAbandoned(input, "before its plan was made");
+  std::vector<std::string> auto_lines;
+  if (isAutoShot(p.shot)) {
+    // The choice rests on the scene and a pilot render of it: the plan measures them as the
+    // run will (the volume goes to the memory cache the run then finds it in).
+    RunOptions ro = autoRunOptions();
+    ro.threads = int(options_.worker_threads);
+    ro.progress = [&](const RunProgress&) { return !(input.abandoned && input.abandoned()); };
+    try {
+      const AutoChoice choice = chooseAutoForRun(p.shot, ro);
+      auto_lines = choice.planLines();
+      p.shot = choice.shot;
+    } catch (const InputError& e) {
+      throw InputError(clientPaths(e.what(), (fs::path(dir) / "input").string()));
+    }
+    p.keys = computeCacheKeys(p.shot);
+  }
   JobPlan plan;
   plan.shot_name = p.shot.name;
   plan.method = p.shot.bake.method;
@@ -327,7 +343,8 @@ JobPlan JobManager::plan(const SubmitInput& input) {
       p.shot, p.keys, [&](const std::string& key) { return cache_->lookup(key).has_value(); });
   plan.bake_key = mp.bake_key.empty() ? p.keys.bake : mp.bake_key;
   plan.bake_cached = mp.bake_cached;
-  plan.components = mp.components;
+  plan.components = auto_lines;
+  plan.components.insert(plan.components.end(), mp.components.begin(), mp.components.end());
   const unsigned threads =
       options_.worker_threads ? options_.worker_threads : std::thread::hardware_concurrency();
   const std::string phase = phasePlanLine(p.shot.medium.phase, &phases_, int(threads));
@@ -607,15 +624,21 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
                outcome.error.empty() ? "" : ": " + printable(outcome.error));
 }
 
-RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {
+RunOptions JobManager::autoRunOptions() {
   RunOptions ro;
-  ro.out_dir = store_->outputDir(job->record.id);
-  ro.cache = cache_.get();
   ro.volumes = &volumes_;
   ro.phases = &phases_;
+  ro.max_voxels = options_.limits.max_voxels;
+  ro.max_samples = int(std::min<int64_t>(options_.limits.max_samples, 1000000));
+  return ro;
+}
+
+RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {
+  RunOptions ro = autoRunOptions();
+  ro.out_dir = store_->outputDir(job->record.id);
+  ro.cache = cache_.get();
   ro.directions = directions_.get();
   ro.sun_tolerance_deg = job->sun_tolerance_deg;
-  ro.max_voxels = options_.limits.max_voxels;
   // An event per new message or per percent of progress, so a long run does not flood the
   // event log; the answer is whether the run may go on.
   ro.progress = [this, job](const RunProgress& p) {

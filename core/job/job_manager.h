@@ -162,6 +162,8 @@ class JobManager {
   void saveLocked(const Job& job);
   void runnerLoop();
   void runJob(const std::shared_ptr<Job>& job);
+  /// The caches and limits every run, and method auto's choice in a plan, use.
+  RunOptions autoRunOptions();
   RunOptions runOptions(const std::shared_ptr<Job>& job);
   RunResult runInArena(Job& job, const RunOptions& ro, Outcome* outcome);
   void finishJob(Job& job, const RunResult& result, const Outcome& outcome);

@@ -58,6 +58,10 @@ class ShotRun final : public MethodRun {
  public:
   ShotRun(const ShotSpec& shot, const RunOptions& opt, ShotCacheKeys keys)
       : shot_(shot), opt_(opt), keys_(std::move(keys)) {}
+  /// `density`: the shot's field, already built (by auto's measurement).
+  void setDensity(DensityFieldPtr density) { density_ = std::move(density); }
+  /// Header attributes every view gets (auto's choice).
+  void setHeader(std::map<std::string, std::string> header) { header_ = std::move(header); }
   ~ShotRun() override {
     std::error_code ec;
     if (!scratch_.empty()) fs::remove_all(scratch_, ec);
@@ -165,6 +169,8 @@ class ShotRun final : public MethodRun {
   RunProgress progress_;
   std::optional<Scene> scene_;
   bool density_built_ = false;
+  DensityFieldPtr density_;
+  std::map<std::string, std::string> header_;
   std::string scratch_;  // without a cache: where cached() computes, removed with the run
   int scratch_count_ = 0;
 };
@@ -172,6 +178,11 @@ class ShotRun final : public MethodRun {
 const Scene& ShotRun::scene() {
   Scene& s = const_cast<Scene&>(lights());
   if (density_built_) return s;
+  if (density_) {
+    s.medium.density = density_;
+    density_built_ = true;
+    return s;
+  }
   const auto t0 = std::chrono::steady_clock::now();
   // Limits that need the files: checked before voxelising a mesh, and on a loaded VDB before it
   // enters the memory cache.
@@ -235,6 +246,7 @@ void ShotRun::writeView(const std::string& stem, const Camera& camera,
     header["cloudbake:sun_irradiance"] =
         exactNumber(e.x) + " " + exactNumber(e.y) + " " + exactNumber(e.z);
   }
+  for (const auto& [k, v] : header_) header[k] = v;
   for (const auto& [k, v] : attributes) header[k] = v;
   // The camera in OpenEXR's standard attributes, which compositing packages read.
   const CameraRays rays(camera);
@@ -272,6 +284,15 @@ void checkRunnable(const ShotSpec& shot, const std::string& source) {
 
 namespace {
 
+// auto.json: the choice, what it rested on, and the bake's own error estimates when the chosen
+// method gives them.
+void writeAutoRecord(MethodRun& run, const AutoChoice& choice) {
+  nlohmann::json record = choice.toJson();
+  record["bake_estimates"] = run.result().bake_estimates;
+  run.writeOutput("auto.json",
+                  [&](const std::string& path) { writeFileAtomic(path, record.dump(1) + "\n"); });
+}
+
 // Runs the method; its core code names a knob it refuses as "radius: ..." (core/ knows no JSON),
 // which the user wrote as /bake/radius of their file: the error says so.
 void runMethod(const BakeMethod& method, MethodRun& run, const std::string& source) {
@@ -290,22 +311,70 @@ void runMethod(const BakeMethod& method, MethodRun& run, const std::string& sour
 
 }  // namespace
 
+AutoChoice chooseAutoForRun(const ShotSpec& shot, const RunOptions& opt,
+                            std::vector<StepTime>* steps, DensityFieldPtr* density) {
+  const bool need_keys = opt.cache || opt.volumes;
+  ShotRun probe(shot, opt, need_keys ? computeCacheKeys(shot) : ShotCacheKeys{});
+  probe.report("build", 0, "auto: measuring the scene");
+  const bool sequence = std::holds_alternative<SequenceVolumeSpec>(shot.volume);
+  const Scene& scene = sequence ? probe.lights() : probe.scene();
+  AutoOptions ao;
+  ao.threads = opt.threads;
+  ao.limits.max_voxels = opt.max_voxels;
+  ao.max_samples = opt.max_samples;
+  ao.source = opt.source;
+  ao.progress = [&](double f) {
+    return probe.pollMessage(0, "auto: pilot render " + std::to_string(int(100 * f)) + " %");
+  };
+  AutoChoice choice = chooseAuto(shot, scene, ao);
+  if (density && !sequence) *density = scene.medium.density;
+  if (steps) {
+    *steps = probe.result().steps;
+    if (!sequence) {
+      steps->push_back({"auto_pilot", "", -1, choice.pilot.seconds, {}});
+    }
+  }
+  return choice;
+}
+
 RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   const auto t_start = std::chrono::steady_clock::now();
   checkRunOptions(opt);
   ShotSpec shot = shot_in;
-  if (opt.samples != -1) shot.bake.samples = opt.samples;
   checkRunnable(shot, opt.source);
   makeOutputFolder(opt.out_dir);
 
+  // Auto resolves into the chosen method's shot before anything is baked, so its cache entries
+  // are those of a shot naming that method; the density it measured is reused.
+  std::optional<AutoChoice> choice;
+  std::vector<StepTime> auto_steps;
+  DensityFieldPtr density;
+  if (isAutoShot(shot)) {
+    choice = chooseAutoForRun(shot, opt, &auto_steps, &density);
+    shot = choice->shot;
+    if (opt.progress) {
+      RunProgress p;
+      p.stage = "build";
+      p.message = choice->planLines().front();
+      if (!opt.progress(p)) throw Cancelled();
+    }
+  }
+  if (opt.samples != -1) shot.bake.samples = opt.samples;
+
   const bool need_keys = opt.cache || opt.volumes;
   ShotRun run(shot, opt, need_keys ? computeCacheKeys(shot) : ShotCacheKeys{});
+  if (choice) {
+    run.result().steps = auto_steps;
+    run.setHeader({{"cloudbake:auto", autoSummary(*choice)}});
+    if (density) run.setDensity(density);
+  }
   run.report("build", 0, "building " + std::string(volumeTypeName(shot.volume)) + " volume");
   // Validate the medium, lights and cameras up front even when everything is cached, so bad
   // input fails the same way with and without a cache (a sequence is built by its method).
   if (!opt.cache && !methodOf(shot).info().animates) run.scene();
   run.lights();
   runMethod(methodOf(shot), run, opt.source);
+  if (choice) writeAutoRecord(run, *choice);
   RunResult result = run.result();
   result.seconds = secondsSince(t_start);
   run.report("done", 1, "done in " + fixed(result.seconds, 2) + " s");

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/methods/auto.h"
 #include "core/methods/run_types.h"
 #include "core/shot/shot.h"
 
@@ -41,6 +42,9 @@ struct RunOptions {
   /// Voxels a volume may have once its files are read (a mesh given by voxel_size, a VDB's
   /// active voxels; core/job/volume_limits.h); 0: no limit.
   uint64_t max_voxels = 0;
+  /// Most bake.samples and photon-lattice voxels method `auto` may choose (0: no limit beyond
+  /// the methods' own ranges).
+  int max_samples = 0;
 };
 
 /// InputError naming `field` unless `samples` is -1 (unset) or in [1, 1e6]: the one check of
@@ -58,5 +62,13 @@ void checkRunnable(const ShotSpec& shot, const std::string& source = "shot.json"
 /// pointcloud) whose key (computeCacheKeys) is present is not computed again. Throws InputError for
 /// bad input, Cancelled when `progress` returns false.
 RunResult runShot(const ShotSpec& shot, const RunOptions& options);
+
+/// For a shot of method `auto`: builds its scene through the options' caches, measures it and
+/// returns the choice (core/methods/auto.h) without running it; runShot runs choice.shot and
+/// writes the choice to DIR/auto.json. Optional: `steps` receives the volume and pilot times,
+/// `density` the field it built (none for a sequence).
+AutoChoice chooseAutoForRun(const ShotSpec& shot, const RunOptions& options,
+                            std::vector<StepTime>* steps = nullptr,
+                            DensityFieldPtr* density = nullptr);
 
 }  // namespace cloudbake

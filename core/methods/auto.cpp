@@ -1,52 +1,219 @@
 #include "core/methods/auto.h"
 
+#include <cmath>
+
 #include "core/error.h"
+#include "core/format.h"
+#include "core/methods/precomputed.h"
 #include "core/methods/registry.h"
 #include "core/transport/path_tracer.h"
 
 namespace cloudbake {
 namespace {
 
+// docs/methods.md's trade table: `precomputed` measured 0.34-0.43 relative RMSE on the three
+// scenes; it is what animates, so a sequence is its or nobody's.
+constexpr double kPrecomputedError = 0.45;
+
 class AutoMethod final : public BakeMethod {
  public:
   AutoMethod() {
     info_.name = "auto";
     info_.summary =
-        "the cheapest method predicted to meet bake.tolerance (not runnable in this version)";
-    info_.citation = "";
+        "the cheapest method and knobs predicted to meet bake.tolerance on this scene, from a "
+        "cost and error model fitted to the measured trade curves and a short pilot render "
+        "(the choice, its prediction and the bake's own error estimate go to auto.json)";
+    info_.citation =
+        "cloudbake's own measured trade curves (2026; docs/methods.md, \"Method auto\"): the "
+        "model and its fit; the methods it chooses cite their papers";
     info_.version = 1;
-    info_.default_samples = 64;
-    info_.runnable = false;
+    info_.default_samples = 1;
+    info_.animates = true;
     info_.knobs = {
         Knob::integer("max_depth", 1, 1000000, PathTracerOptions{}.max_depth,
-                      "scattering events per path, should the choice be `pathtrace`"),
+                      "scattering events per path, in the pilot and should the choice be "
+                      "`pathtrace`"),
         Knob::number("tolerance", 0, 1, std::nullopt, "",
-                     "relative RMSE of the cloud's own light the choice must meet")
+                     "relative RMSE of the cloud's own light (the scattered layers, background "
+                     "excluded) the choice must meet")
             .exclusiveMax()
             .isRequired(),
     };
   }
   const MethodInfo& info() const override { return info_; }
 
+  // A run resolves the shot first (chooseAuto): what these see of an auto shot is a bug.
   MethodPlan plan(const ShotSpec&, const ShotCacheKeys&,
                   const std::function<bool(const std::string&)>&) const override {
-    throw notRunnable();
+    throw InternalError("method auto is planned through its choice (chooseAuto)");
   }
-  void run(MethodRun&) const override { throw notRunnable(); }
+  void run(MethodRun&) const override {
+    throw InternalError("method auto runs through its choice (chooseAuto)");
+  }
 
  private:
-  static InputError notRunnable() {
-    return InputError("/bake/method: 'auto' is not implemented in this version (use " +
-                      joinedMethodNames(true) + ")");
-  }
   MethodInfo info_;
 };
+
+ShotSpec resolvedShot(const ShotSpec& shot, const AutoCandidate& c) {
+  ShotSpec out = shot;
+  const BakeMethod* method = findMethod(c.method);
+  if (!method) throw InternalError("auto: no method '" + c.method + "'");
+  out.bake.method = c.method;
+  out.bake.samples = c.samples;
+  out.bake.knobs = KnobValues(method->info().knobs);
+  for (const auto& [key, value] : c.knobs) out.bake.knobs.set(key, value);
+  if (c.method == "pathtrace") {
+    out.bake.knobs.set("max_depth", shot.bake.knobs.integer("max_depth"));
+  }
+  return out;
+}
+
+// The candidate's shot passes its method's checks and this server's limits.
+bool withinLimits(const ShotSpec& shot, const AutoOptions& o) {
+  try {
+    const BakeMethod& m = methodOf(shot);
+    m.validate(shot, o.source);
+    m.checkLimits(shot, o.limits, o.source);
+    return true;
+  } catch (const InputError&) {
+    return false;
+  }
+}
+
+std::string percent(double x) { return fixed(100 * x, x < 0.1 ? 1 : 0) + " %"; }
+
+std::string describe(const AutoCandidate& c) {
+  std::string s = c.method;
+  for (const auto& [k, v] : c.knobs) s += " " + k + "=" + std::to_string(v);
+  return s + " samples=" + std::to_string(c.samples);
+}
+
+AutoChoice chooseSequence(const ShotSpec& shot, double tolerance, const AutoOptions& o) {
+  if (tolerance < kPrecomputedError) {
+    throw InputError(o.source + ": /bake/tolerance: " + exactNumber(tolerance) +
+                     " cannot be met for an animated volume: only `precomputed` renders "
+                     "sequences, and its error is about " +
+                     percent(kPrecomputedError) + " (docs/methods.md); ask for at least " +
+                     exactNumber(kPrecomputedError));
+  }
+  AutoChoice choice;
+  choice.tolerance = tolerance;
+  choice.traits.sequence = true;
+  choice.chosen.method = "precomputed";
+  choice.chosen.error = kPrecomputedError;
+  choice.chosen.why = "only precomputed renders animated volumes";
+  choice.considered = {choice.chosen};
+  choice.shot = shot;
+  choice.shot.bake.method = "precomputed";
+  choice.shot.bake.knobs = KnobValues(precomputedMethod().info().knobs);
+  choice.shot.bake.samples = precomputedMethod().info().default_samples;
+  return choice;
+}
 
 }  // namespace
 
 const BakeMethod& autoMethod() {
   static const AutoMethod kMethod;
   return kMethod;
+}
+
+bool isAutoShot(const ShotSpec& shot) { return shot.bake.method == "auto"; }
+
+AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOptions& o) {
+  const double tolerance = shot.bake.knobs.number("tolerance");
+  if (std::holds_alternative<SequenceVolumeSpec>(shot.volume)) {
+    return chooseSequence(shot, tolerance, o);
+  }
+  AutoChoice choice;
+  choice.tolerance = tolerance;
+  choice.traits = measureSceneTraits(shot, scene);
+  PilotOptions po;
+  po.threads = o.threads;
+  po.max_depth = int(shot.bake.knobs.integer("max_depth"));
+  po.progress = o.progress;
+  if (choice.traits.pixels > 0) choice.pilot = runPilot(scene, po);
+  for (const AutoCandidate& c :
+       autoCandidates(choice.traits, choice.pilot, tolerance, o.max_samples)) {
+    if (withinLimits(resolvedShot(shot, c), o)) choice.considered.push_back(c);
+  }
+  if (choice.considered.empty() || !(choice.considered.front().error <= tolerance)) {
+    std::string best = "none within this server's limits";
+    if (!choice.considered.empty()) {
+      const AutoCandidate& b = choice.considered.front();
+      best =
+          "the best predicted is " + describe(b) + " at " + percent(b.error) + " (" + b.why + ")";
+    }
+    throw InputError(o.source + ": /bake/tolerance: no method is predicted to meet " +
+                     exactNumber(tolerance) + " on this scene within this server's limits; " +
+                     best);
+  }
+  choice.chosen = choice.considered.front();
+  choice.shot = resolvedShot(shot, choice.chosen);
+  return choice;
+}
+
+std::vector<std::string> AutoChoice::planLines() const {
+  std::vector<std::string> lines;
+  lines.push_back("auto: chose " + describe(chosen) + " for a tolerance of " + percent(tolerance) +
+                  ": predicted error " + percent(chosen.error) + ", " + fixed(chosen.seconds, 1) +
+                  " s (" + chosen.why + ")");
+  if (!traits.sequence) {
+    lines.push_back("auto: measured " +
+                    (pilot.samples > 0 ? "a pilot of " + std::to_string(pilot.pixels) +
+                                             " pixels x " + std::to_string(pilot.samples) +
+                                             " paths x 2 seeds in " + fixed(pilot.seconds, 2) + " s"
+                                       : std::string("no views to pilot")) +
+                    "; albedo " + fixed(traits.albedo, 3) + ", phase spikiness " +
+                    fixed(traits.phase_spikiness, 1) + ", optical thickness of a 1/128 voxel " +
+                    fixed(traits.tau_voxel_128, 3));
+  }
+  for (size_t i = 1; i < considered.size() && i < 4; ++i) {
+    const AutoCandidate& c = considered[i];
+    lines.push_back("auto: also considered " + describe(c) + ": " + percent(c.error) + ", " +
+                    fixed(c.seconds, 1) + " s");
+  }
+  return lines;
+}
+
+nlohmann::json AutoChoice::toJson() const {
+  auto candidate = [](const AutoCandidate& c) {
+    nlohmann::json knobs = nlohmann::json::object();
+    for (const auto& [k, v] : c.knobs) knobs[k] = v;
+    return nlohmann::json{{"method", c.method},
+                          {"knobs", knobs},
+                          {"samples", c.samples},
+                          {"predicted_error", c.error},
+                          {"predicted_seconds", c.seconds},
+                          {"why", c.why}};
+  };
+  nlohmann::json considered_json = nlohmann::json::array();
+  for (const AutoCandidate& c : considered) considered_json.push_back(candidate(c));
+  return {{"tolerance", tolerance},
+          {"chosen", candidate(chosen)},
+          {"considered", considered_json},
+          {"traits",
+           {{"albedo", traits.albedo},
+            {"phase_spikiness", traits.phase_spikiness},
+            {"sun", traits.sun},
+            {"sky", traits.sky},
+            {"tau_voxel_128", traits.tau_voxel_128},
+            {"views", traits.views},
+            {"pixels", traits.pixels},
+            {"frames", traits.frames}}},
+          {"pilot",
+           {{"noise_1spp", pilot.noise_1spp},
+            {"seconds_per_sample", pilot.seconds_per_sample},
+            {"multiple_fraction", pilot.multiple_fraction},
+            {"cloud_fraction", pilot.cloud_fraction},
+            {"samples", pilot.samples},
+            {"pixels", pilot.pixels},
+            {"seconds", pilot.seconds}}}};
+}
+
+std::string autoSummary(const AutoChoice& c) {
+  return describe(c.chosen) + " for tolerance " + exactNumber(c.tolerance) + ", predicted " +
+         exactNumber(c.chosen.error);
 }
 
 }  // namespace cloudbake

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <sstream>
 
@@ -235,6 +236,11 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
   const double total = start.back() + (shot.outputs.vdb ? 0.05 * work.bake_seconds : 0.0);
   std::string entry;
   const BakedLight light = obtainBake(run, bake, bake_w / total, &entry);
+  for (const char* key : {"tally_noise", "truncation"}) {
+    const auto it = light.metadata.find(std::string("cloudbake:") + key);
+    if (it != light.metadata.end())
+      run.result().bake_estimates[key] = std::atof(it->second.c_str());
+  }
 
   for (int i = 0; i < n_views; ++i) {
     const Camera& camera = lights.cameras[size_t(i)];

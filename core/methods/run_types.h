@@ -108,6 +108,9 @@ struct RunResult {
   bool vdb_cached = false;
   double seconds = 0;
   std::vector<StepTime> steps;  ///< in the order they ran
+  /// The bake's own error estimates, where its method gives them (photon: tally_noise and
+  /// truncation, as in bake.vdb's metadata).
+  std::map<std::string, double> bake_estimates;
 };
 
 }  // namespace cloudbake

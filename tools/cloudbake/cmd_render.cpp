@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/job/run_shot.h"
 #include "core/methods/registry.h"
 #include "core/shot/shot_parser.h"
@@ -35,7 +36,27 @@ struct RenderOptions {
   bool png = false;
   double png_exposure = 0;
   std::string stats_json;  // "": none
+  bool dry_run = false;
 };
+
+// What the run would do, without doing it: method auto's choice (it measures the scene and
+// renders its pilot, which is what the choice rests on) and the method's plan.
+std::vector<std::string> dryRun(const ShotSpec& shot, const RunOptions& run) {
+  std::vector<std::string> lines;
+  ShotSpec resolved = shot;
+  if (isAutoShot(shot)) {
+    const AutoChoice choice = chooseAutoForRun(shot, run);
+    lines = choice.planLines();
+    std::cout << "auto.json: " << choice.toJson().dump() << "\n";
+    resolved = choice.shot;
+  }
+  if (run.samples != -1) resolved.bake.samples = run.samples;
+  const MethodPlan plan =
+      methodOf(resolved).plan(resolved, ShotCacheKeys{}, [](const std::string&) { return false; });
+  lines.insert(lines.end(), plan.components.begin(), plan.components.end());
+  lines.push_back("paths or rays: " + exactNumber(plan.pixel_samples));
+  return lines;
+}
 
 // The run's numbers for benchmarks and pipelines (docs/cli.md): counters, per-step seconds, the
 // seconds per kind of step, and the process's peak resident memory.
@@ -174,6 +195,10 @@ std::vector<std::string> render(const RenderOptions& opt) {
     }
     return true;
   };
+  if (opt.dry_run) {
+    for (const std::string& line : dryRun(shot, run)) std::cout << line << "\n";
+    return {};
+  }
   const RunResult result = runShot(shot, run);
   if (!opt.stats_json.empty()) writeStatsJson(opt.stats_json, shot, result);
   std::vector<std::string> written;
@@ -200,6 +225,9 @@ void addRenderCommand(CLI::App& app, int* exit_code) {
                   "paths (pathtrace) or rays (views from a bake) per pixel, overriding the "
                   "shot's bake.samples (1..1000000)");
   cmd->add_flag("--quiet", opt->quiet, "no progress on stderr");
+  cmd->add_flag("--dry-run", opt->dry_run,
+                "print what the run would do (method auto: its choice, predicted error and "
+                "cost, after measuring the scene with a short pilot render) and write nothing");
   cmd->add_flag("--png", opt->png,
                 "also write an auto-exposed sRGB preview DIR/<view>.png beside each EXR");
   cmd->add_option("--stats-json", opt->stats_json,

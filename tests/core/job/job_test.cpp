@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <thread>
 #include <vector>
 
@@ -414,17 +415,29 @@ TEST(RunShot, ProgressReturningFalseCancels) {
   fs::remove_all(dir);
 }
 
-TEST(RunShot, RejectsMethodsNotImplemented) {
+// An auto shot runs its choice: the views carry the choice in their header, auto.json records
+// it with its prediction, and the chosen method's files are written.
+TEST(RunShot, AutoRunsItsChoiceAndRecordsIt) {
   std::string shot = tinyShot();
-  shot.replace(shot.find("\"pathtrace\""), 11, "\"auto\", \"tolerance\": 0.1");
+  shot.replace(shot.find("\"pathtrace\""), 11, "\"auto\", \"tolerance\": 0.3");
   RunOptions opt;
   opt.out_dir = freshDir("method").string();
-  try {
-    runShot(parse(shot), opt);
-    FAIL() << "expected InputError";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("/bake/method"), std::string::npos) << e.what();
+  const RunResult r = runShot(parse(shot), opt);
+  const fs::path record = fs::path(opt.out_dir) / "auto.json";
+  ASSERT_TRUE(fs::exists(record));
+  const nlohmann::json j = nlohmann::json::parse(readWholeFile(record.string()));
+  EXPECT_LE(j["chosen"]["predicted_error"].get<double>(), 0.3);
+  const std::string method = j["chosen"]["method"];
+  bool exr = false;
+  for (const OutputFile& f : r.files) {
+    if (f.name.size() > 4 && f.name.substr(f.name.size() - 4) == ".exr") {
+      const ExrContents c = readExr(f.path);
+      EXPECT_EQ(c.attributes.at("cloudbake:method"), method);
+      EXPECT_EQ(c.attributes.at("cloudbake:auto").rfind(method, 0), 0u);
+      exr = true;
+    }
   }
+  EXPECT_TRUE(exr);
   fs::remove_all(opt.out_dir);
 }
 
@@ -488,6 +501,18 @@ TEST(JobManager, AssetPathsAreBoundedAndConflictsNamed) {
   fs::remove_all(dir);
 }
 
+// A unit sphere seen in an 8x8 view, baked by `bake` (a JSON object).
+std::string sphereShot(const std::string& bake) {
+  return R"({"version": 1, "name": "a",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": 2, "albedo": 0.9, "phase": {"type": "isotropic"}},
+    "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]}},
+    "bake": )" +
+         bake + R"(,
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [8, 8]}]})";
+}
+
 // A submit or dry run whose client gave up stops staging and planning with Cancelled, leaving no
 // temporary folder behind; one whose client still waits is unaffected.
 TEST(JobManager, AbandonedSubmitStopsAndCleansUp) {
@@ -496,13 +521,7 @@ TEST(JobManager, AbandonedSubmitStopsAndCleansUp) {
   o.state_dir = dir.string();
   JobManager jobs(o);
   SubmitInput in;
-  in.shot_json = R"({"version": 1, "name": "a",
-    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
-    "medium": {"extinction": 2, "albedo": 0.9, "phase": {"type": "isotropic"}},
-    "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]}},
-    "bake": {"method": "single"},
-    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
-               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [8, 8]}]})";
+  in.shot_json = sphereShot(R"({"method": "single"})");
   int calls = 0;
   in.abandoned = [&] { return ++calls > 0; };  // gone before the first asset is staged
   in.assets = {{"a.vdb", std::string(64, 'a')}, {"b.vdb", std::string(64, 'b')}};
@@ -518,6 +537,33 @@ TEST(JobManager, AbandonedSubmitStopsAndCleansUp) {
   EXPECT_TRUE(!fs::exists(tmp) || fs::is_empty(tmp));
   in.abandoned = [] { return false; };
   EXPECT_EQ(jobs.plan(in).method, "single");
+  fs::remove_all(dir);
+}
+
+// The dry run of an auto shot measures the scene, says what it chose and plans that method; a
+// tolerance no method meets within the server's limits names /bake/tolerance.
+TEST(JobManager, AutoPlanSaysWhatItChose) {
+  const fs::path dir = freshDir("auto-plan");
+  JobManagerOptions o;
+  o.state_dir = dir.string();
+  o.worker_threads = 2;
+  JobManager jobs(o);
+  SubmitInput in;
+  in.shot_json = sphereShot(R"({"method": "auto", "tolerance": 0.2})");
+  const JobPlan plan = jobs.plan(in);
+  EXPECT_NE(plan.method, "auto");
+  ASSERT_FALSE(plan.components.empty());
+  EXPECT_EQ(plan.components.front().rfind("auto: chose " + plan.method, 0), 0u)
+      << plan.components.front();
+  in.shot_json.replace(in.shot_json.find("0.2}"), 3, "1e-9");
+  try {
+    jobs.plan(in);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("shot.json: /bake/tolerance: no method"),
+              std::string::npos)
+        << e.what();
+  }
   fs::remove_all(dir);
 }
 

@@ -138,17 +138,6 @@ TEST(RunShotBake, CancellingDuringTheBakeThrows) {
   fs::remove_all(dir);
 }
 
-TEST(RunShotBake, MethodsNotImplementedAreRefusedByName) {
-  ShotSpec s = parse(shot("single"));
-  s.bake.method = "auto";
-  try {
-    checkRunnable(s, "shot.json");
-    ADD_FAILURE() << "no error";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("/bake/method: 'auto'"), std::string::npos);
-  }
-}
-
 // Progress is weighted by each part's predicted work and never goes back: the bake, most of the
 // work, takes most of the bar (it took 1 / (1 + views + vdb) of it, and a pointcloud bake sat at
 // 33% for 99% of its time).

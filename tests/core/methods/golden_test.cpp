@@ -108,6 +108,9 @@ std::string versionFile(const std::string& method) {
 
 TEST(Golden, EveryRunnableMethodHasGoldenValues) {
   for (const std::string& name : methodNames(/*runnable_only=*/true)) {
+    // auto writes what its choice writes (pinned in that method's rows); which method it
+    // chooses rests on measured seconds, so it is tested by its own tests (auto_test.cpp).
+    if (name == "auto") continue;
     bool found = false;
     for (const Golden& g : goldens()) found = found || g.method == name;
     EXPECT_TRUE(found) << "method '" << name << "' has no golden scene in " << __FILE__;

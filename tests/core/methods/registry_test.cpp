@@ -47,7 +47,7 @@ TEST(MethodRegistry, EveryMethodIsDescribedAndFoundByName) {
   }
   EXPECT_EQ(findMethod("nonesuch"), nullptr);
   EXPECT_EQ(methodNames(true), (std::vector<std::string>{"pathtrace", "single", "pointcloud",
-                                                         "precomputed", "photon"}));
+                                                         "precomputed", "photon", "auto"}));
 }
 
 TEST(MethodRegistry, KnobTablesAreConsistent) {

@@ -236,14 +236,23 @@ TEST_F(RenderCli, MissingFilesExitWith3) {
   EXPECT_NE(r.err.find("/volume/vdb/path: file not found"), std::string::npos) << r.err;
 }
 
-TEST_F(RenderCli, MethodsNotImplementedAreRefusedClearly) {
+// Method auto's dry run says what it chose and writes nothing; a tolerance no method meets
+// within the limits is an input error naming /bake/tolerance.
+TEST_F(RenderCli, AutoDryRunSaysWhatItChose) {
   json j = slab();
-  j["bake"] = {{"method", "auto"}, {"tolerance", 0.1}};
-  const CliResult r =
-      run("render '" + writeShot("auto.json", j).string() + "' --out '" + dir_.string() + "'");
+  j["bake"] = {{"method", "auto"}, {"tolerance", 0.2}};
+  const fs::path out = dir_ / "auto-out";
+  CliResult r = run("render '" + writeShot("auto.json", j).string() + "' --out '" + out.string() +
+                    "' --dry-run --quiet");
+  EXPECT_EQ(r.rc, 0) << r.err;
+  EXPECT_NE(r.out.find("auto: chose "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("predicted error"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(out / "view.exr"));
+  j["bake"] = {{"method", "auto"}, {"tolerance", 1e-6}};
+  r = run("render '" + writeShot("auto2.json", j).string() + "' --out '" + out.string() +
+          "' --dry-run --quiet");
   EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("/bake/method: 'auto' is not implemented in this version"),
-            std::string::npos)
+  EXPECT_NE(r.err.find("/bake/tolerance: no method is predicted to meet"), std::string::npos)
       << r.err;
 }
 

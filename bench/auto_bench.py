@@ -1,0 +1,178 @@
+#!/usr/bin/env python3
+"""Method `auto` on scenes its model was not fitted on: how often it meets the tolerance, and how
+much slower it is than the best choice in hindsight (issue 13).
+
+The model (core/methods/auto_model.cpp) was fitted on bench/photon_bench.py's five scenes. This
+bench renders five others, made by changing their clouds, media and lights (HELD_OUT below), at
+--res x 3/4 --res pixels, two views each. For each scene it renders a reference with `pathtrace`
+twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/), then `auto` at each tolerance,
+and the candidates auto chooses among (single, photon's first three rungs; the path tracer's
+cost for a tolerance follows from the references' own noise and seconds). It prints
+
+  scene | tolerance | auto's choice | auto s | rel. RMSE | met | best in hindsight | best s |
+  slowdown
+
+- rel. RMSE: of the cloud's own light (sun + sky layers) over the cloud's pixels, against each
+  reference and averaged over the two and the views (`cloudbake compare --json`), as
+  bench/photon_bench.py; the references' own noise is printed per scene (it is in every number);
+- met: rel. RMSE <= tolerance;
+- best in hindsight: the cheapest measured candidate whose rel. RMSE met the tolerance (the
+  path tracer's at the samples its measured noise needs), and slowdown = auto s / best s
+  (auto's seconds include its pilot).
+
+Usage: bench/auto_bench.py [--build build] [--threads 2] [--res 80] [--ref-spp 4096]
+                           [--tolerances 0.05,0.1,0.2,0.3] [--scenes a,b] [--work DIR]
+"""
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import photon_bench as pb  # noqa: E402  (scene loading, renders and comparisons)
+
+
+def _perlin_dense(shot):
+    shot["volume"]["procedural"].update({"seed": 21, "cover": 0.6})
+    shot["medium"].update({"extinction": 30.0, "phase": {"type": "hg", "g": 0.7}})
+    shot["lighting"]["sun"]["direction"] = [-0.6, -0.5, 0.35]
+
+
+def _bunny_thin(shot):
+    shot["medium"].update({"extinction": 20.0, "albedo": 0.9})
+    shot["lighting"]["sun"]["direction"] = [0.3, -0.6, 0.75]
+
+
+def _disney_top(shot):
+    shot["medium"].update({"extinction": 0.4, "phase": {"type": "hg", "g": 0.6}})
+    shot["lighting"]["sun"]["direction"] = [0.1, 0.2, 0.97]
+
+
+def _sphere(shot):
+    shot["volume"] = {"sphere": {"center": [0, 0, 0.5], "radius": 0.7, "density": 1.0}}
+    shot["medium"].update({"extinction": 8.0, "albedo": 0.95, "phase": {"type": "hg", "g": 0.8}})
+    shot["lighting"]["sun"]["direction"] = [0.0, -0.5, 0.8]
+    shot["lighting"]["sky"] = {"radiance": [0.3, 0.35, 0.45]}
+
+
+def _layer_low_albedo(shot):
+    shot["volume"]["procedural"].update({"seed": 3})
+    shot["medium"].update({"extinction": 8.0, "albedo": 0.8})
+    shot["lighting"]["sun"]["direction"] = [0.8, 0.1, 0.3]
+
+
+# name: (bench scene it starts from, change)
+HELD_OUT = {"perlin_dense": ("perlin", _perlin_dense), "bunny_thin": ("bunny", _bunny_thin),
+            "disney_top": ("disney", _disney_top), "sphere": ("perlin", _sphere),
+            "layer_albedo": ("thin", _layer_low_albedo)}
+PHOTON_RUNGS = [(1 << 17, 3, 64, 32), (1 << 19, 3, 128, 48), (1 << 21, 4, 192, 48)]
+
+
+def error_against(cloudbake, out, refs, views, alpha):
+    errs = []
+    for v in views:
+        rows = [pb.compare(cloudbake, os.path.join(out, v + ".exr"), os.path.join(r, v + ".exr"),
+                           os.path.join(r, v + ".exr"), alpha) for r in refs]
+        errs.append(sum(r["rel_rmse"] for r in rows) / 2)
+    return sum(errs) / len(errs)
+
+
+def run_and_measure(cloudbake, shot, bake, out, refs, views, args):
+    s = json.loads(json.dumps(shot))
+    s["bake"] = bake
+    stats = pb.render(cloudbake, s, out, args.threads)
+    return stats, error_against(cloudbake, out, refs, views, args.cloud_alpha)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--build", default=os.path.join(pb.ROOT, "build"))
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--res", type=int, default=80)
+    ap.add_argument("--ref-spp", type=int, default=4096)
+    ap.add_argument("--tolerances", default="0.05,0.1,0.2,0.3")
+    ap.add_argument("--cloud-alpha", type=float, default=0.05)
+    ap.add_argument("--scenes", default=",".join(HELD_OUT))
+    ap.add_argument("--work", default=None)
+    args = ap.parse_args()
+    args.work = args.work or tempfile.mkdtemp(prefix="auto_bench.")
+    cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
+                                                            "cloudbake")
+    tolerances = [float(t) for t in args.tolerances.split(",")]
+    print("| scene | tolerance | auto's choice | auto s | rel. RMSE | met | best in hindsight | "
+          "best s | slowdown |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    met = pairs = 0
+    slowdowns = []
+    for scene in args.scenes.split(","):
+        base, change = HELD_OUT[scene]
+        shot = pb.load_scene(base, args.res)
+        if shot is None:
+            continue
+        change(shot)
+        shot["name"] = scene
+        views = [v["name"] for v in shot["views"]]
+        refs, ref_seconds = [], []
+        for seed in (1, 2):
+            s = json.loads(json.dumps(shot))
+            s["bake"] = {"method": "pathtrace", "samples": args.ref_spp, "seed": seed}
+            out = os.path.join(args.work, "ref", "%s-%d-%d-%d" % (scene, args.res, args.ref_spp,
+                                                                 seed))
+            ref_seconds.append(pb.render(cloudbake, s, out, args.threads)["seconds"])
+            refs.append(out)
+        ref_noise = sum(pb.compare(cloudbake, os.path.join(refs[0], v + ".exr"),
+                                   os.path.join(refs[1], v + ".exr"),
+                                   os.path.join(refs[0], v + ".exr"),
+                                   args.cloud_alpha)["rel_rmse"] for v in views) / len(views)
+        ref_noise /= math.sqrt(2)  # one render's noise
+        # The path tracer in hindsight: noise (against a reference of the same noise as each
+        # seed's) falls as 1 / sqrt(spp), seconds grow with spp.
+        noise_1spp = ref_noise * math.sqrt(args.ref_spp)
+        sec_per_spp = sum(ref_seconds) / 2 / args.ref_spp
+        measured = []  # (name, seconds, error)
+        stats, err = run_and_measure(cloudbake, shot, {"method": "single"},
+                                     os.path.join(args.work, scene, "single"), refs, views, args)
+        measured.append(("single", stats["seconds"], err))
+        for photons, order, lattice, tally in PHOTON_RUNGS:
+            samples = 16 if photons >= (1 << 19) else 4
+            bake = {"method": "photon", "photons": photons, "order": order,
+                    "light_resolution": lattice, "tally_resolution": tally, "samples": samples}
+            stats, err = run_and_measure(cloudbake, shot, bake, os.path.join(
+                args.work, scene, "photon-%d" % photons), refs, views, args)
+            measured.append(("photon %d" % photons, stats["seconds"], err))
+        print("%s: reference noise %.4f per render; measured: %s" % (
+            scene, ref_noise, ", ".join("%s %.3f in %.1f s" % (n, e, s) for n, s, e in measured)),
+            file=sys.stderr, flush=True)
+        for tol in tolerances:
+            out = os.path.join(args.work, scene, "auto-%g" % tol)
+            stats, err = run_and_measure(cloudbake, shot, {"method": "auto", "tolerance": tol},
+                                         out, refs, views, args)
+            with open(os.path.join(out, "auto.json")) as f:
+                chosen = json.load(f)["chosen"]
+            choice = chosen["method"] + (" %d spp" % chosen["samples"]
+                                         if chosen["method"] == "pathtrace" else
+                                         " " + " ".join("%s=%s" % kv
+                                                        for kv in chosen["knobs"].items()))
+            pt_seconds = sec_per_spp * math.ceil((noise_1spp / tol) ** 2)
+            options = [(n, s) for n, s, e in measured if e <= tol] + [("pathtrace", pt_seconds)]
+            best_name, best_s = min(options, key=lambda o: o[1])
+            ok = err <= tol
+            met += ok
+            pairs += 1
+            slowdowns.append(stats["seconds"] / best_s)
+            print("| %s | %g | %s | %.1f | %.4f | %s | %s | %.1f | %.2f |" % (
+                scene, tol, choice, stats["seconds"], err, "yes" if ok else "**no**", best_name,
+                best_s, stats["seconds"] / best_s), flush=True)
+    if pairs:
+        slowdowns.sort()
+        print("\nmet %d of %d scene x tolerance pairs (%.0f %%); slowdown against the best in "
+              "hindsight: median %.2f, worst %.2f" % (met, pairs, 100.0 * met / pairs,
+                                                       slowdowns[len(slowdowns) // 2],
+                                                       slowdowns[-1]))
+    print("work folder: %s" % args.work, file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

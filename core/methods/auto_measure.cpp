@@ -1,0 +1,137 @@
+#include "core/methods/auto_measure.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "core/error.h"
+#include "core/format.h"
+#include "core/math/rng.h"
+#include "core/methods/common.h"
+#include "core/transport/path_tracer.h"
+#include "core/transport/sun_guiding.h"
+
+namespace cloudbake {
+namespace {
+
+constexpr double kCloudAlpha = 0.05;
+
+// The 90th percentile of sigma_t over the cloud's box where there is any density: a lattice's
+// interpolation errs where the cloud is dense, and a percentile ignores the odd spike.
+double denseSigmaT(const Medium& medium) {
+  const DensityField& field = *medium.density;
+  const Bounds3 b = field.bounds();
+  auto lookup = field.lookup();
+  Rng rng(0x5ca1ab1eULL, 7);
+  std::vector<double> inside;
+  constexpr int kPoints = 8192;
+  for (int i = 0; i < kPoints; ++i) {
+    const Vec3 p{b.min.x + (b.max.x - b.min.x) * rng.uniform(),
+                 b.min.y + (b.max.y - b.min.y) * rng.uniform(),
+                 b.min.z + (b.max.z - b.min.z) * rng.uniform()};
+    const double d = lookup->density(p);
+    if (d > 0) inside.push_back(d * medium.extinction);
+  }
+  if (inside.empty()) return 0;
+  const size_t k = std::min(inside.size() - 1, size_t(0.9 * double(inside.size())));
+  std::nth_element(inside.begin(), inside.begin() + long(k), inside.end());
+  return inside[k];
+}
+
+Camera pilotCamera(const Camera& c, int longest) {
+  Camera p = c;
+  const int side = std::max(c.width_px, c.height_px);
+  if (side > longest) {
+    const double s = double(longest) / side;
+    p.width_px = std::max(1, int(std::lround(c.width_px * s)));
+    p.height_px = std::max(1, int(std::lround(c.height_px * s)));
+  }
+  return p;
+}
+
+}  // namespace
+
+SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene) {
+  SceneTraits t;
+  const Medium& m = scene.medium;
+  t.albedo = maxComponent(m.albedo);
+  t.phase_spikiness = phaseSpikiness(*m.phase);
+  t.sun = shot.lighting.has_sun && maxComponent(scene.sun.irradiance) > 0;
+  t.sky = needsSky(shot);
+  const Bounds3 b = m.density->bounds();
+  const double extent = std::max({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
+  t.tau_voxel_128 = denseSigmaT(m) * extent / 128.0;
+  t.views = shot.outputs.exr ? int(shot.views.size()) : 0;
+  for (const Camera& c : shot.views) t.pixels += double(c.width_px) * c.height_px;
+  if (!shot.outputs.exr) t.pixels = 0;
+  if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
+    t.sequence = true;
+    t.frames = seq->frames;
+  }
+  return t;
+}
+
+void PairNoise::add(const RenderLayers& a, const RenderLayers& b) {
+  const int w = a.beauty.width, h = a.beauty.height;
+  pixels += int64_t(w) * h;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      if (a.beauty.at(x, y)[3] < kCloudAlpha || b.beauty.at(x, y)[3] < kCloudAlpha) continue;
+      ++cloud_pixels;
+      for (int c = 0; c < 3; ++c) {
+        const double va = double(a.sun.at(x, y)[c]) + a.sky.at(x, y)[c];
+        const double vb = double(b.sun.at(x, y)[c]) + b.sky.at(x, y)[c];
+        sum_sq_diff += (va - vb) * (va - vb);
+        sum_mean += 0.5 * (va + vb);
+        sum_multiple += 0.5 * (double(a.multiple.at(x, y)[c]) + b.multiple.at(x, y)[c]);
+        sum_scattered += 0.5 * (va + vb);
+        ++values;
+      }
+    }
+  }
+}
+
+double PairNoise::relativeNoise() const {
+  if (values == 0 || !(sum_mean > 0)) return 0;
+  return std::sqrt(sum_sq_diff / double(values) / 2.0) / (sum_mean / double(values));
+}
+
+double PairNoise::multipleFraction() const {
+  return sum_scattered > 0 ? std::clamp(sum_multiple / sum_scattered, 0.0, 1.0) : 0.0;
+}
+
+PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
+  PilotMeasure pm;
+  pm.samples = o.samples;
+  const auto t0 = std::chrono::steady_clock::now();
+  PairNoise noise;
+  const int n = std::min<int>(int(scene.cameras.size()), o.max_views);
+  for (int v = 0; v < n; ++v) {
+    const Camera cam = pilotCamera(scene.cameras[size_t(v)], o.longest_side_px);
+    RenderLayers pair[2];
+    for (int s = 0; s < 2; ++s) {
+      PathTracerOptions pt;
+      pt.samples_per_pixel = o.samples;
+      pt.seed = 0x9170 + uint64_t(s);
+      pt.max_depth = o.max_depth;
+      pt.threads = o.threads;
+      const double done = double(2 * v + s) / double(2 * n);
+      pair[s] = renderPathTraced(scene.medium, scene.sun, scene.sky, cam, pt, [&](double f) {
+        return !o.progress || o.progress(done + f / double(2 * n));
+      });
+    }
+    noise.add(pair[0], pair[1]);
+  }
+  pm.seconds = secondsSince(t0);
+  pm.pixels = noise.pixels;
+  pm.noise_1spp = noise.relativeNoise() * std::sqrt(double(o.samples));
+  pm.multiple_fraction = noise.multipleFraction();
+  pm.cloud_fraction = noise.pixels > 0 ? double(noise.cloud_pixels) / double(noise.pixels) : 0;
+  // Cost per path: measured at the pilot's size; a pixel at full size costs the same (the
+  // framing is the same, only finer).
+  pm.seconds_per_sample =
+      noise.pixels > 0 ? pm.seconds / (2.0 * double(o.samples) * double(noise.pixels)) : 0;
+  return pm;
+}
+
+}  // namespace cloudbake

@@ -1,0 +1,44 @@
+// What method `auto` measures of a scene before it chooses: the traits read from the density
+// and lights (cheap), and a pilot: a short path-traced render of the views at a reduced size with
+// two seeds, which gives the reference's noise and cost on this very scene and how much of the
+// cloud's light is multiply scattered.
+#pragma once
+
+#include <functional>
+
+#include "core/methods/auto_model.h"
+#include "core/shot/shot.h"
+#include "core/transport/path_tracer.h"
+#include "core/transport/scene.h"
+
+namespace cloudbake {
+
+/// The shot's traits; `scene` must have its density built.
+SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene);
+
+struct PilotOptions {
+  int longest_side_px = 64;  ///< each view is rendered at most this size (aspect kept)
+  int samples = 8;           ///< paths per pixel of each of the two renders
+  int max_views = 4;         ///< views beyond these are not piloted (their cost is scaled)
+  int max_depth = 100000;
+  int threads = 0;
+  /// Return false to stop (the pilot then throws Cancelled).
+  std::function<bool(double fraction)> progress;
+};
+
+/// Renders the pilot and measures it. A scene whose cloud covers no pixel of any view measures
+/// noise and multiple fraction 0 (there is no cloud light to be wrong about).
+PilotMeasure runPilot(const Scene& scene, const PilotOptions& options);
+
+/// The relative noise and mean of the cloud's own light (sun + sky layers over the pixels with
+/// alpha >= 0.05 in both) between two renders of different seeds: RMS difference / sqrt 2 /
+/// mean. Accumulated over views by `add`.
+struct PairNoise {
+  double sum_sq_diff = 0, sum_mean = 0, sum_multiple = 0, sum_scattered = 0;
+  int64_t values = 0, cloud_pixels = 0, pixels = 0;
+  void add(const RenderLayers& a, const RenderLayers& b);
+  double relativeNoise() const;
+  double multipleFraction() const;
+};
+
+}  // namespace cloudbake

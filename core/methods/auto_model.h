@@ -1,0 +1,84 @@
+// The cost and error model behind method `auto`: what each method is predicted to cost and how
+// far from the reference it is predicted to land on one scene, from the scene's own numbers
+// (SceneTraits) and a short pilot render of it (PilotMeasure). Free functions, so tests reach
+// every step; the constants are fitted to bench/photon_bench.py's and bench/trade_bench.py's
+// measured curves (docs/methods.md, "Method auto").
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace cloudbake {
+
+/// What the model reads of a scene before any bake.
+struct SceneTraits {
+  double albedo = 1;           ///< the largest channel's single-scattering albedo
+  double phase_spikiness = 0;  ///< V = 4 pi integral(p^2) - 1 (core/transport/sun_guiding.h)
+  bool sun = false;            ///< a sun with irradiance > 0
+  bool sky = false;            ///< a sky that is not black
+  /// Optical thickness of one voxel of a 128-voxel lattice over the cloud's box where the
+  /// cloud is dense (the 90th percentile of sigma_t inside it): how much a lattice's linear
+  /// interpolation of the transmittance errs.
+  double tau_voxel_128 = 0;
+  int views = 0;
+  double pixels = 0;  ///< over every view
+  bool sequence = false;
+  int frames = 1;
+};
+
+/// A short path-traced render of the shot's views at a reduced size, two seeds: the noise and
+/// cost of the reference on this scene, and how much of the cloud's light is multiply scattered.
+struct PilotMeasure {
+  /// Relative noise per pixel of the cloud's own light (sun + sky layers, pixels with alpha >=
+  /// 0.05) at one path per pixel: the two renders' RMS difference / sqrt 2 / their mean,
+  /// times sqrt(spp).
+  double noise_1spp = 0;
+  double seconds_per_sample = 0;  ///< per path per pixel, on the pilot's threads
+  double multiple_fraction = 0;   ///< multiple / (single + multiple) over the cloud's pixels
+  double cloud_fraction = 0;      ///< the pixels with alpha >= 0.05
+  double seconds = 0;             ///< what the pilot itself took
+  int samples = 0;                ///< paths per pixel of each pilot render
+  int64_t pixels = 0;             ///< pixels of each pilot render, over the views
+};
+
+/// One method and its knobs as the model sees it.
+struct AutoCandidate {
+  std::string method;
+  /// Knob values that differ from the method's defaults (integers; the shot's own bake.seed and
+  /// the auto knobs are applied by the caller).
+  std::vector<std::pair<std::string, int64_t>> knobs;
+  int samples = 1;     ///< bake.samples
+  double error = 0;    ///< predicted relative RMSE of the cloud's own light
+  double seconds = 0;  ///< predicted seconds of the whole shot
+  std::string why;     ///< one line: what the prediction rests on
+};
+
+/// The photon ladder: each rung one of bench/photon_bench.py's measured settings (and beyond).
+struct PhotonRung {
+  int64_t photons;
+  int order;
+  int light_resolution;
+  int tally_resolution;
+  double bunny_error;  ///< relative RMSE measured on the bunny scene, the model's unit
+};
+const std::vector<PhotonRung>& photonRungs();
+
+/// Relative error of `photon` on this scene over its error on the bunny scene at the same rung
+/// (the rungs' errors across the five bench scenes keep their ratios within about 20 %).
+double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
+
+/// Bias of single scattering read from a lattice of `resolution` voxels: relative, from the
+/// curvature of the interpolated transmittance (tau^2 / 8 per voxel of optical thickness tau).
+double latticeSingleBias(const SceneTraits& traits, int resolution);
+
+/// The candidates the model predicts, cheapest first among those within `tolerance`; `limits`:
+/// most samples per pixel a pathtrace candidate may ask (0: 1e6).
+std::vector<AutoCandidate> autoCandidates(const SceneTraits& traits, const PilotMeasure& pilot,
+                                          double tolerance, int max_samples);
+
+/// Paths per pixel that bring the reference's noise to `tolerance` on this scene.
+int64_t pathtraceSamplesFor(const PilotMeasure& pilot, double tolerance);
+
+}  // namespace cloudbake

@@ -1,0 +1,224 @@
+// Method auto: the model's pieces (samples for a tolerance, the scene factor fitted on the five
+// bench scenes, the lattice bias), the choice among candidates (what meets the tolerance,
+// cheapest first; limits and peaky phases; a clear error naming /bake/tolerance when nothing
+// meets it), the pilot's noise against the noise measured between two longer renders, and what
+// it measures of the light's orders.
+#include "core/methods/auto.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "core/error.h"
+#include "core/methods/registry.h"
+#include "core/shot/scene_builder.h"
+#include "core/shot/shot_parser.h"
+
+namespace cloudbake {
+namespace {
+
+std::string shot(const std::string& bake, double albedo = 0.95, double extinction = 3,
+                 int px = 16) {
+  return R"({"version": 1, "name": "a",
+    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "medium": {"extinction": )" +
+         std::to_string(extinction) + R"(, "albedo": )" + std::to_string(albedo) +
+         R"(, "phase": {"type": "hg", "g": 0.6}},
+    "lighting": {"sun": {"direction": [0.5, 0, 0.8660254], "irradiance": [1, 1, 1]},
+                 "sky": {"radiance": [0.1, 0.1, 0.1]}},
+    "bake": )" +
+         bake + R"(,
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [)" +
+         std::to_string(px) + ", " + std::to_string(px) + R"(]}]})";
+}
+
+PilotMeasure pilotOf(double noise, double multiple, double seconds_per_sample = 1e-6) {
+  PilotMeasure p;
+  p.noise_1spp = noise;
+  p.multiple_fraction = multiple;
+  p.seconds_per_sample = seconds_per_sample;
+  p.cloud_fraction = 0.25;
+  p.samples = 8;
+  return p;
+}
+
+SceneTraits traitsOf(double tau_voxel, double pixels = 4 * 640.0 * 480) {
+  SceneTraits t;
+  t.sun = t.sky = true;
+  t.phase_spikiness = 21.4;
+  t.tau_voxel_128 = tau_voxel;
+  t.views = 4;
+  t.pixels = pixels;
+  return t;
+}
+
+TEST(AutoModel, PathtraceSamplesMeetTheToleranceWithTheMargin) {
+  const PilotMeasure p = pilotOf(2.0, 0.7);
+  const int64_t spp = pathtraceSamplesFor(p, 0.1);
+  EXPECT_EQ(spp, 576);  // (1.2 x 2 / 0.1)^2
+  EXPECT_LE(1.2 * 2.0 / std::sqrt(double(spp)), 0.1 + 1e-12);
+  EXPECT_EQ(pathtraceSamplesFor(pilotOf(0, 0), 0.1), 1);  // no cloud light: one path
+  EXPECT_GT(pathtraceSamplesFor(p, 0.01), 4 * pathtraceSamplesFor(p, 0.02) - 4);
+}
+
+TEST(AutoModel, PhotonFactorReproducesTheBenchScenes) {
+  // The five scenes the factor was fitted on (their pilots' multiple fraction, tau_voxel_128)
+  // and their measured photon errors over the bunny's.
+  struct Row {
+    double multiple, tau, factor;
+  };
+  for (const Row& r : {Row{0.735, 0.129, 1.2}, Row{0.554, 0.074, 1.0}, Row{0.817, 0.575, 2.25},
+                       Row{0.267, 0.087, 0.70}, Row{0.813, 0.415, 1.82}}) {
+    const double f = photonSceneFactor(traitsOf(r.tau), pilotOf(2, r.multiple));
+    EXPECT_NEAR(f / r.factor, 1.0, 0.1) << r.multiple << " " << r.tau;
+  }
+}
+
+TEST(AutoModel, LatticeBiasFallsWithResolution) {
+  const SceneTraits t = traitsOf(0.5);
+  EXPECT_NEAR(latticeSingleBias(t, 128), 0.25 / 8, 1e-12);
+  EXPECT_LT(latticeSingleBias(t, 256), latticeSingleBias(t, 128) / 3.9);
+  EXPECT_LE(latticeSingleBias(traitsOf(1e6), 8), 1.0);
+}
+
+TEST(AutoModel, CandidatesMeetingTheToleranceComeFirstCheapestFirst) {
+  const std::vector<AutoCandidate> c = autoCandidates(traitsOf(0.1), pilotOf(2, 0.6), 0.1, 0);
+  ASSERT_FALSE(c.empty());
+  size_t meeting = 0;
+  while (meeting < c.size() && c[meeting].error <= 0.1) ++meeting;
+  ASSERT_GT(meeting, 0u);
+  for (size_t i = meeting; i < c.size(); ++i) EXPECT_GT(c[i].error, 0.1);
+  for (size_t i = 1; i < meeting; ++i) EXPECT_LE(c[i - 1].seconds, c[i].seconds);
+  // Four 640x480 views at 10 %: a bake is far cheaper than the path tracer.
+  EXPECT_EQ(c.front().method, "photon");
+}
+
+TEST(AutoModel, SingleWhereMultipleScatteringIsNegligible) {
+  const std::vector<AutoCandidate> c = autoCandidates(traitsOf(0.05), pilotOf(2, 0.02), 0.1, 0);
+  EXPECT_EQ(c.front().method, "single");
+  // ... and never where it is not.
+  for (const AutoCandidate& x : autoCandidates(traitsOf(0.05), pilotOf(2, 0.5), 0.3, 0)) {
+    if (x.method == "single") {
+      EXPECT_GT(x.error, 0.5);
+    }
+  }
+}
+
+TEST(AutoModel, NoPhotonPredictionForPeakyPhases) {
+  SceneTraits t = traitsOf(0.1);
+  t.phase_spikiness = 3000;  // a droplet's Mie peak: outside what photon was measured on
+  for (const AutoCandidate& x : autoCandidates(t, pilotOf(4, 0.6), 0.1, 0)) {
+    EXPECT_NE(x.method, "photon");
+  }
+}
+
+TEST(AutoModel, SmallViewsGoToThePathTracer) {
+  // One 32x32 view: a bake's fixed cost is not worth it.
+  const std::vector<AutoCandidate> c =
+      autoCandidates(traitsOf(0.1, 32 * 32), pilotOf(2, 0.6), 0.1, 0);
+  EXPECT_EQ(c.front().method, "pathtrace");
+}
+
+TEST(AutoChoice, ChoosesRunsNothingAndSaysWhy) {
+  const ShotSpec s = parseShot(shot(R"({"method": "auto", "tolerance": 0.2})"), "");
+  const Scene scene = buildScene(s, "shot.json");
+  AutoOptions o;
+  o.threads = 2;
+  const AutoChoice c = chooseAuto(s, scene, o);
+  EXPECT_EQ(c.shot.bake.method, c.chosen.method);
+  EXPECT_NE(c.shot.bake.method, "auto");
+  EXPECT_LE(c.chosen.error, 0.2);
+  EXPECT_EQ(c.considered.front().method, c.chosen.method);
+  EXPECT_GT(c.pilot.noise_1spp, 0);
+  EXPECT_GT(c.pilot.multiple_fraction, 0.05);
+  EXPECT_LT(c.pilot.multiple_fraction, 0.95);
+  ASSERT_FALSE(c.planLines().empty());
+  EXPECT_NE(c.planLines().front().find("auto: chose " + c.chosen.method), std::string::npos);
+  EXPECT_EQ(c.toJson()["chosen"]["method"], c.chosen.method);
+  // The resolved shot passes its method's own checks.
+  EXPECT_NO_THROW(methodOf(c.shot).validate(c.shot, "shot.json"));
+}
+
+TEST(AutoChoice, ToleranceNoMethodMeetsIsAClearError) {
+  const ShotSpec s = parseShot(shot(R"({"method": "auto", "tolerance": 0.001})"), "");
+  const Scene scene = buildScene(s, "shot.json");
+  AutoOptions o;
+  o.threads = 2;
+  o.max_samples = 1000;  // the path tracer would need ~1e6 paths per pixel
+  try {
+    chooseAuto(s, scene, o);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("shot.json: /bake/tolerance: no method is predicted to meet 0.001"),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("the best predicted is"), std::string::npos) << what;
+  }
+}
+
+TEST(AutoChoice, SequencesArePrecomputedsOrAClearError) {
+  const std::string seq = R"({"version": 1, "name": "s",
+    "volume": {"sequence": {"procedural": {"type": "perlin_cloud", "resolution": 16}, "frames": 2}},
+    "medium": {"extinction": 3, "albedo": 0.9, "phase": {"type": "hg", "g": 0.6}},
+    "lighting": {"sun": {"direction": [0, 0, 1], "irradiance": [1, 1, 1]}},
+    "bake": {"method": "auto", "tolerance": TOL},
+    "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [8, 8]}]})";
+  auto with = [&](const std::string& tol) {
+    std::string t = seq;
+    t.replace(t.find("TOL"), 3, tol);
+    return parseShot(t, "");
+  };
+  const ShotSpec ok = with("0.5");
+  const AutoChoice c = chooseAuto(ok, Scene{}, AutoOptions{});
+  EXPECT_EQ(c.shot.bake.method, "precomputed");
+  try {
+    chooseAuto(with("0.1"), Scene{}, AutoOptions{});
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/bake/tolerance: 0.1 cannot be met for an animated"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// The pilot's noise at one path per pixel predicts the noise of longer renders: measured between
+// two 64-spp renders of the same view, within 25 % (both estimates are themselves noisy).
+TEST(AutoPilot, NoiseMatchesTheNoiseOfLongerRenders) {
+  const ShotSpec s = parseShot(shot(R"({"method": "pathtrace"})", 0.95, 3, 32), "");
+  const Scene scene = buildScene(s, "shot.json");
+  PilotOptions po;
+  po.threads = 2;
+  const PilotMeasure p = runPilot(scene, po);
+  PairNoise pair;
+  RenderLayers r[2];
+  for (int k = 0; k < 2; ++k) {
+    PathTracerOptions pt;
+    pt.samples_per_pixel = 64;
+    pt.seed = 50 + uint64_t(k);
+    pt.threads = 2;
+    r[k] = renderPathTraced(scene.medium, scene.sun, scene.sky, scene.cameras[0], pt);
+  }
+  pair.add(r[0], r[1]);
+  EXPECT_NEAR(p.noise_1spp / (pair.relativeNoise() * 8.0), 1.0, 0.25);
+  EXPECT_NEAR(p.multiple_fraction, pair.multipleFraction(), 0.1);
+  EXPECT_GT(p.cloud_fraction, 0.3);
+  EXPECT_LT(p.cloud_fraction, 0.7);  // a sphere of radius 1 in a 2.5-wide square: ~0.5
+}
+
+// Absorbing media scatter once at most: the pilot measures no multiple scattering there, and a
+// thick white one mostly multiple scattering.
+TEST(AutoPilot, MultipleFractionFollowsAlbedoAndThickness) {
+  PilotOptions po;
+  po.threads = 2;
+  const ShotSpec black = parseShot(shot(R"({"method": "pathtrace"})", 0.0), "");
+  EXPECT_EQ(runPilot(buildScene(black, ""), po).multiple_fraction, 0.0);
+  const ShotSpec white = parseShot(shot(R"({"method": "pathtrace"})", 1.0, 30), "");
+  EXPECT_GT(runPilot(buildScene(white, ""), po).multiple_fraction, 0.6);
+}
+
+}  // namespace
+}  // namespace cloudbake
