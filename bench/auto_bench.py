@@ -70,20 +70,23 @@ HELD_OUT = {"perlin_dense": ("perlin", _perlin_dense), "bunny_thin": ("bunny", _
 PHOTON_RUNGS = [(1 << 17, 3, 64, 32), (1 << 19, 3, 128, 48), (1 << 21, 4, 192, 48)]
 
 
-def error_against(cloudbake, out, refs, views, alpha):
+def error_against(cloudbake, out, refs, views, alpha, ref_noise):
+    """Rel. RMSE against each reference, averaged, with one reference's own noise taken out in
+    quadrature (the two are independent): the error against the converged image."""
     errs = []
     for v in views:
         rows = [pb.compare(cloudbake, os.path.join(out, v + ".exr"), os.path.join(r, v + ".exr"),
                            os.path.join(r, v + ".exr"), alpha) for r in refs]
         errs.append(sum(r["rel_rmse"] for r in rows) / 2)
-    return sum(errs) / len(errs)
+    e = sum(errs) / len(errs)
+    return math.sqrt(max(0.0, e * e - ref_noise * ref_noise))
 
 
-def run_and_measure(cloudbake, shot, bake, out, refs, views, args):
+def run_and_measure(cloudbake, shot, bake, out, refs, views, args, ref_noise):
     s = json.loads(json.dumps(shot))
     s["bake"] = bake
     stats = pb.render(cloudbake, s, out, args.threads)
-    return stats, error_against(cloudbake, out, refs, views, args.cloud_alpha)
+    return stats, error_against(cloudbake, out, refs, views, args.cloud_alpha, ref_noise)
 
 
 def main():
@@ -106,6 +109,7 @@ def main():
     print("|---|---|---|---|---|---|---|---|---|")
     met = pairs = 0
     slowdowns = []
+    coverage = []  # (scene, candidate, predicted, measured)
     for scene in args.scenes.split(","):
         base, change = HELD_OUT[scene]
         shot = pb.load_scene(base, args.res)
@@ -127,20 +131,28 @@ def main():
                                    os.path.join(refs[0], v + ".exr"),
                                    args.cloud_alpha)["rel_rmse"] for v in views) / len(views)
         ref_noise /= math.sqrt(2)  # one render's noise
-        # The path tracer in hindsight: noise (against a reference of the same noise as each
-        # seed's) falls as 1 / sqrt(spp), seconds grow with spp.
+        # The path tracer in hindsight: its noise falls as 1 / sqrt(spp); its seconds are a
+        # fixed part (the volume, the process) and a part per path, from a 16-spp run and the
+        # references.
         noise_1spp = ref_noise * math.sqrt(args.ref_spp)
-        sec_per_spp = sum(ref_seconds) / 2 / args.ref_spp
+        short, _ = run_and_measure(cloudbake, shot, {"method": "pathtrace", "samples": 16},
+                                   os.path.join(args.work, scene, "pt16"), refs, views, args,
+                                   ref_noise)
+        sec_per_spp = max(1e-9, (sum(ref_seconds) / 2 - short["seconds"]) / (args.ref_spp - 16))
+        pt_fixed = max(0.0, short["seconds"] - 16 * sec_per_spp)
         measured = []  # (name, seconds, error)
-        stats, err = run_and_measure(cloudbake, shot, {"method": "single"},
-                                     os.path.join(args.work, scene, "single"), refs, views, args)
+        # Views from a bake at auto's rays per pixel (16 x 4800 / pixels per view, 1 to 16).
+        samples = max(1, min(16, math.ceil(16 * 4800 / (args.res * (args.res * 3 // 4)))))
+        stats, err = run_and_measure(cloudbake, shot, {"method": "single", "samples": samples},
+                                     os.path.join(args.work, scene, "single-%d" % samples), refs,
+                                     views, args, ref_noise)
         measured.append(("single", stats["seconds"], err))
         for photons, order, lattice, tally in PHOTON_RUNGS:
-            samples = 16 if photons >= (1 << 19) else 4
             bake = {"method": "photon", "photons": photons, "order": order,
                     "light_resolution": lattice, "tally_resolution": tally, "samples": samples}
             stats, err = run_and_measure(cloudbake, shot, bake, os.path.join(
-                args.work, scene, "photon-%d" % photons), refs, views, args)
+                args.work, scene, "photon-%d-%d" % (photons, samples)), refs, views, args,
+                ref_noise)
             measured.append(("photon %d" % photons, stats["seconds"], err))
         print("%s: reference noise %.4f per render; measured: %s" % (
             scene, ref_noise, ", ".join("%s %.3f in %.1f s" % (n, e, s) for n, s, e in measured)),
@@ -148,14 +160,17 @@ def main():
         for tol in tolerances:
             out = os.path.join(args.work, scene, "auto-%g" % tol)
             stats, err = run_and_measure(cloudbake, shot, {"method": "auto", "tolerance": tol},
-                                         out, refs, views, args)
+                                         out, refs, views, args, ref_noise)
             with open(os.path.join(out, "auto.json")) as f:
-                chosen = json.load(f)["chosen"]
+                record = json.load(f)
+            chosen = record["chosen"]
+            if tol == tolerances[0]:
+                coverage.extend(predicted_vs_measured(scene, record, measured))
             choice = chosen["method"] + (" %d spp" % chosen["samples"]
                                          if chosen["method"] == "pathtrace" else
                                          " " + " ".join("%s=%s" % kv
                                                         for kv in chosen["knobs"].items()))
-            pt_seconds = sec_per_spp * math.ceil((noise_1spp / tol) ** 2)
+            pt_seconds = pt_fixed + sec_per_spp * math.ceil((noise_1spp / tol) ** 2)
             options = [(n, s) for n, s, e in measured if e <= tol] + [("pathtrace", pt_seconds)]
             best_name, best_s = min(options, key=lambda o: o[1])
             ok = err <= tol
@@ -171,7 +186,36 @@ def main():
               "hindsight: median %.2f, worst %.2f" % (met, pairs, 100.0 * met / pairs,
                                                        slowdowns[len(slowdowns) // 2],
                                                        slowdowns[-1]))
+    # Whether auto's predictions of the bakes bound what they measured: what makes its choice
+    # safe at view sizes this bench cannot afford references for (a bake is chosen for large
+    # views, where the path tracer's cost grows with the pixels and a bake's does not).
+    print("\n| scene | candidate | predicted error | measured error | bounded |")
+    print("|---|---|---|---|---|")
+    for scene, name, predicted, err in coverage:
+        print("| %s | %s | %.3f | %.3f | %s |" % (scene, name, predicted, err,
+                                                "yes" if err <= predicted else "**no**"))
+    if coverage:
+        print("\npredictions bounding the measured error: %d of %d" % (
+            sum(1 for c in coverage if c[3] <= c[2]), len(coverage)))
     print("work folder: %s" % args.work, file=sys.stderr)
+
+
+def predicted_vs_measured(scene, record, measured):
+    """auto's predicted error of each bake it considered against the bench's measurement of the
+    same knobs (single at its default lattice, photon's rungs)."""
+    rows = []
+    for c in record["considered"]:
+        knobs = c["knobs"]
+        if c["method"] == "single" and knobs.get("light_resolution") == 128:
+            name = "single"
+        elif c["method"] == "photon":
+            name = "photon %d" % knobs["photons"]
+        else:
+            continue
+        for n, _, err in measured:
+            if n == name:
+                rows.append((scene, name, c["predicted_error"], err))
+    return rows
 
 
 if __name__ == "__main__":

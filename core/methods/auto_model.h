@@ -65,8 +65,9 @@ struct PhotonRung {
 };
 const std::vector<PhotonRung>& photonRungs();
 
-/// Relative error of `photon` on this scene over its error on the bunny scene at the same rung
-/// (the rungs' errors across the five bench scenes keep their ratios within about 20 %).
+/// Relative error of `photon` on this scene over its error on the bunny scene at the same rung:
+/// the worst of the five bench scenes (the rungs' errors across scenes keep their ratios within
+/// about 20 %, but no trait of the scene predicted the ratio on held-out scenes; auto_model.cpp).
 double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
 
 /// Bias of single scattering read from a lattice of `resolution` voxels: relative, from the
