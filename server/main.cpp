@@ -74,6 +74,7 @@ struct ServerFlags {
   uint64_t max_samples = uint64_t(jobs.limits.max_samples);
   unsigned max_views = unsigned(jobs.limits.max_views);
   size_t max_streams = 256;
+  double keep_jobs_hours = jobs.keep_finished_seconds / 3600.0;
 };
 
 void addServiceOptions(CLI::App& app, ServerFlags* f) {
@@ -113,6 +114,17 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
                  "wall-clock seconds a job may run before it is stopped and FAILED (0: no limit)")
       ->envname("CLOUDBAKE_MAX_JOB_SECONDS")
       ->check(CLI::Range(0.0, 1e9))
+      ->capture_default_str();
+  app.add_option("--keep-jobs-hours", f->keep_jobs_hours,
+                 "finished jobs (records, inputs, outputs) older than this are pruned, unless a "
+                 "client touched them in the last 10 minutes (0: kept forever)")
+      ->envname("CLOUDBAKE_KEEP_JOBS_HOURS")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
+  app.add_option("--max-finished-jobs", o.max_finished_jobs,
+                 "finished jobs kept at most; the oldest beyond it are pruned (0: no limit)")
+      ->envname("CLOUDBAKE_MAX_FINISHED_JOBS")
+      ->check(CLI::Range(size_t(0), size_t(100000000)))
       ->capture_default_str();
   app.add_option("--max-upload-bytes", o.max_upload_bytes, "largest asset upload")
       ->envname("CLOUDBAKE_MAX_UPLOAD_BYTES")
@@ -163,6 +175,7 @@ void addLogOptions(CLI::App& app, ServerFlags* f) {
 }
 
 void applyLimitFlags(ServerFlags* f) {
+  f->jobs.keep_finished_seconds = f->keep_jobs_hours * 3600.0;
   f->jobs.limits.max_image_pixels = int64_t(f->max_image_pixels);
   f->jobs.limits.max_samples = int64_t(f->max_samples);
   f->jobs.limits.max_views = int(f->max_views);

@@ -140,6 +140,8 @@ struct JobManager::Job {
   std::deque<JobEvent> events;
   uint64_t next_seq = 1;
   std::chrono::steady_clock::time_point started;
+  // When a client last asked for the job (status, events, outputs): pruning spares it a while.
+  std::chrono::steady_clock::time_point last_access = std::chrono::steady_clock::now();
   double last_fraction = -1;
   std::string last_message;
 };
@@ -205,8 +207,43 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
   if (!jobs_.empty()) {
     spdlog::info("job store: {} job(s) restored, {} requeued", jobs_.size(), queue_.size());
   }
+  prune();
   const unsigned runners = std::max(1u, options_.max_concurrent_jobs);
   for (unsigned i = 0; i < runners; ++i) runners_.emplace_back([this] { runnerLoop(); });
+}
+
+void JobManager::prune() {
+  const double now = unixNow();
+  const auto steady_now = std::chrono::steady_clock::now();
+  std::vector<std::string> doomed;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::vector<std::pair<double, std::string>> finished;  // (finished, id), oldest first
+    for (const auto& [id, job] : jobs_) {
+      if (job->record.terminal()) finished.push_back({job->record.finished, id});
+    }
+    std::sort(finished.begin(), finished.end());
+    const size_t over =
+        options_.max_finished_jobs > 0 && finished.size() > options_.max_finished_jobs
+            ? finished.size() - options_.max_finished_jobs
+            : 0;
+    for (size_t i = 0; i < finished.size(); ++i) {
+      const auto& [when, id] = finished[i];
+      const bool old =
+          options_.keep_finished_seconds > 0 && now - when > options_.keep_finished_seconds;
+      if (!old && i >= over) continue;
+      const double idle =
+          std::chrono::duration<double>(steady_now - jobs_[id]->last_access).count();
+      if (idle < options_.prune_grace_seconds) continue;
+      jobs_.erase(id);
+      doomed.push_back(id);
+    }
+  }
+  for (const std::string& id : doomed) store_->remove(id);
+  if (!doomed.empty()) {
+    spdlog::info("job store: pruned {} finished job(s) (--keep-jobs-hours, --max-finished-jobs)",
+                 doomed.size());
+  }
 }
 
 JobManager::~JobManager() {
@@ -384,6 +421,7 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
 }
 
 JobRecord JobManager::submit(const SubmitInput& input) {
+  prune();
   {
     // Fail fast before linking assets and hashing volumes; enqueue checks again.
     std::lock_guard<std::mutex> lock(mutex_);
@@ -435,6 +473,7 @@ std::shared_ptr<JobManager::Job> JobManager::find(const std::string& id) const {
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = jobs_.find(id);
   if (it == jobs_.end()) throw NotFoundError("job '" + id.substr(0, 64) + "' not found");
+  it->second->last_access = std::chrono::steady_clock::now();
   return it->second;
 }
 
@@ -622,6 +661,7 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   finishJob(*job, result, outcome);
   spdlog::info("job {}: {}{}", id, jobStateName(outcome.state),
                outcome.error.empty() ? "" : ": " + printable(outcome.error));
+  prune();
 }
 
 RunOptions JobManager::autoRunOptions() {

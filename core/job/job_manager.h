@@ -56,6 +56,14 @@ struct JobManagerOptions {
   /// Wall-clock seconds a job may run; past it the job is stopped (as a cancel, within about a
   /// second) and FAILED, naming --max-job-seconds. 0: no limit.
   double max_job_seconds = 86400;
+  /// Finished jobs (records, inputs and outputs) are pruned once finished longer ago than this
+  /// (seconds; 0: kept by age forever), and the oldest beyond `max_finished_jobs` (0: no
+  /// limit), after each job ends, at each submit and at start. A job a client touched (status,
+  /// events, an output) within `prune_grace_seconds` is kept: a fetch in progress is never cut
+  /// (and a stream already open reads on from its open file).
+  double keep_finished_seconds = 7 * 86400.0;
+  size_t max_finished_jobs = 10000;
+  double prune_grace_seconds = 600;
   JobLimits limits;
 };
 
@@ -157,6 +165,8 @@ class JobManager {
   struct Outcome;
   Prepared prepare(const SubmitInput& input, const std::string& dir);
   std::shared_ptr<Job> find(const std::string& id) const;
+  /// Removes the finished jobs the options say to prune (see keep_finished_seconds).
+  void prune();
   void pushEventLocked(Job& job, const std::string& stage, double fraction,
                        const std::string& message);
   void saveLocked(const Job& job);

@@ -567,6 +567,56 @@ TEST(JobManager, AutoPlanSaysWhatItChose) {
   fs::remove_all(dir);
 }
 
+JobRecord waitFinished(JobManager& jobs, const std::string& id) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  JobRecord r = jobs.get(id);
+  while (!r.terminal() && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    r = jobs.get(id);
+  }
+  return r;
+}
+
+// Finished jobs are pruned beyond the count and past the age the options give (records, inputs
+// and outputs), oldest first, except those a client touched within the grace period.
+TEST(JobManager, FinishedJobsArePrunedByCountAndAge) {
+  const fs::path dir = freshDir("prune");
+  JobManagerOptions o;
+  o.state_dir = dir.string();
+  o.worker_threads = 2;
+  o.max_finished_jobs = 2;
+  o.prune_grace_seconds = 0;
+  std::vector<std::string> ids;
+  {
+    JobManager jobs(o);
+    SubmitInput in;
+    in.shot_json = sphereShot(R"({"method": "single", "light_resolution": 8})");
+    for (int i = 0; i < 3; ++i) {
+      ids.push_back(jobs.submit(in).id);
+      ASSERT_EQ(waitFinished(jobs, ids.back()).state, JobState::kSucceeded);
+    }
+    // The third job's end pruned the first: the oldest beyond two.
+    EXPECT_THROW(jobs.get(ids[0]), NotFoundError);
+    EXPECT_FALSE(fs::exists(dir / "jobs" / ids[0]));
+    EXPECT_EQ(jobs.list(std::nullopt, 0).size(), 2u);
+    EXPECT_NO_THROW(jobs.output(ids[2], "v.exr"));
+  }
+  {
+    o.max_finished_jobs = 0;
+    o.prune_grace_seconds = 600;  // just restored: as if clients had touched them now
+    o.keep_finished_seconds = 1e-9;
+    JobManager jobs(o);
+    EXPECT_EQ(jobs.list(std::nullopt, 0).size(), 2u);
+  }
+  {
+    o.prune_grace_seconds = 0;
+    JobManager jobs(o);  // older than the age limit: pruned at start
+    EXPECT_TRUE(jobs.list(std::nullopt, 0).empty());
+    EXPECT_FALSE(fs::exists(dir / "jobs" / ids[2]));
+  }
+  fs::remove_all(dir);
+}
+
 // A job whose record is corrupt is reported FAILED with the reason, not dropped silently; a
 // folder without any record (a submit that crashed before it was acknowledged) is skipped.
 TEST(JobStore, CorruptRecordIsReportedFailedNotDropped) {
