@@ -85,12 +85,17 @@ def render(cloudbake, shot, out_dir, threads):
         return json.load(f)
 
 
-def compare(cloudbake, a, b, alpha_from, cloud_alpha):
-    """`scattered` of a against b over the pixels where alpha_from's alpha >= cloud_alpha."""
+def compare_all(cloudbake, a, b, alpha_from, cloud_alpha):
+    """Every layer of a against b over the pixels where alpha_from's alpha >= cloud_alpha."""
     out = subprocess.run([cloudbake, "compare", a, b, "--json", "--cloud-alpha", str(cloud_alpha),
                           "--mask-from", alpha_from], check=True, capture_output=True,
                          text=True).stdout
-    return json.loads(out)["scattered"]
+    return json.loads(out)
+
+
+def compare(cloudbake, a, b, alpha_from, cloud_alpha):
+    """`scattered` of a against b over the pixels where alpha_from's alpha >= cloud_alpha."""
+    return compare_all(cloudbake, a, b, alpha_from, cloud_alpha)["scattered"]
 
 
 def steps(stats, kind):

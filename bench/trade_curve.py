@@ -1,0 +1,236 @@
+#!/usr/bin/env python3
+"""The trade, measured and drawn (issue 13): each method's error against its cost as its knobs
+grow, on the five scenes of bench/photon_bench.py, with the Pareto front.
+
+For each scene (both views, --res x 3/4 --res pixels) it renders a reference with `pathtrace`
+twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/ with bench/photon_bench.py's names,
+so the two benches share references and photon renders), then every configuration of CONFIGS
+once, and writes
+
+- a markdown table: scene | method | quality | bake s | s/view | peak MiB | rel. RMSE (the
+  cloud's own light, sun + sky layers, over the cloud's pixels, with one reference's own noise
+  taken out in quadrature) | beauty rel. RMSE | bias of the sun, sky, single and multiple
+  layers (mean / reference mean - 1) | s for 4 x 640x480;
+- the shot cost of four 640x480 views, from the measured seconds: a bake's seconds plus its
+  views' at 64x the pixels and the rays per unit image auto uses (16 rays per pixel at 80x60,
+  1 at 640x480), the path tracer's views at 64x the pixels and the same paths per pixel (the
+  error per pixel at equal rays per unit image is taken as the measured one: the assumption the
+  extrapolation rests on);
+- per scene and requested error (2, 5, 10, 30 %): the fastest configuration that reaches it, and
+  its speedup over the path tracer (whose seconds for any error follow from its measured noise,
+  which falls as 1 / sqrt(spp));
+- with --plot-dir, one PNG per scene: rel. RMSE against seconds for four 640x480 views, log-log,
+  one line per method, the Pareto front dashed (python3-matplotlib, deploy/bench-packages.txt);
+- with --json-out, every point.
+
+Usage: /usr/bin/python3 bench/trade_curve.py [--build build] [--threads 2] [--res 80] [--ref-spp 8192]
+           [--scenes perlin,bunny,disney,thin,cumulus] [--work DIR] [--plot-dir docs/images]
+           [--json-out FILE]
+"""
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import photon_bench as pb  # noqa: E402  (scenes, renders, comparisons)
+
+TARGETS = (0.02, 0.05, 0.10, 0.30)
+FULL_PIXELS = 640 * 480
+VIEWS = 4
+
+
+def configs():
+    """(method, quality, bake, output folder name); photon's names are photon_bench's."""
+    out = []
+    for spp in (4, 16, 64, 256):
+        out.append(("pathtrace", "%d spp" % spp, {"method": "pathtrace", "samples": spp,
+                                                  "seed": 3}, "pt-%d" % spp))
+    for lattice in (64, 128, 256):
+        out.append(("single", "lattice %d" % lattice,
+                    {"method": "single", "light_resolution": lattice, "samples": 16},
+                    "single-%d" % lattice))
+    for points in (16384, 65536):
+        out.append(("pointcloud", "%d points" % points,
+                    {"method": "pointcloud", "points": points, "samples": 16},
+                    "pointcloud-%d" % points))
+    for photons, order, lattice, tally, zonal in pb.SWEEPS["default"]:
+        out.append(("photon", "%d photons, order %d, %d/%d" % (photons, order, lattice, tally),
+                    {"method": "photon", "photons": photons, "order": order,
+                     "light_resolution": lattice, "tally_resolution": tally,
+                     "zonal_order": zonal, "samples": 16},
+                    "%d-%d-%d-%d-%d-%d" % (photons, order, lattice, tally, zonal, 16)))
+    return out
+
+
+def layers_against(cloudbake, out, refs, views, alpha):
+    """compare --json of each view against each reference, averaged: {layer: (rel_rmse, bias)}."""
+    acc = {}
+    for v in views:
+        for r in refs:
+            res = pb.compare_all(cloudbake, os.path.join(out, v + ".exr"),
+                                 os.path.join(r, v + ".exr"), os.path.join(r, v + ".exr"),
+                                 alpha)
+            for layer, row in res.items():
+                bias = row["mean"] / row["reference_mean"] - 1 if row["reference_mean"] else 0.0
+                e = acc.setdefault(layer, [0.0, 0.0, 0])
+                e[0] += row["rel_rmse"]
+                e[1] += bias
+                e[2] += 1
+    return {k: (e[0] / e[2], e[1] / e[2]) for k, e in acc.items()}
+
+
+def shot_seconds(method, stats, res):
+    """Seconds for four 640x480 views from the measured run (see the module's docstring)."""
+    views = [s["seconds"] for s in stats["steps"] if s["step"] == "view"]
+    view_s = sum(views) / max(1, len(views))
+    scale = FULL_PIXELS / float(res * (res * 3 // 4))
+    if method == "pathtrace":
+        return VIEWS * view_s * scale, 0.0, view_s
+    bake_s = sum(s["seconds"] for s in stats["steps"]
+                 if s["step"] in ("bake", "precompute", "light", "volume"))
+    rays_ratio = 1.0 / 16.0  # 16 rays per pixel at 80x60 -> 1 at 640x480 (auto's rule)
+    return bake_s + VIEWS * view_s * scale * rays_ratio, bake_s, view_s
+
+
+def pareto(points):
+    """The points no other point beats in both seconds and error, by seconds."""
+    front, best = [], float("inf")
+    for p in sorted(points, key=lambda p: (p["shot_s"], p["error"])):
+        if p["error"] < best:
+            front.append(p)
+            best = p["error"]
+    return front
+
+
+def plot(scene, points, path):
+    try:
+        import matplotlib
+    except ImportError:
+        sys.exit("--plot-dir needs matplotlib: apt-get install python3-matplotlib, and run this "
+                 "script with /usr/bin/python3 (Debian's modules load there)")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 4.2), dpi=110)
+    for method in ("pathtrace", "single", "pointcloud", "photon"):
+        pts = sorted((p for p in points if p["method"] == method), key=lambda p: p["shot_s"])
+        if pts:
+            ax.plot([p["shot_s"] for p in pts], [p["error"] for p in pts], "o-", label=method)
+    front = pareto(points)
+    ax.step([p["shot_s"] for p in front], [p["error"] for p in front], "k--", where="post",
+            alpha=0.6, label="Pareto front")
+    for t in TARGETS:
+        ax.axhline(t, color="grey", lw=0.5, alpha=0.5)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("seconds for four 640x480 views (2 cores, from the measured runs)")
+    ax.set_ylabel("rel. RMSE of the cloud's own light")
+    ax.set_title("%s: error against cost" % scene)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def fastest(points, pt_noise_1spp, pt_s_per_spp, target):
+    """(name, seconds, speedup over the path tracer) of the cheapest way to `target`."""
+    pt_s = pt_s_per_spp * max(1.0, (pt_noise_1spp / target) ** 2)
+    options = [(p["method"] + " " + p["quality"], p["shot_s"]) for p in points
+               if p["method"] != "pathtrace" and p["error"] <= target]
+    options.append(("pathtrace %d spp" % math.ceil((pt_noise_1spp / target) ** 2), pt_s))
+    name, s = min(options, key=lambda o: o[1])
+    return name, s, pt_s / s
+
+
+def measure_scene(cloudbake, scene, args):
+    shot = pb.load_scene(scene, args.res)
+    if shot is None:
+        return None
+    views = [v["name"] for v in shot["views"]]
+    refs = []
+    for seed in (1, 2):
+        s = json.loads(json.dumps(shot))
+        s["bake"] = {"method": "pathtrace", "samples": args.ref_spp, "seed": seed}
+        out = os.path.join(args.work, "ref", "%s-%d-%d-%d" % (scene, args.res, args.ref_spp, seed))
+        pb.render(cloudbake, s, out, args.threads)
+        refs.append(out)
+    ref_noise = sum(pb.compare(cloudbake, os.path.join(refs[0], v + ".exr"),
+                               os.path.join(refs[1], v + ".exr"),
+                               os.path.join(refs[0], v + ".exr"), args.cloud_alpha)["rel_rmse"]
+                    for v in views) / len(views) / math.sqrt(2)
+    points = []
+    for method, quality, bake, name in configs():
+        s = json.loads(json.dumps(shot))
+        s["bake"] = bake
+        out = os.path.join(args.work, scene, name)
+        stats = pb.render(cloudbake, s, out, args.threads)
+        layers = layers_against(cloudbake, out, refs, views, args.cloud_alpha)
+        raw = layers["scattered"][0]
+        shot_s, bake_s, view_s = shot_seconds(method, stats, args.res)
+        points.append({
+            "scene": scene, "method": method, "quality": quality, "bake_s": bake_s,
+            "view_s": view_s, "peak_mib": stats["peak_rss_mib"], "shot_s": shot_s,
+            "error": math.sqrt(max(0.0, raw * raw - ref_noise * ref_noise)),
+            "beauty_error": layers["beauty"][0],
+            "bias": {k: layers[k][1] for k in ("sun", "sky", "single", "multiple")},
+            "samples": bake.get("samples", 1)})
+    return points, ref_noise
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--build", default=os.path.join(pb.ROOT, "build"))
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--res", type=int, default=80)
+    ap.add_argument("--ref-spp", type=int, default=8192)
+    ap.add_argument("--cloud-alpha", type=float, default=0.05)
+    ap.add_argument("--scenes", default=",".join(pb.SCENES))
+    ap.add_argument("--work", default=None)
+    ap.add_argument("--plot-dir", default=None)
+    ap.add_argument("--json-out", default=None)
+    args = ap.parse_args()
+    args.work = args.work or tempfile.mkdtemp(prefix="trade_curve.")
+    cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
+                                                            "cloudbake")
+    print("| scene | method | quality | bake s | s/view | peak MiB | rel. RMSE | beauty | "
+          "bias sun/sky/single/multiple | s, 4 x 640x480 |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    all_points, summary = [], []
+    for scene in args.scenes.split(","):
+        measured = measure_scene(cloudbake, scene, args)
+        if measured is None:
+            continue
+        points, ref_noise = measured
+        all_points.extend(points)
+        for p in points:
+            b = p["bias"]
+            print("| %s | %s | %s | %.2f | %.3f | %.0f | %.4f | %.4f | %+.3f/%+.3f/%+.3f/%+.3f | "
+                  "%.1f |" % (scene, p["method"], p["quality"], p["bake_s"], p["view_s"],
+                              p["peak_mib"], p["error"], p["beauty_error"], b["sun"], b["sky"],
+                              b["single"], b["multiple"], p["shot_s"]), flush=True)
+        # The path tracer's noise per path and seconds per path per pixel from its measured
+        # points (least squares of error^2 x spp; seconds linear in spp).
+        pts = [p for p in points if p["method"] == "pathtrace"]
+        noise_1spp = math.sqrt(sum(p["error"] ** 2 * p["samples"] for p in pts) / len(pts))
+        longest = max(pts, key=lambda p: p["samples"])
+        s_per_spp = longest["shot_s"] / longest["samples"]
+        for t in TARGETS:
+            summary.append((scene, t) + fastest(points, noise_1spp, s_per_spp, t))
+        print("%s: reference noise %.4f per render" % (scene, ref_noise), file=sys.stderr)
+        if args.plot_dir:
+            os.makedirs(args.plot_dir, exist_ok=True)
+            plot(scene, points, os.path.join(args.plot_dir, "trade_%s.png" % scene))
+    print("\n| scene | requested error | fastest | s, 4 x 640x480 | x faster than pathtrace |")
+    print("|---|---|---|---|---|")
+    for scene, t, name, s, speedup in summary:
+        print("| %s | %g | %s | %.1f | %.1f |" % (scene, t, name, s, speedup))
+    if args.json_out:
+        with open(args.json_out, "w") as f:
+            json.dump(all_points, f, indent=1)
+    print("work folder: %s" % args.work, file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
