@@ -26,6 +26,8 @@
 #include "common/exit_codes.h"
 #include "common/grpc_status.h"
 #include "common/json_limits.h"
+#include "core/io/exr_io.h"
+#include "core/io/png_writer.h"
 #include "core/job/sha256.h"
 
 namespace {
@@ -141,6 +143,7 @@ struct Client {
   double retry_s = 30;  // how long a submit retries a full queue or an unavailable server
   bool json = false;
   bool wait_for_server = false;
+  bool png = false;  // --png: a preview beside each downloaded EXR
   std::shared_ptr<grpc::Channel> channel;
   std::unique_ptr<v1::BakeService::Stub> stub;
 
@@ -433,6 +436,28 @@ v1::Job getJob(Client& c, const std::string& id) {
   return job;
 }
 
+/// DIR/<stem>.png beside a downloaded EXR: its beauty (or, in other files, the unprefixed RGB)
+/// auto-exposed as `cloudbake preview` does. The EXR is the product; the PNG is for looking.
+std::string writePreview(const std::string& exr_path) {
+  try {
+    const cloudbake::ExrContents exr = cloudbake::readExr(exr_path);
+    auto it = exr.layers.find("beauty");
+    if (it == exr.layers.end()) it = exr.layers.find("");
+    if (it == exr.layers.end() || it->second.channels < 3) {
+      throw CliError{ExitCode::kFailure, exr_path + ": --png: no RGB layer to preview"};
+    }
+    const std::string png = fs::path(exr_path).replace_extension(".png").string();
+    cloudbake::writePreviewPng(png, it->second);
+    return png;
+  } catch (const std::exception& e) {  // unreadable EXR, unwritable PNG
+    throw CliError{ExitCode::kFailure, std::string("--png: ") + e.what()};
+  }
+}
+
+bool isExr(const std::string& name) {
+  return name.size() > 4 && name.compare(name.size() - 4, 4, ".exr") == 0;
+}
+
 /// Fetches every output of a job; prints paths (or a JSON object with --json).
 int fetchAll(Client& c, const v1::Job& job, const std::string& dir, const std::string& only) {
   if (job.state() != v1::SUCCEEDED) {
@@ -449,6 +474,11 @@ int fetchAll(Client& c, const v1::Job& job, const std::string& dir, const std::s
     files.push_back(
         {{"name", f.name()}, {"path", path}, {"size", f.size()}, {"sha256", f.sha256()}});
     if (!c.json) std::cout << path << "\n";
+    if (c.png && isExr(f.name())) {
+      const std::string png = writePreview(path);
+      files.back()["preview"] = png;
+      if (!c.json) std::cout << png << "\n";
+    }
   }
   if (!any && !only.empty()) {
     throw CliError{ExitCode::kNotFound, "job " + job.id() + " has no output '" + only + "'"};
@@ -517,6 +547,7 @@ struct SubmitArgs {
   int samples = -1;
   double sun_tolerance_deg = 0;
   bool allow_outside = false;
+  bool png = false;
 };
 
 /// The shot file's text; CliError (exit 3 or 2) when it is missing or cannot be read.
@@ -799,6 +830,7 @@ struct JobArgs {
   unsigned limit = 0;
   std::vector<double> sun;
   bool quiet = false;
+  bool png = false;
 };
 
 int cmdWatch(Client& c, const std::string& id) {
@@ -915,6 +947,9 @@ CLI::App* addSubmitCommand(CLI::App& app, SubmitArgs* sa) {
   submit->add_option("--samples", sa->samples, "override bake.samples (1..1000000)");
   submit->add_flag("--allow-outside", sa->allow_outside,
                    "also upload files the shot names outside its folder (absolute or ../ paths)");
+  submit->add_flag("--png", sa->png,
+                   "also write an auto-exposed sRGB preview DIR/<view>.png beside each "
+                   "downloaded EXR (display only: the EXR is the product)");
   submit->add_option("--sun-tolerance", sa->sun_tolerance_deg,
                      "reuse a cached bake whose sun direction is within DEG degrees (default 0)");
   return submit;
@@ -939,16 +974,19 @@ Commands addCommands(CLI::App& app, SubmitArgs* sa, JobArgs* ja) {
   cmd.fetch->add_option("job", ja->job_id, "job id")->required();
   cmd.fetch->add_option("--out", ja->out_dir, "folder (default: current)");
   cmd.fetch->add_option("--name", ja->name, "only this output (e.g. nadir.exr)");
+  cmd.fetch->add_flag("--png", ja->png, "also write a PNG preview beside each EXR");
   cmd.render = app.add_subcommand("render", "render new views of a job's shot from the cache");
   cmd.render->add_option("job", ja->job_id, "job id")->required();
   cmd.render->add_option("--views", ja->views_file, "JSON file with an array of shot-format views");
   cmd.render->add_option("--sun", ja->sun, "new sun irradiance R G B")->expected(3);
   cmd.render->add_option("--out", ja->out_dir, "download the new views here");
   cmd.render->add_flag("--quiet", ja->quiet, "no progress on stderr");
+  cmd.render->add_flag("--png", ja->png, "also write a PNG preview beside each EXR");
   return cmd;
 }
 
 int runCommand(const Commands& cmd, Client& c, const SubmitArgs& sa, const JobArgs& ja) {
+  c.png = sa.png || ja.png;
   // These connect themselves: submit only once the shot file has been read.
   if (cmd.health->parsed()) return cmdHealth(c);
   if (cmd.info->parsed()) return cmdInfo(c);

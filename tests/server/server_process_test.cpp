@@ -343,6 +343,15 @@ TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
   fetch = run(server_.cloudctl() + " fetch " + id + " --out " + ws_.path("again"));
   EXPECT_EQ(fetch.code, 0) << fetch.err;
   EXPECT_EQ(fs::last_write_time(kept), old_time);
+  // --png: a preview beside each EXR, named in the output and the JSON.
+  fetch = run(server_.cloudctl() + " --json fetch " + id + " --png --out " + ws_.path("png"));
+  ASSERT_EQ(fetch.code, 0) << fetch.err;
+  EXPECT_NE(fetch.out.find("\"preview\":\"" + ws_.path("png/front.png")), std::string::npos)
+      << fetch.out;
+  const std::string png = slurp(ws_.path("png/front.png"));
+  ASSERT_GT(png.size(), 8u);
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+  EXPECT_FALSE(fs::exists(ws_.path("png/bake.png")));  // VDBs get none
 
   // --json submit: the result on stdout, progress on stderr as JSON lines, never going back.
   const CmdResult js =
