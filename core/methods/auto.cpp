@@ -132,6 +132,9 @@ AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOption
   po.threads = o.threads;
   po.max_depth = int(shot.bake.knobs.integer("max_depth"));
   po.progress = o.progress;
+  // A droplet's spike makes the path tracer's noise heavy-tailed: a short pilot may miss the
+  // rare large samples and read the noise low, so peaky phases get 4x the pilot's paths.
+  if (choice.traits.phase_spikiness > 100) po.samples = 32;
   if (choice.traits.pixels > 0) choice.pilot = runPilot(scene, po);
   for (const AutoCandidate& c :
        autoCandidates(choice.traits, choice.pilot, tolerance, o.max_samples)) {

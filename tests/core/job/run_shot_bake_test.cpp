@@ -112,6 +112,26 @@ TEST(RunShotBake, PointcloudSecondViewAndSunColourBakeNothing) {
   fs::remove_all(dir);
 }
 
+// A photon bake's own error estimates reach the run's result (auto.json records them), the same
+// numbers as bake.vdb's metadata; methods without estimates leave them empty.
+TEST(RunShotBake, PhotonsErrorEstimatesReachTheResult) {
+  const fs::path dir = freshDir("estimates");
+  RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  const RunResult r = runShot(
+      parse(shot("photon", R"(, "photons": 20000, "order": 2, "tally_resolution": 12)")), opt);
+  ASSERT_EQ(r.bake_estimates.count("tally_noise"), 1u);
+  const BakedLight bake = readBakedLight((dir / "out" / "bake.vdb").string());
+  EXPECT_DOUBLE_EQ(r.bake_estimates.at("tally_noise"),
+                   std::stod(bake.metadata.at("cloudbake:tally_noise")));
+  EXPECT_GT(r.bake_estimates.at("tally_noise"), 0);
+  EXPECT_LT(r.bake_estimates.at("tally_noise"), 1);
+  EXPECT_EQ(r.bake_estimates.count("truncation"), 1u);
+  opt.out_dir = (dir / "single").string();
+  EXPECT_TRUE(runShot(parse(shot("single")), opt).bake_estimates.empty());
+  fs::remove_all(dir);
+}
+
 TEST(RunShotBake, ASkyIsBakedOnlyWhenItShines) {
   const fs::path dir = freshDir("sky");
   BakeCache cache((dir / "cache").string(), 0);
