@@ -135,7 +135,13 @@ AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOption
   // A droplet's spike makes the path tracer's noise heavy-tailed: a short pilot may miss the
   // rare large samples and read the noise low, so peaky phases get 4x the pilot's paths.
   if (choice.traits.phase_spikiness > 100) po.samples = 32;
-  if (choice.traits.pixels > 0) choice.pilot = runPilot(scene, po);
+  if (choice.traits.pixels > 0) {
+    choice.pilot = runPilot(scene, po);
+  } else {
+    // No views: the product is bake.vdb, whose views come later. Nothing measures how much of
+    // the light is multiply scattered, so single is not trusted with it.
+    choice.pilot.multiple_fraction = 1;
+  }
   for (const AutoCandidate& c :
        autoCandidates(choice.traits, choice.pilot, tolerance, o.max_samples)) {
     if (withinLimits(resolvedShot(shot, c), o)) choice.considered.push_back(c);

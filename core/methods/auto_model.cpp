@@ -140,7 +140,9 @@ std::vector<AutoCandidate> autoCandidates(const SceneTraits& traits, const Pilot
       all.push_back(photonCandidate(traits, pilot, rung, factor));
     }
   }
-  all.push_back(pathtraceCandidate(traits, pilot, tolerance, max_samples));
+  // Without views the path tracer makes nothing to be accurate about (a shot of bake.vdb
+  // alone wants the baked light).
+  if (traits.pixels > 0) all.push_back(pathtraceCandidate(traits, pilot, tolerance, max_samples));
   std::stable_sort(all.begin(), all.end(), [&](const AutoCandidate& a, const AutoCandidate& b) {
     const bool ma = a.error <= tolerance, mb = b.error <= tolerance;
     if (ma != mb) return ma;

@@ -145,6 +145,18 @@ TEST(AutoChoice, ChoosesRunsNothingAndSaysWhy) {
   EXPECT_NO_THROW(methodOf(c.shot).validate(c.shot, "shot.json"));
 }
 
+// A shot of bake.vdb alone gets a light bake (photon, predicted by its bound), not the path
+// tracer, which would write the density only.
+TEST(AutoChoice, ABakeForAShotWithoutViews) {
+  std::string text = shot(R"({"method": "auto", "tolerance": 0.3})");
+  text.insert(text.rfind('}'),
+              R"(, "outputs": {"exr": false, "vdb": true, "vdb_voxel_size": 0.25})");
+  const ShotSpec s = parseShot(text, "");
+  const AutoChoice c = chooseAuto(s, buildScene(s, "shot.json"), AutoOptions{});
+  EXPECT_EQ(c.chosen.method, "photon");
+  EXPECT_EQ(c.pilot.samples, 0);  // no views, no pilot
+}
+
 TEST(AutoChoice, ToleranceNoMethodMeetsIsAClearError) {
   const ShotSpec s = parseShot(shot(R"({"method": "auto", "tolerance": 0.001})"), "");
   const Scene scene = buildScene(s, "shot.json");
