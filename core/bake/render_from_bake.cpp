@@ -899,10 +899,11 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
 
   RenderLayers out = makeRenderLayers(w, h);
   std::optional<BakeMarcher> marcher;
-  auto render_tile = [&](const TileRect& t, const std::atomic<bool>&) {
+  auto render_tile = [&](const TileRect& t, const TilePoll& poll) {
     Rng rng;
     for (int y = t.y0; y < t.y1; ++y) {
       for (int x = t.x0; x < t.x1; ++x) {
+        if (poll.stop()) return;
         PixelSum sum;
         if (spp == 1) {
           marcher->trace(rays.generate(x + 0.5, y + 0.5), &sum);

@@ -335,18 +335,19 @@ RenderLayers renderPathTraced(const Medium& medium, const Sun& sun, const Sky& s
   const double inv_spp = 1.0 / spp;
   RenderLayers out = makeRenderLayers(w, h);
 
-  auto render_tile = [&](const TileRect& t, const std::atomic<bool>& cancelled) {
+  auto render_tile = [&](const TileRect& t, const TilePoll& poll) {
     const int tw = t.x1 - t.x0;
     std::vector<PathSample> acc(size_t(tw) * (t.y1 - t.y0));
     const auto lookup = medium.density->lookup();
     Rng rng;
     for (int s = 0; s < spp; ++s) {
-      if (cancelled.load(std::memory_order_relaxed)) return;
       // One stream per (tile, sample): the image does not depend on which thread runs a tile.
       rng.setSeed(mixBits(options.seed, mixBits(uint64_t(t.index), uint64_t(s))),
                   mixBits(uint64_t(t.index), options.seed));
       for (int y = t.y0; y < t.y1; ++y) {
         for (int x = t.x0; x < t.x1; ++x) {
+          // A dense, white medium's paths take long: a cancel must not wait for the tile.
+          if (poll.stop()) return;
           const double fx = x + rng.uniform(), fy = y + rng.uniform();
           PathSample ps;
           integrator.trace(rays.generate(fx, fy), *lookup, rng, &ps);

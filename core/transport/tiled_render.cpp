@@ -3,6 +3,8 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <mutex>
 
 #include "core/math/parallel.h"
@@ -10,7 +12,7 @@
 namespace cloudbake {
 
 bool renderTiles(int width, int height, int tile_size, int threads, const ProgressFn& progress,
-                 const std::function<void(const TileRect&, const std::atomic<bool>&)>& render_tile,
+                 const std::function<void(const TileRect&, const TilePoll&)>& render_tile,
                  const std::function<void()>& setup) {
   const int tiles_x = (width + tile_size - 1) / tile_size;
   const int tiles = tiles_x * ((height + tile_size - 1) / tile_size);
@@ -20,6 +22,25 @@ bool renderTiles(int width, int height, int tile_size, int threads, const Progre
   int reported = 0;
   ParallelOptions per_tile;  // the flag is polled before every tile
   per_tile.cancelled = [&](double) { return cancelled.load(std::memory_order_relaxed); };
+  // Inside tiles: the flag, and the caller's progress once per kPollInterval whichever thread
+  // comes first (the others go on without waiting for the lock).
+  using Clock = std::chrono::steady_clock;
+  constexpr auto kPollInterval = std::chrono::milliseconds(100);
+  std::atomic<int64_t> next_poll{(Clock::now() + kPollInterval).time_since_epoch().count()};
+  const TilePoll poll([&] {
+    if (cancelled.load(std::memory_order_relaxed)) return true;
+    if (!progress) return false;
+    const auto now = Clock::now();
+    int64_t due = next_poll.load(std::memory_order_relaxed);
+    if (now.time_since_epoch().count() < due) return false;
+    if (!next_poll.compare_exchange_strong(due, (now + kPollInterval).time_since_epoch().count())) {
+      return false;
+    }
+    std::unique_lock<std::mutex> lock(progress_mutex, std::try_to_lock);
+    if (!lock.owns_lock()) return false;
+    if (!progress(double(reported) / tiles)) cancelled = true;
+    return cancelled.load();
+  });
   auto run = [&] {
     if (setup) setup();
     parallelFor(
@@ -31,7 +52,7 @@ bool renderTiles(int width, int height, int tile_size, int threads, const Progre
           rect.y0 = (t / tiles_x) * tile_size;
           rect.x1 = std::min(rect.x0 + tile_size, width);
           rect.y1 = std::min(rect.y0 + tile_size, height);
-          render_tile(rect, cancelled);
+          render_tile(rect, poll);
           const int done = ++tiles_done;
           if (progress) {
             std::lock_guard<std::mutex> lock(progress_mutex);

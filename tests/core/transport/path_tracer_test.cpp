@@ -427,7 +427,7 @@ TEST(PathTracer, ProgressAndCancellation) {
     ++calls;
     return true;
   });
-  EXPECT_EQ(calls.load(), 16);
+  EXPECT_GE(calls.load(), 16);  // once per tile, and between pixels of a tile past 0.1 s
   EXPECT_TRUE(monotonic);
   EXPECT_DOUBLE_EQ(last, 1.0);
 
@@ -439,6 +439,31 @@ TEST(PathTracer, ProgressAndCancellation) {
                                 }),
                Cancelled);
   EXPECT_LT(calls.load(), 256);  // stopped well before all tiles were done
+}
+
+// A cancel reaches a tile whose paths take long (a thick white sphere, paths capped at 1e6
+// events, one 32x32 tile: minutes of work): progress is asked between pixels, at most every
+// 0.1 s, so the render stops within about that (it waited for the whole tile: 13 s and more).
+TEST(PathTracer, CancelReachesALongTile) {
+  Medium m = sphereMedium(1e4, 1.0, std::make_shared<IsotropicPhase>());
+  PathTracerOptions opt;
+  opt.samples_per_pixel = 4;
+  opt.tile_size = 32;
+  opt.max_depth = 1000000;
+  opt.threads = 1;
+  int calls = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_THROW(renderPathTraced(m, Sun{}, constantSky(Rgb(1)), perspectiveCamera(32), opt,
+                                [&](double f) {
+                                  EXPECT_EQ(f, 0.0);  // no tile finished
+                                  ++calls;
+                                  return false;
+                                }),
+               Cancelled);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(calls, 1);
+  EXPECT_LT(seconds, 5.0);
 }
 
 TEST(PathTracer, RejectsInvalidInput) {
