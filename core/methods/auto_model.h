@@ -70,8 +70,8 @@ const std::vector<PhotonRung>& photonRungs();
 /// about 20 %, but no trait of the scene predicted the ratio on held-out scenes; auto_model.cpp).
 double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
 
-/// Bias of single scattering read from a lattice of `resolution` voxels: relative, from the
-/// curvature of the interpolated transmittance (tau^2 / 8 per voxel of optical thickness tau).
+/// Bias of single scattering read from a lattice of `resolution` voxels, relative: tau^2 / 2 per
+/// voxel of optical thickness tau (measured on Disney's cloud; auto_model.cpp).
 double latticeSingleBias(const SceneTraits& traits, int resolution);
 
 /// The candidates the model predicts, cheapest first among those within `tolerance`; `limits`:

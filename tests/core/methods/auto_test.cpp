@@ -82,7 +82,7 @@ TEST(AutoModel, PhotonFactorBoundsEveryMeasuredScene) {
 
 TEST(AutoModel, LatticeBiasFallsWithResolution) {
   const SceneTraits t = traitsOf(0.5);
-  EXPECT_NEAR(latticeSingleBias(t, 128), 0.25 / 8, 1e-12);
+  EXPECT_NEAR(latticeSingleBias(t, 128), 0.25 / 2, 1e-12);
   EXPECT_LT(latticeSingleBias(t, 256), latticeSingleBias(t, 128) / 3.9);
   EXPECT_LE(latticeSingleBias(traitsOf(1e6), 8), 1.0);
 }
