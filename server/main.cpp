@@ -100,7 +100,8 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
       ->check(CLI::Range(1u, 256u))
       ->capture_default_str();
   app.add_option("--queue-bound", o.queue_bound,
-                 "queued jobs beyond which submits fail with RESOURCE_EXHAUSTED")
+                 "queued jobs plus submits and dry runs being prepared, beyond which they fail "
+                 "with RESOURCE_EXHAUSTED")
       ->envname("CLOUDBAKE_QUEUE_BOUND")
       ->check(CLI::Range(size_t(1), size_t(100000)))
       ->capture_default_str();

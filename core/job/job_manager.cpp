@@ -104,7 +104,8 @@ std::string clientPaths(std::string message, const std::string& input_dir) {
 // refuse with the same words.
 ResourceExhaustedError queueFull(size_t waiting, size_t bound) {
   return ResourceExhaustedError("the job queue is full (" + std::to_string(waiting) +
-                                " jobs waiting, bound " + std::to_string(bound) + "); retry later");
+                                " jobs waiting or being prepared, bound " + std::to_string(bound) +
+                                "); retry later");
 }
 
 // A job's submission, kept in its folder: it is requeued from it after a restart and RenderView
@@ -345,7 +346,30 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
   return p;
 }
 
+// A submit's or a dry run's place against the queue bound while it is prepared: staging
+// assets and measuring a scene are work, and without a place a burst of small requests would
+// pile it up beside the queue (issue 15, defect 6).
+class JobManager::PrepareSlot {
+ public:
+  explicit PrepareSlot(JobManager& jobs) : jobs_(jobs) {
+    std::lock_guard<std::mutex> lock(jobs_.mutex_);
+    const size_t waiting = jobs_.queue_.size() + jobs_.preparing_;
+    if (waiting >= jobs_.options_.queue_bound) throw queueFull(waiting, jobs_.options_.queue_bound);
+    ++jobs_.preparing_;
+  }
+  ~PrepareSlot() {
+    std::lock_guard<std::mutex> lock(jobs_.mutex_);
+    --jobs_.preparing_;
+  }
+  PrepareSlot(const PrepareSlot&) = delete;
+  PrepareSlot& operator=(const PrepareSlot&) = delete;
+
+ private:
+  JobManager& jobs_;
+};
+
 JobPlan JobManager::plan(const SubmitInput& input) {
+  const PrepareSlot slot(*this);
   const std::string dir = (fs::path(options_.state_dir) / "tmp" / uniqueSuffix()).string();
   struct Cleanup {
     std::string dir;
@@ -422,13 +446,8 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
 
 JobRecord JobManager::submit(const SubmitInput& input) {
   prune();
-  {
-    // Fail fast before linking assets and hashing volumes; enqueue checks again.
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (queue_.size() >= options_.queue_bound) {
-      throw queueFull(queue_.size(), options_.queue_bound);
-    }
-  }
+  // Fails fast before linking assets and hashing volumes; enqueue checks the queue again.
+  const PrepareSlot slot(*this);
   const std::string id = newJobId();
   const std::string dir = store_->jobDir(id);
   try {

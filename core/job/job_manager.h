@@ -50,7 +50,10 @@ struct JobManagerOptions {
   std::string state_dir;
   unsigned worker_threads = 0;       ///< threads of each job's task_arena; 0: all hardware
   unsigned max_concurrent_jobs = 1;  ///< runners
-  size_t queue_bound = 16;           ///< queued (not running) jobs; more: ResourceExhausted
+  /// Queued (not running) jobs plus submits and dry runs being prepared (staging assets,
+  /// measuring a scene for method auto): more get ResourceExhausted, so many small requests
+  /// cannot pile up work outside the queue.
+  size_t queue_bound = 16;
   uint64_t cache_max_bytes = uint64_t(1) << 30;
   uint64_t max_upload_bytes = uint64_t(1) << 30;
   /// Wall-clock seconds a job may run; past it the job is stopped (as a cancel, within about a
@@ -163,6 +166,7 @@ class JobManager {
   struct Job;
   struct Prepared;
   struct Outcome;
+  class PrepareSlot;
   Prepared prepare(const SubmitInput& input, const std::string& dir);
   std::shared_ptr<Job> find(const std::string& id) const;
   /// Removes the finished jobs the options say to prune (see keep_finished_seconds).
@@ -190,6 +194,7 @@ class JobManager {
   mutable std::condition_variable cv_;  // queue changes and new events
   std::map<std::string, std::shared_ptr<Job>> jobs_;
   std::deque<std::shared_ptr<Job>> queue_;
+  size_t preparing_ = 0;  // submits and plans between their start and enqueue (PrepareSlot)
   size_t running_ = 0;
   bool stopping_ = false;
   std::vector<std::thread> runners_;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <nlohmann/json.hpp>
 #include <thread>
 #include <vector>
@@ -575,6 +576,46 @@ JobRecord waitFinished(JobManager& jobs, const std::string& id) {
     r = jobs.get(id);
   }
   return r;
+}
+
+// Submits and dry runs being prepared count against the queue bound, so a burst of them cannot
+// pile work up beside the queue; once one is done its place is free again.
+TEST(JobManager, RequestsBeingPreparedCountAgainstTheQueue) {
+  const fs::path dir = freshDir("preparing");
+  JobManagerOptions o;
+  o.state_dir = dir.string();
+  o.queue_bound = 1;
+  JobManager jobs(o);
+  SubmitInput slow;
+  slow.shot_json = sphereShot(R"({"method": "single", "light_resolution": 8})");
+  std::promise<void> inside, release;
+  std::shared_future<void> released = release.get_future().share();
+  bool first = true;
+  slow.abandoned = [&] {
+    if (first) {
+      first = false;
+      inside.set_value();
+      released.wait();
+    }
+    return false;
+  };
+  std::thread planning([&] { jobs.plan(slow); });
+  inside.get_future().wait();  // the dry run holds the one place while it stages
+  SubmitInput quick;
+  quick.shot_json = slow.shot_json;
+  try {
+    jobs.submit(quick);
+    ADD_FAILURE() << "a submit got past a full bound";
+  } catch (const ResourceExhaustedError& e) {
+    EXPECT_NE(std::string(e.what()).find("jobs waiting or being prepared, bound 1"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(jobs.plan(quick), ResourceExhaustedError);
+  release.set_value();
+  planning.join();
+  EXPECT_NO_THROW(jobs.plan(quick));  // the place is free again
+  fs::remove_all(dir);
 }
 
 // Finished jobs are pruned beyond the count and past the age the options give (records, inputs
