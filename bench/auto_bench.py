@@ -118,19 +118,9 @@ def main():
         change(shot)
         shot["name"] = scene
         views = [v["name"] for v in shot["views"]]
-        refs, ref_seconds = [], []
-        for seed in (1, 2):
-            s = json.loads(json.dumps(shot))
-            s["bake"] = {"method": "pathtrace", "samples": args.ref_spp, "seed": seed}
-            out = os.path.join(args.work, "ref", "%s-%d-%d-%d" % (scene, args.res, args.ref_spp,
-                                                                 seed))
-            ref_seconds.append(pb.render(cloudbake, s, out, args.threads)["seconds"])
-            refs.append(out)
-        ref_noise = sum(pb.compare(cloudbake, os.path.join(refs[0], v + ".exr"),
-                                   os.path.join(refs[1], v + ".exr"),
-                                   os.path.join(refs[0], v + ".exr"),
-                                   args.cloud_alpha)["rel_rmse"] for v in views) / len(views)
-        ref_noise /= math.sqrt(2)  # one render's noise
+        refs, ref_stats, diffs = pb.references(cloudbake, shot, scene, args)
+        ref_seconds = [st["seconds"] for st in ref_stats]
+        ref_noise = sum(diffs) / len(diffs) / math.sqrt(2)  # one render's noise
         # The path tracer in hindsight: its noise falls as 1 / sqrt(spp); its seconds are a
         # fixed part (the volume, the process) and a part per path, from a 16-spp run and the
         # references.

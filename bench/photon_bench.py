@@ -98,6 +98,25 @@ def compare(cloudbake, a, b, alpha_from, cloud_alpha):
     return compare_all(cloudbake, a, b, alpha_from, cloud_alpha)["scattered"]
 
 
+def references(cloudbake, shot, scene, args):
+    """The scene's two `pathtrace` references (seeds 1 and 2, args.ref_spp each), rendered once
+    and cached under WORK/ref/ (shared by the benches); returns their folders, their stats and,
+    per view, the relative RMS difference of their cloud's own light (sqrt 2 times one render's
+    noise)."""
+    refs, stats = [], []
+    for seed in (1, 2):
+        s = json.loads(json.dumps(shot))
+        s["bake"] = {"method": "pathtrace", "samples": args.ref_spp, "seed": seed}
+        out = os.path.join(args.work, "ref", "%s-%d-%d-%d" % (scene, args.res, args.ref_spp, seed))
+        stats.append(render(cloudbake, s, out, args.threads))
+        refs.append(out)
+    diffs = []
+    for v in shot["views"]:
+        a, b = (os.path.join(r, v["name"] + ".exr") for r in refs)
+        diffs.append(compare(cloudbake, a, b, a, args.cloud_alpha)["rel_rmse"])
+    return refs, stats, diffs
+
+
 def steps(stats, kind):
     return [s["seconds"] for s in stats["steps"] if s["step"] == kind]
 
@@ -127,18 +146,8 @@ def main():
         if shot is None:
             continue
         views = [v["name"] for v in shot["views"]]
-        refs = []
-        for seed in (1, 2):
-            s = json.loads(json.dumps(shot))
-            s["bake"] = {"method": "pathtrace", "samples": args.ref_spp, "seed": seed}
-            out = os.path.join(args.work, "ref", "%s-%d-%d-%d" % (scene, args.res, args.ref_spp,
-                                                                 seed))
-            render(cloudbake, s, out, args.threads)
-            refs.append(out)
-        ref_noise = []
-        for v in views:
-            a, b = (os.path.join(r, v + ".exr") for r in refs)
-            ref_noise.append(compare(cloudbake, a, b, a, args.cloud_alpha)["rel_rmse"] / 2)
+        refs, _, diffs = references(cloudbake, shot, scene, args)
+        ref_noise = [d / 2 for d in diffs]  # the noise of the two references' mean
         for photons, order, lattice, tally, zonal in SWEEPS[args.sweep]:
             s = json.loads(json.dumps(shot))
             s["bake"] = {"method": "photon", "photons": photons, "order": order,

@@ -149,17 +149,8 @@ def measure_scene(cloudbake, scene, args):
     if shot is None:
         return None
     views = [v["name"] for v in shot["views"]]
-    refs = []
-    for seed in (1, 2):
-        s = json.loads(json.dumps(shot))
-        s["bake"] = {"method": "pathtrace", "samples": args.ref_spp, "seed": seed}
-        out = os.path.join(args.work, "ref", "%s-%d-%d-%d" % (scene, args.res, args.ref_spp, seed))
-        pb.render(cloudbake, s, out, args.threads)
-        refs.append(out)
-    ref_noise = sum(pb.compare(cloudbake, os.path.join(refs[0], v + ".exr"),
-                               os.path.join(refs[1], v + ".exr"),
-                               os.path.join(refs[0], v + ".exr"), args.cloud_alpha)["rel_rmse"]
-                    for v in views) / len(views) / math.sqrt(2)
+    refs, _, diffs = pb.references(cloudbake, shot, scene, args)
+    ref_noise = sum(diffs) / len(diffs) / math.sqrt(2)  # one render's noise
     points = []
     for method, quality, bake, name in configs():
         s = json.loads(json.dumps(shot))

@@ -61,9 +61,10 @@ SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene) {
   const Bounds3 b = m.density->bounds();
   const double extent = std::max({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
   t.tau_voxel_128 = denseSigmaT(m) * extent / 128.0;
-  t.views = shot.outputs.exr ? int(shot.views.size()) : 0;
-  for (const Camera& c : shot.views) t.pixels += double(c.width_px) * c.height_px;
-  if (!shot.outputs.exr) t.pixels = 0;
+  if (shot.outputs.exr) {  // views are rendered only then
+    t.views = int(shot.views.size());
+    for (const Camera& c : shot.views) t.pixels += double(c.width_px) * c.height_px;
+  }
   if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
     t.sequence = true;
     t.frames = seq->frames;
@@ -84,7 +85,6 @@ void PairNoise::add(const RenderLayers& a, const RenderLayers& b) {
         sum_sq_diff += (va - vb) * (va - vb);
         sum_mean += 0.5 * (va + vb);
         sum_multiple += 0.5 * (double(a.multiple.at(x, y)[c]) + b.multiple.at(x, y)[c]);
-        sum_scattered += 0.5 * (va + vb);
         ++values;
       }
     }
@@ -97,7 +97,7 @@ double PairNoise::relativeNoise() const {
 }
 
 double PairNoise::multipleFraction() const {
-  return sum_scattered > 0 ? std::clamp(sum_multiple / sum_scattered, 0.0, 1.0) : 0.0;
+  return sum_mean > 0 ? std::clamp(sum_multiple / sum_mean, 0.0, 1.0) : 0.0;
 }
 
 PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {

@@ -34,7 +34,9 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& options);
 /// alpha >= 0.05 in both) between two renders of different seeds: RMS difference / sqrt 2 /
 /// mean. Accumulated over views by `add`.
 struct PairNoise {
-  double sum_sq_diff = 0, sum_mean = 0, sum_multiple = 0, sum_scattered = 0;
+  /// Sums over the cloud's pixels and channels: squared differences, the pair's mean of the
+  /// cloud's own light (sun + sky) and of its multiply scattered part.
+  double sum_sq_diff = 0, sum_mean = 0, sum_multiple = 0;
   int64_t values = 0, cloud_pixels = 0, pixels = 0;
   void add(const RenderLayers& a, const RenderLayers& b);
   double relativeNoise() const;

@@ -6,6 +6,7 @@
 #include "core/format.h"
 #include "core/math/sh_basis.h"
 #include "core/methods/common.h"
+#include "core/methods/photon.h"
 
 namespace cloudbake {
 namespace {
@@ -28,6 +29,8 @@ constexpr double kPhotonPerPath = 1.2;
 // measured on: droplet Mie tables are in the thousands, where the zonal terms' truncation is
 // not measured, so auto does not predict photon's error there.
 constexpr double kPhotonMaxSpikiness = 50;
+// The zonal terms of the photon candidates: photon's default, which auto leaves as it is.
+const int kZonalOrder = PhotonBakeOptions{}.zonal_order;
 
 // Rays per pixel of a view from a bake. The bakes' errors were measured at 80x60 with 16 rays
 // per pixel, as the reference averages over each pixel (one ray through the centre would count
@@ -73,7 +76,7 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   c.seconds = latticeSeconds(rung.light_resolution) * (traits.sky ? 2.0 : 1.0) +
               photon_seconds * double(rung.photons) * (traits.sky ? 2.0 : 1.0) +
               traits.pixels * c.samples * kViewSecondsPerCoefficient *
-                  double(shCount(rung.order) + 24 - rung.order);
+                  double(shCount(rung.order) + kZonalOrder - rung.order);
   c.why = "photon's error at these knobs was " + fixed(100 * rung.bunny_error, 1) +
           " % on the bunny scene and at most " + fixed(factor, 2) +
           " times that on the five bench scenes";
