@@ -3,8 +3,10 @@
 // cloudctl; server/status_mapping.cpp: gRPC statuses).
 #pragma once
 
+#include <cerrno>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace cloudbake {
 
@@ -49,6 +51,28 @@ class ResourceExhaustedError : public std::runtime_error {
  public:
   explicit ResourceExhaustedError(const std::string& what) : std::runtime_error(what) {}
 };
+
+/// A write failed because the volume has no space left (ENOSPC, or EDQUOT past a quota). A
+/// ResourceExhaustedError: retry once space is freed. `what()` is the one message clients see,
+/// which names no server path; `detail()` keeps the path and the system's words for the log.
+class StorageFullError : public ResourceExhaustedError {
+ public:
+  explicit StorageFullError(std::string detail)
+      : ResourceExhaustedError("no space left on the server's cache volume"),
+        detail_(std::move(detail)) {}
+  const std::string& detail() const { return detail_; }
+
+ private:
+  std::string detail_;
+};
+
+/// True for the errno values of a full volume.
+inline bool isNoSpaceErrno(int err) { return err == ENOSPC || err == EDQUOT; }
+
+/// Throws StorageFullError(detail) when `err` is such a value; returns otherwise.
+inline void throwIfNoSpace(int err, const std::string& detail) {
+  if (isNoSpaceErrno(err)) throw StorageFullError(detail);
+}
 
 /// The request is valid but the job is not in a state that allows it, e.g. fetching the result
 /// of a job that has not succeeded (gRPC FAILED_PRECONDITION, exit code 5).

@@ -81,6 +81,7 @@ grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
                          std::to_string(msg.data().size()) + " bytes");
       }
       writer.write(msg.data().data(), msg.data().size());
+      upload_bytes_ += msg.data().size();
     }
     // The stream also ends when the client gives up: that is no truncated upload to report.
     if (ctx->IsCancelled()) return abandoned(ctx, "UploadAsset");
@@ -221,6 +222,7 @@ grpc::Status BakeServiceImpl::FetchResult(Ctx* ctx, const v1::FetchResultRequest
       c.set_sha256(file.sha256);
       c.set_data(buffer.data(), n);
       if (!writer->Write(c)) return abandoned(ctx, "FetchResult");
+      fetch_bytes_ += n;
       offset += n;
     } while (offset < file.size);
     return grpc::Status::OK;

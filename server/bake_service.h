@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
 
 #include "cloudbake/v1/bake_service.grpc.pb.h"
 #include "core/job/job_manager.h"
@@ -30,6 +31,12 @@ class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
                            grpc::ServerWriter<v1::ResultChunk>*) override;
   grpc::Status RenderView(Ctx*, const v1::RenderViewRequest*, v1::SubmitJobResponse*) override;
 
+  /// Bytes received by UploadAsset and sent by FetchResult since the server started.
+  uint64_t uploadBytes() const { return upload_bytes_; }
+  uint64_t fetchBytes() const { return fetch_bytes_; }
+  /// Streaming calls open now.
+  size_t openStreams() const { return streams_; }
+
  private:
   /// Holds one of the max_streams slots while a streaming call runs.
   class StreamSlot {
@@ -46,6 +53,7 @@ class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
   JobManager& jobs_;
   size_t max_streams_;
   std::atomic<size_t> streams_{0};
+  std::atomic<uint64_t> upload_bytes_{0}, fetch_bytes_{0};
 };
 
 }  // namespace cloudbake::server

@@ -53,6 +53,7 @@ void toProto(const JobRecord& r, v1::Job* out) {
   out->set_fraction(r.fraction);
   out->set_error(r.error);
   out->set_error_is_input(r.error_is_input);
+  out->set_error_no_space(r.error_no_space);
   for (const OutputFile& f : r.outputs) {
     v1::OutputFile* o = out->add_outputs();
     o->set_name(f.name);

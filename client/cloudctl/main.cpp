@@ -112,6 +112,7 @@ Json jobJson(const v1::Job& j) {
           {"stage", j.stage()},
           {"fraction", j.fraction()},
           {"error", j.error()},
+          {"error_no_space", j.error_no_space()},
           {"created_unix", j.created_unix()},
           {"started_unix", j.started_unix()},
           {"finished_unix", j.finished_unix()},
@@ -131,6 +132,7 @@ int jobExitCode(const v1::Job& j) {
     case v1::CANCELLED:
       return ExitCode::kCancelled;
     case v1::FAILED:
+      if (j.error_no_space()) return ExitCode::kUnavailable;  // a full server: retry later
       return j.error_is_input() ? ExitCode::kBadInput : ExitCode::kJobFailed;
     default:
       return ExitCode::kFailure;

@@ -6,6 +6,7 @@
 #include <ImfInputFile.h>
 #include <ImfMatrixAttribute.h>
 #include <ImfOutputFile.h>
+#include <ImfStdIO.h>
 #include <ImfStringAttribute.h>
 #include <ImfTestFile.h>
 #include <unistd.h>
@@ -16,10 +17,12 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <fstream>
 #include <set>
 #include <sstream>
 
 #include "core/error.h"
+#include "core/io/file_sync.h"
 
 namespace cloudbake {
 namespace {
@@ -112,11 +115,27 @@ void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
 
   const std::string tmp = uniqueTempPath(path);
   try {
-    Imf::OutputFile file(tmp.c_str(), header);
-    file.setFrameBuffer(fb);
-    file.writePixels(height);
-  } catch (const std::exception& e) {
+    // Our own stream, checked at the end: OpenEXR closes its own file stream unchecked in a
+    // destructor, so a full disk could cut the last buffered bytes off a file reported
+    // written. (No exception mask: the destructor that writes the line offsets must not throw.)
+    std::ofstream os(tmp, std::ios::out | std::ios::binary | std::ios::trunc);
+    if (!os) throw std::runtime_error(std::string("cannot create: ") + std::strerror(errno));
+    {
+      Imf::StdOFStream stream(os, tmp.c_str());
+      Imf::OutputFile file(stream, header);
+      file.setFrameBuffer(fb);
+      file.writePixels(height);
+    }
+    os.close();
+    if (os.fail()) throw std::runtime_error(std::string("write failed: ") + std::strerror(errno));
+    syncFile(tmp);
+  } catch (const StorageFullError&) {
     std::remove(tmp.c_str());
+    throw;
+  } catch (const std::exception& e) {
+    const int err = errno;
+    std::remove(tmp.c_str());
+    throwIfNoSpace(err, path + ": cannot write EXR: " + e.what());
     throw InputError(path + ": cannot write EXR: " + e.what());
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {

@@ -3,6 +3,7 @@
 #include <png.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 
@@ -36,8 +37,10 @@ void writePng(const std::string& path, int width, int height, int channels,
   const int ok = png_image_write_to_file(&image, path.c_str(), 0, pixels.data(),
                                          static_cast<png_int_32>(width * channels), nullptr);
   if (!ok) {
+    const int err = errno;
     const std::string message = image.message;
     png_image_free(&image);
+    throwIfNoSpace(err, path + ": cannot write PNG: " + message);
     throw InputError(path + ": cannot write PNG: " + message);
   }
   png_image_free(&image);

@@ -4,6 +4,7 @@
 #include <openvdb/io/Stream.h>
 #include <openvdb/tree/LeafManager.h>
 
+#include <cerrno>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -11,6 +12,7 @@
 #include <set>
 
 #include "core/error.h"
+#include "core/io/file_sync.h"
 #include "core/io/openvdb_file.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/openvdb_grid.h"
@@ -166,16 +168,39 @@ void initOpenVdb() {
   std::call_once(once, [] { openvdb::initialize(); });
 }
 
+namespace {
+
+// io::File::write neither checks its stream nor closes it checked, so a full disk left 0-byte or
+// truncated files that "succeeded". The same seekable archive format (what File writes), written
+// to a stream that throws on any failed write, flush or close.
+class CheckedVdbArchive : public openvdb::io::Archive {
+ public:
+  void writeTo(std::ostream& os, const openvdb::GridPtrVec& grids,
+               const openvdb::MetaMap& meta) const {
+    Archive::write(os, grids, /*seekable=*/true, meta);
+  }
+};
+
+}  // namespace
+
 void writeVdbFileAtomically(const std::string& path, const openvdb::GridPtrVec& grids,
                             const openvdb::MetaMap& meta) {
   initOpenVdb();
   const std::string tmp = path + ".tmp";
   try {
-    openvdb::io::File file(tmp);
-    file.write(grids, meta);
-    file.close();
-  } catch (const std::exception& e) {
+    std::ofstream os;
+    os.exceptions(std::ios::failbit | std::ios::badbit);
+    os.open(tmp, std::ios::out | std::ios::binary | std::ios::trunc);
+    CheckedVdbArchive().writeTo(os, grids, meta);
+    os.close();
+    syncFile(tmp);
+  } catch (const StorageFullError&) {
     std::remove(tmp.c_str());
+    throw;
+  } catch (const std::exception& e) {
+    const int err = errno;
+    std::remove(tmp.c_str());
+    throwIfNoSpace(err, path + ": cannot write VDB file (" + e.what() + ")");
     throw InputError(path + ": cannot write VDB file (" + e.what() + ")");
   }
   std::error_code ec;

@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
 #include <filesystem>
 
@@ -45,7 +46,10 @@ AssetStore::Writer::Writer(const AssetStore& store, std::string sha256, uint64_t
   }
   tmp_ = (fs::path(store_.root_) / ("upload-" + uniqueSuffix())).string();
   file_.reset(std::fopen(tmp_.c_str(), "wb"));
-  if (!file_) throw std::runtime_error("asset store: cannot create " + tmp_);
+  if (!file_) {
+    throwIfNoSpace(errno, "asset store: cannot create " + tmp_);
+    throw std::runtime_error("asset store: cannot create " + tmp_);
+  }
 }
 
 AssetStore::Writer::~Writer() {
@@ -63,6 +67,7 @@ void AssetStore::Writer::write(const void* data, size_t size) {
   }
   hash_.update(data, size);
   if (size > 0 && std::fwrite(data, 1, size, file_.get()) != size) {
+    throwIfNoSpace(errno, "asset store: write failed for " + tmp_);
     throw std::runtime_error("asset store: write failed for " + tmp_);
   }
 }
@@ -76,10 +81,11 @@ std::string AssetStore::Writer::finish() {
   if (got != sha256_) {
     throw InputError("sha256: content hashes to " + got + ", not the declared " + sha256_);
   }
-  if (std::fflush(file_.get()) != 0 || ::fsync(fileno(file_.get())) != 0) {
+  if (std::fflush(file_.get()) != 0 || ::fsync(fileno(file_.get())) != 0 ||
+      std::fclose(file_.release()) != 0) {
+    throwIfNoSpace(errno, "asset store: sync failed for " + tmp_);
     throw std::runtime_error("asset store: sync failed for " + tmp_);
   }
-  file_.reset();
   const fs::path dest = fs::path(store_.root_) / sha256_;
   fs::rename(tmp_, dest);
   finished_ = true;

@@ -34,17 +34,22 @@ void writeFileAtomic(const std::string& path, const std::string& data) {
     const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
     if (n < 0) {
       if (errno == EINTR) continue;
-      const std::string err = std::strerror(errno);
+      const int saved = errno;
+      const std::string err = std::strerror(saved);
       ::close(fd);
       ::unlink(tmp.c_str());
+      throwIfNoSpace(saved, path + ": write failed: " + err);
       throw std::runtime_error(path + ": write failed: " + err);
     }
     done += size_t(n);
   }
   // fsync before rename: otherwise a crash can leave the new name pointing at empty data.
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+  int failed = ::fsync(fd) == 0 ? 0 : errno;
+  if (::close(fd) != 0 && failed == 0) failed = errno;
+  if (failed != 0) {
     ::unlink(tmp.c_str());
-    throw std::runtime_error(path + ": sync failed: " + std::strerror(errno));
+    throwIfNoSpace(failed, path + ": sync failed: " + std::strerror(failed));
+    throw std::runtime_error(path + ": sync failed: " + std::strerror(failed));
   }
   if (::rename(tmp.c_str(), path.c_str()) != 0) {
     const std::string err = std::strerror(errno);
@@ -69,8 +74,10 @@ void linkOrCopy(const std::string& from, const std::string& to) {
   fs::create_hard_link(from, to, ec);
   if (!ec) return;
   fs::copy_file(from, to, fs::copy_options::overwrite_existing, ec);
-  if (ec)
+  if (ec) {
+    throwIfNoSpace(ec.value(), "cannot copy " + from + " to " + to + ": " + ec.message());
     throw std::runtime_error("cannot link or copy " + from + " to " + to + ": " + ec.message());
+  }
 }
 
 }  // namespace cloudbake

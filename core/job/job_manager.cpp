@@ -579,6 +579,12 @@ JobManagerStats JobManager::stats() const {
   std::lock_guard<std::mutex> lock(mutex_);
   s.queued = queue_.size();
   s.running = running_;
+  for (const auto& [id, job] : jobs_) {
+    const JobState state = job->record.state;
+    s.succeeded += state == JobState::kSucceeded;
+    s.failed += state == JobState::kFailed;
+    s.cancelled += state == JobState::kCancelled;
+  }
   return s;
 }
 
@@ -635,6 +641,7 @@ struct JobManager::Outcome {
   JobState state = JobState::kSucceeded;
   std::string error;
   bool error_is_input = false;
+  bool error_no_space = false;
 };
 
 namespace {
@@ -648,6 +655,14 @@ std::string successMessage(const RunResult& result) {
           : std::to_string(result.views_rendered) + " view(s) rendered, " +
                 std::to_string(result.views_cached) + " from cache)";
   return fmt::format("succeeded in {:.2f} s (", result.seconds) + parts;
+}
+
+// Whether a run was served by the cache: scattering computations against cached reuses.
+std::string cacheOutcome(const RunResult& r) {
+  const int computed = r.views_rendered + r.bakes_computed;
+  const int cached = r.views_cached + r.bakes_cached;
+  if (computed + cached == 0) return "none";
+  return computed == 0 ? "hit" : cached == 0 ? "miss" : "partial";
 }
 
 }  // namespace
@@ -671,16 +686,29 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   scatter_computations_ += uint64_t(result.views_rendered) + uint64_t(result.bakes_computed);
   views_from_cache_ += uint64_t(result.views_cached);
   bakes_from_cache_ += uint64_t(result.bakes_cached);
+  finishJob(*job, result, &outcome);
   if (outcome.state != JobState::kSucceeded) {
     // A failed or cancelled job keeps no partial outputs.
     std::error_code ec;
     fs::remove_all(ro.out_dir, ec);
-    result.files.clear();
   }
-  finishJob(*job, result, outcome);
-  spdlog::info("job {}: {}{}", id, jobStateName(outcome.state),
-               outcome.error.empty() ? "" : ": " + printable(outcome.error));
+  reportFinished(*job, result, outcome);
   prune();
+}
+
+void JobManager::reportFinished(const Job& job, const RunResult& result, const Outcome& outcome) {
+  JobFinished f;
+  f.id = job.record.id;
+  f.method = result.method.empty() ? job.record.method : result.method;
+  f.state = outcome.state;
+  f.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - job.started).count();
+  f.cache = cacheOutcome(result);
+  f.steps = result.steps;
+  // One line per finished job with what a log search needs (docs/deployment.md, "Logs").
+  spdlog::info("job {}: finished: {}, method {}, {:.2f} s, cache {}{}", f.id, jobStateName(f.state),
+               f.method, f.seconds, f.cache,
+               outcome.error.empty() ? "" : ": " + printable(outcome.error));
+  if (options_.on_job_finished) options_.on_job_finished(f);
 }
 
 RunOptions JobManager::autoRunOptions() {
@@ -738,6 +766,12 @@ RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcom
       outcome->state = job.shutdown ? JobState::kFailed : JobState::kCancelled;
       outcome->error = job.shutdown ? "interrupted by server shutdown; resubmit" : "cancelled";
     }
+  } catch (const StorageFullError& e) {
+    // Resource, not input: the client may retry once space is freed; no server path in it.
+    outcome->state = JobState::kFailed;
+    outcome->error = std::string(e.what()) + "; resubmit once space is freed";
+    outcome->error_no_space = true;
+    spdlog::error("job {}: {}", job.record.id, e.detail());
   } catch (const InputError& e) {
     outcome->state = JobState::kFailed;
     outcome->error = clientPaths(e.what(), store_->inputDir(job.record.id));
@@ -752,27 +786,52 @@ RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcom
   return result;
 }
 
-void JobManager::finishJob(Job& job, const RunResult& result, const Outcome& outcome) {
+void JobManager::finishJob(Job& job, const RunResult& result, Outcome* outcome) {
   std::lock_guard<std::mutex> lock(mutex_);
   JobRecord& r = job.record;
-  r.state = outcome.state;
   r.finished = unixNow();
-  r.error = outcome.error;
-  r.error_is_input = outcome.error_is_input;
   r.views_rendered = result.views_rendered;
   r.views_cached = result.views_cached;
   r.bakes_computed = result.bakes_computed;
   r.bakes_cached = result.bakes_cached;
   r.views_from_bake = result.views_from_bake;
-  r.stage = jobStateName(outcome.state);
-  if (outcome.state == JobState::kSucceeded) r.fraction = 1;
-  for (OutputFile f : result.files) {
-    f.path.clear();  // clients fetch outputs by name, never by a server path
-    r.outputs.push_back(f);
+  if (outcome->state == JobState::kSucceeded) {
+    for (OutputFile f : result.files) {
+      f.path.clear();  // clients fetch outputs by name, never by a server path
+      r.outputs.push_back(f);
+    }
   }
-  saveLocked(job);
+  setOutcome(&r, *outcome);
+  try {
+    store_->save(r);
+  } catch (const std::exception& e) {
+    spdlog::error("job {}: cannot save record: {}", r.id, e.what());
+    if (outcome->state == JobState::kSucceeded) {
+      // A success a restart would take back is never reported: the job fails now, as it
+      // would after a restart (a RUNNING record on disk is marked FAILED).
+      const bool no_space = dynamic_cast<const StorageFullError*>(&e) != nullptr;
+      outcome->state = JobState::kFailed;
+      outcome->error_no_space = no_space;
+      outcome->error = no_space ? std::string(e.what()) + "; resubmit once space is freed"
+                                : "internal error: the job's record could not be saved (details "
+                                  "in the server log, job " +
+                                      r.id + ")";
+      r.outputs.clear();
+      setOutcome(&r, *outcome);
+      saveLocked(job);
+    }
+  }
   pushEventLocked(job, "done", r.fraction,
-                  outcome.state == JobState::kSucceeded ? successMessage(result) : outcome.error);
+                  outcome->state == JobState::kSucceeded ? successMessage(result) : outcome->error);
+}
+
+void JobManager::setOutcome(JobRecord* r, const Outcome& outcome) {
+  r->state = outcome.state;
+  r->error = outcome.error;
+  r->error_is_input = outcome.error_is_input;
+  r->error_no_space = outcome.error_no_space;
+  r->stage = jobStateName(outcome.state);
+  if (outcome.state == JobState::kSucceeded) r->fraction = 1;
 }
 
 }  // namespace cloudbake

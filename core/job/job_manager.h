@@ -44,6 +44,19 @@ struct JobLimits {
   uint64_t max_voxels = uint64_t(1) << 28;
 };
 
+/// What a runner reports when a job ends (for metrics): `method` is the one that ran (auto's
+/// choice) or, when the job failed before choosing, the shot's; `steps` as RunResult's.
+struct JobFinished {
+  std::string id;
+  std::string method;
+  JobState state = JobState::kFailed;
+  double seconds = 0;
+  /// "hit": nothing was scattered, everything came from the cache; "miss": everything was
+  /// computed; "partial": some of each; "none": the job failed before the cache was asked.
+  std::string cache;
+  std::vector<StepTime> steps;
+};
+
 /// Settings of a JobManager. Everything durable lives under `state_dir`: jobs/, cache/,
 /// assets/.
 struct JobManagerOptions {
@@ -68,6 +81,9 @@ struct JobManagerOptions {
   size_t max_finished_jobs = 10000;
   double prune_grace_seconds = 600;
   JobLimits limits;
+  /// Optional: called by the runner once a job's final record is saved (not under the
+  /// manager's lock; it must not call back into the manager).
+  std::function<void(const JobFinished&)> on_job_finished;
 };
 
 /// A shot as a client submits it: JSON text (format v1) and the files it names, by path
@@ -117,6 +133,7 @@ struct JobManagerStats {
   uint64_t volume_builds = 0;
   uint64_t jobs_submitted = 0;
   size_t queued = 0, running = 0;
+  size_t succeeded = 0, failed = 0, cancelled = 0;  ///< finished jobs held (not yet pruned)
   BakeCacheStats cache;
 };
 
@@ -180,7 +197,10 @@ class JobManager {
   RunOptions autoRunOptions();
   RunOptions runOptions(const std::shared_ptr<Job>& job);
   RunResult runInArena(Job& job, const RunOptions& ro, Outcome* outcome);
-  void finishJob(Job& job, const RunResult& result, const Outcome& outcome);
+  void reportFinished(const Job& job, const RunResult& result, const Outcome& outcome);
+  /// Records the outcome durably; a success whose record cannot be saved becomes a failure.
+  void finishJob(Job& job, const RunResult& result, Outcome* outcome);
+  static void setOutcome(JobRecord* r, const Outcome& outcome);
   JobRecord enqueue(Prepared prepared, const std::string& dir, const std::string& id);
 
   JobManagerOptions options_;

@@ -59,6 +59,7 @@ Json toJson(const JobRecord& r) {
           {"fraction", r.fraction},
           {"error", r.error},
           {"error_is_input", r.error_is_input},
+          {"error_no_space", r.error_no_space},
           {"outputs", outputs},
           {"views_rendered", r.views_rendered},
           {"views_cached", r.views_cached},
@@ -81,6 +82,7 @@ JobRecord fromJson(const Json& j) {
   r.fraction = j.at("fraction").get<double>();
   r.error = j.at("error").get<std::string>();
   r.error_is_input = j.at("error_is_input").get<bool>();
+  r.error_no_space = j.value("error_no_space", false);  // absent from older records
   for (const Json& f : j.at("outputs")) {
     OutputFile o;
     o.name = f.at("name").get<std::string>();

@@ -26,6 +26,7 @@ struct JobRecord {
   double fraction = 0;
   std::string error;
   bool error_is_input = false;
+  bool error_no_space = false;      ///< FAILED because the server's volume is full
   std::vector<OutputFile> outputs;  ///< `path` is not stored; JobStore::outputPath gives it
   int views_rendered = 0;
   int views_cached = 0;

@@ -149,8 +149,15 @@ class ShotRun final : public MethodRun {
     // A copy, not a link: the job's file must not change if the cache entry is tampered with.
     const fs::path path = fs::path(opt_.out_dir) / name;
     const std::string tmp = path.string() + ".tmp." + uniqueSuffix();
-    fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
-    fs::rename(tmp, path);
+    try {
+      fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
+      fs::rename(tmp, path);
+    } catch (const fs::filesystem_error& e) {
+      std::error_code ec;
+      fs::remove(tmp, ec);
+      throwIfNoSpace(e.code().value(), e.what());
+      throw;
+    }
     result_.files.push_back(describeOutput(opt_.out_dir, name));
   }
 
@@ -376,6 +383,7 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   runMethod(methodOf(shot), run, opt.source);
   if (choice) writeAutoRecord(run, *choice);
   RunResult result = run.result();
+  result.method = shot.bake.method;
   result.seconds = secondsSince(t_start);
   run.report("done", 1, "done in " + fixed(result.seconds, 2) + " s");
   return result;

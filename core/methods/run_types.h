@@ -94,6 +94,7 @@ struct StepTime {
 /// (single, pointcloud) compute their light once per light direction (`bakes_computed`) or
 /// reuse it (`bakes_cached`), then ray-march every view from it (`views_from_bake`).
 struct RunResult {
+  std::string method;  ///< the bake method that ran (for a shot of `auto`: the one it chose)
   std::vector<OutputFile> files;
   int views_rendered = 0;
   int views_cached = 0;

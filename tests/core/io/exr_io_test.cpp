@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "tests/tiny_volume.h"
 
 namespace cloudbake {
 namespace {
@@ -126,6 +127,29 @@ TEST(ExrIo, MissingAndCorruptFilesThrowInputErrorNamingThePath) {
   }
   std::remove(garbage.c_str());
   std::remove(good.c_str());
+}
+
+// A full disk: StorageFullError, and neither the EXR nor a temporary is left behind.
+TEST(ExrIo, FullDiskThrowsStorageFullAndLeavesNoFile) {
+  const std::string dir = (std::filesystem::temp_directory_path() /
+                           ("cloudbake_exr_full_" + std::to_string(::getpid())))
+                              .string();
+  testing::TinyVolume volume(dir, 1);
+  if (!volume.ok()) GTEST_SKIP() << volume.why();
+  Image noise(512, 512, 4);
+  uint32_t state = 1;
+  for (float& v : noise.data) {  // incompressible, so ZIP cannot make it fit
+    state = state * 1664525u + 1013904223u;
+    v = float(state >> 8) / float(1 << 24);
+  }
+  const std::string path = volume.dir() + "/view.exr";
+  EXPECT_THROW(writeExr(path, {{"", noise}}), StorageFullError);
+  size_t left = 0;
+  for (const auto& e : std::filesystem::directory_iterator(volume.dir())) {
+    ++left;
+    ADD_FAILURE() << "left behind: " << e.path();
+  }
+  EXPECT_EQ(left, 0u);
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include "core/volume/analytic.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/sources.h"
+#include "tests/tiny_volume.h"
 
 namespace cloudbake {
 namespace {
@@ -126,6 +127,31 @@ TEST_F(VdbIoTest, ErrorsNameThePath) {
   const auto size = std::filesystem::file_size(good);
   std::filesystem::resize_file(good, size - 10);
   EXPECT_THROW(VdbFileReader{good}, InputError);
+}
+
+// A full disk: the write fails with StorageFullError (a message naming no path, the path kept
+// for the log) and leaves neither the file nor its temporary; it used to leave 0-byte files.
+TEST_F(VdbIoTest, FullDiskThrowsStorageFullAndLeavesNoFile) {
+  testing::TinyVolume volume(dir_ + "/tiny", 1);
+  if (!volume.ok()) GTEST_SKIP() << volume.why();
+  PerlinCloudOptions cloud;
+  cloud.resolution = 128;
+  cloud.cover = 0.1;  // mostly cloud: many active voxels
+  const auto field = makePerlinCloud(cloud);
+  const std::string path = volume.dir() + "/cloud.vdb";
+  try {
+    writeVdb(path, *field, {});
+    FAIL() << "wrote " << std::filesystem::file_size(path) << " bytes into 1 MiB";
+  } catch (const StorageFullError& e) {
+    EXPECT_STREQ(e.what(), "no space left on the server's cache volume");
+    EXPECT_NE(e.detail().find(path), std::string::npos) << e.detail();
+  }
+  EXPECT_FALSE(std::filesystem::exists(path));
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
+  // The space is free again: a small file writes and reads back.
+  cloud.resolution = 16;
+  writeVdb(path, *makePerlinCloud(cloud), {});
+  EXPECT_EQ(VdbFileReader(path).grids().size(), 1u);
 }
 
 }  // namespace
