@@ -151,6 +151,12 @@ std::vector<MetricFamily> ServerMetrics::Snapshot::collectLocked() const {
                        "Entries dropped because a checksum was wrong", kC, s.cache.corrupt));
   out.push_back(single("cloudbake_cache_entries", "Entries held", kG, s.cache.entries));
   out.push_back(single("cloudbake_cache_bytes", "Bytes held by the cache", kG, s.cache.bytes));
+  out.push_back(single("cloudbake_outputs_corrupt_total",
+                       "Job outputs refused because they no longer match their SHA-256", kC,
+                       double(s.outputs_corrupt)));
+  out.push_back(single("cloudbake_assets_corrupt_dropped_total",
+                       "Stored assets dropped because they no longer hash to their name", kC,
+                       double(s.assets_corrupt)));
   out.push_back(single("cloudbake_upload_bytes_total", "Asset bytes received", kC,
                        double(sources_.upload_bytes())));
   out.push_back(single("cloudbake_fetch_bytes_total", "Result bytes sent", kC,

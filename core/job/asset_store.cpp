@@ -1,5 +1,6 @@
 #include "core/job/asset_store.h"
 
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -28,7 +29,15 @@ std::string AssetStore::find(const std::string& sha256) const {
   if (!isSha256Hex(sha256)) return {};
   const fs::path p = fs::path(root_) / sha256;
   std::error_code ec;
-  return fs::is_regular_file(p, ec) ? p.string() : std::string();
+  if (!fs::is_regular_file(p, ec)) return {};
+  if (verified_.check(p.string(), sha256)) return p.string();
+  // Two callers may find it corrupt at once: only the one whose removal succeeds reports it.
+  if (fs::remove(p, ec)) {
+    ++corrupt_;
+    spdlog::warn("asset store: asset {} no longer hashes to its name; dropped (upload it again)",
+                 sha256);
+  }
+  return {};
 }
 
 AssetStore::Writer::Writer(const AssetStore& store, std::string sha256, uint64_t declared_size)
@@ -88,6 +97,7 @@ std::string AssetStore::Writer::finish() {
   }
   const fs::path dest = fs::path(store_.root_) / sha256_;
   fs::rename(tmp_, dest);
+  store_.verified_.remember(dest.string());  // hashed while written
   finished_ = true;
   return dest.string();
 }

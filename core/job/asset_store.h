@@ -1,12 +1,14 @@
 // Uploaded assets (VDBs, meshes, sky maps), content-addressed by SHA-256 so each is sent once.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <cstdio>
 #include <memory>
 #include <string>
 
 #include "core/job/sha256.h"
+#include "core/job/verified_files.h"
 
 namespace cloudbake {
 
@@ -17,8 +19,12 @@ class AssetStore {
  public:
   AssetStore(std::string root, uint64_t max_asset_bytes);
 
-  /// Path of asset `sha256` if it is held, else empty.
+  /// Path of asset `sha256` if it is held and its content still hashes to it (checked on first
+  /// use in this process and whenever the file changed), else empty. A corrupt asset is removed
+  /// and counted, so the next upload of the right bytes stores it again.
   std::string find(const std::string& sha256) const;
+  /// Assets found corrupt and removed since the store was opened.
+  uint64_t corruptDropped() const { return corrupt_; }
 
   /// Streams one upload. Throws InputError for a bad declared hash or when the data exceeds
   /// max_asset_bytes; finish() throws InputError when the hash or size does not match.
@@ -44,6 +50,8 @@ class AssetStore {
  private:
   std::string root_;
   uint64_t max_asset_bytes_;
+  mutable VerifiedFiles verified_;
+  mutable std::atomic<uint64_t> corrupt_{0};
 };
 
 }  // namespace cloudbake

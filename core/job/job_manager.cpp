@@ -549,6 +549,20 @@ std::vector<JobEvent> JobManager::events(const std::string& id, uint64_t after,
 }
 
 OutputFile JobManager::output(const std::string& id, const std::string& name) const {
+  OutputFile out = recordedOutput(id, name);
+  // Served only as recorded: a file changed since it was written (a bad disk, a hand) would
+  // stream under its original checksum.
+  if (!verified_outputs_.check(out.path, out.sha256)) {
+    ++outputs_corrupt_;
+    spdlog::error("job {}: output '{}' does not match its recorded size and SHA-256", id, name);
+    throw FailedPreconditionError("job " + id + ": output '" + name +
+                                  "' is damaged on the server and cannot be served; resubmit the "
+                                  "job (what it computed is in the server's cache)");
+  }
+  return out;
+}
+
+OutputFile JobManager::recordedOutput(const std::string& id, const std::string& name) const {
   auto job = find(id);
   std::lock_guard<std::mutex> lock(mutex_);
   if (job->record.state != JobState::kSucceeded) {
@@ -576,6 +590,8 @@ JobManagerStats JobManager::stats() const {
   s.volume_builds = volumes_.builds();
   s.jobs_submitted = submitted_;
   s.cache = cache_->stats();
+  s.outputs_corrupt = outputs_corrupt_;
+  s.assets_corrupt = assets_->corruptDropped();
   std::lock_guard<std::mutex> lock(mutex_);
   s.queued = queue_.size();
   s.running = running_;

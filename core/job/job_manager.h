@@ -25,6 +25,7 @@
 #include "core/job/job_record.h"
 #include "core/job/phase_cache.h"
 #include "core/job/run_shot.h"
+#include "core/job/verified_files.h"
 #include "core/job/volume_cache.h"
 #include "core/shot/shot.h"
 
@@ -134,6 +135,8 @@ struct JobManagerStats {
   uint64_t jobs_submitted = 0;
   size_t queued = 0, running = 0;
   size_t succeeded = 0, failed = 0, cancelled = 0;  ///< finished jobs held (not yet pruned)
+  uint64_t outputs_corrupt = 0;  ///< outputs refused because they no longer match their hash
+  uint64_t assets_corrupt = 0;  ///< stored assets dropped because they no longer hash to their name
   BakeCacheStats cache;
 };
 
@@ -171,8 +174,9 @@ class JobManager {
   /// not finished. `record` receives the job's record. Throws NotFoundError.
   std::vector<JobEvent> events(const std::string& id, uint64_t after,
                                std::chrono::milliseconds wait, JobRecord* record) const;
-  /// Absolute path and description of output `name` of a SUCCEEDED job. Throws NotFoundError
-  /// (job or name), FailedPreconditionError (job not succeeded).
+  /// Absolute path and description of output `name` of a SUCCEEDED job, once the file is checked
+  /// against its recorded SHA-256 (on first use and whenever it changed). Throws NotFoundError
+  /// (job or name), FailedPreconditionError (job not succeeded, or the file is damaged).
   OutputFile output(const std::string& id, const std::string& name) const;
 
   AssetStore& assets() { return *assets_; }
@@ -197,6 +201,7 @@ class JobManager {
   RunOptions autoRunOptions();
   RunOptions runOptions(const std::shared_ptr<Job>& job);
   RunResult runInArena(Job& job, const RunOptions& ro, Outcome* outcome);
+  OutputFile recordedOutput(const std::string& id, const std::string& name) const;
   void reportFinished(const Job& job, const RunResult& result, const Outcome& outcome);
   /// Records the outcome durably; a success whose record cannot be saved becomes a failure.
   void finishJob(Job& job, const RunResult& result, Outcome* outcome);
@@ -211,6 +216,8 @@ class JobManager {
   PhaseCache phases_;
   std::unique_ptr<DirectionIndex> directions_;
   mutable std::mutex mutex_;
+  mutable VerifiedFiles verified_outputs_;
+  mutable std::atomic<uint64_t> outputs_corrupt_{0};
   mutable std::condition_variable cv_;  // queue changes and new events
   std::map<std::string, std::shared_ptr<Job>> jobs_;
   std::deque<std::shared_ptr<Job>> queue_;

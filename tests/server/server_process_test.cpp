@@ -953,6 +953,18 @@ TEST(ServerRestart, ResultsSurviveRestartsAndCrashesServeNothingCorrupt) {
     EXPECT_EQ(run(again.cloudctl() + " fetch " + id + " --out " + ws.path("f2")).code, 5);
     // The completed job's own result is intact and fetchable.
     EXPECT_EQ(run(again.cloudctl() + " fetch " + done_id + " --out " + ws.path("f3")).code, 0);
+    // Damaged on disk after that fetch verified it: refused, never streamed as if intact.
+    const std::string served = state + "/jobs/" + done_id + "/out/front.exr";
+    {
+      std::fstream io(served, std::ios::binary | std::ios::in | std::ios::out);
+      io.seekp(std::streamoff(fs::file_size(served) / 2));
+      for (int i = 0; i < 16; ++i) io.put('\x5a');
+    }
+    const CmdResult damaged =
+        run(again.cloudctl() + " fetch " + done_id + " --out " + ws.path("f3b"));
+    EXPECT_EQ(damaged.code, 5) << damaged.err;
+    EXPECT_NE(damaged.err.find("damaged on the server"), std::string::npos) << damaged.err;
+    EXPECT_FALSE(fs::exists(ws.path("f3b/front.exr")));
     // Resubmitting the shot does not serve the corrupt entry: it recomputes.
     const CmdResult r =
         run(again.cloudctl() + " --json submit " + shot + " --quiet --out " + ws.path("f4"));

@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/io/exr_io.h"
 #include "core/io/vdb_io.h"
+#include "core/job/asset_store.h"
 #include "core/job/bake_cache.h"
 #include "core/job/cache_key.h"
 #include "core/job/direction_index.h"
@@ -655,6 +656,66 @@ TEST(JobManager, FinishedJobsArePrunedByCountAndAge) {
     EXPECT_TRUE(jobs.list(std::nullopt, 0).empty());
     EXPECT_FALSE(fs::exists(dir / "jobs" / ids[2]));
   }
+  fs::remove_all(dir);
+}
+
+// Flips `n` bytes in the middle of a file in place, as a bad disk or a careless hand would.
+void flipBytes(const fs::path& path, int n) {
+  std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+  const auto size = std::streamoff(fs::file_size(path));
+  for (int i = 0; i < n; ++i) {
+    f.seekg(size / 2 + i);
+    const char c = char(f.get() ^ 0x5a);
+    f.seekp(size / 2 + i);
+    f.put(c);
+  }
+}
+
+// A stored asset that no longer hashes to its name is dropped (never handed to a job) and the
+// same bytes uploaded again are stored again, not skipped as "already present".
+TEST(AssetStore, CorruptAssetIsDroppedAndTheNextUploadStoresIt) {
+  const fs::path dir = freshDir("assets");
+  AssetStore store(dir.string(), 1 << 20);
+  const std::string bytes(4096, 'x');
+  const std::string sha = sha256Hex(bytes);
+  auto upload = [&] {
+    AssetStore::Writer w(store, sha, bytes.size());
+    w.write(bytes.data(), bytes.size());
+    return w.finish();
+  };
+  const std::string path = upload();
+  EXPECT_EQ(store.find(sha), path);
+  flipBytes(path, 16);
+  EXPECT_EQ(store.find(sha), "");
+  EXPECT_FALSE(fs::exists(path));
+  EXPECT_EQ(store.corruptDropped(), 1u);
+  EXPECT_EQ(upload(), path);
+  EXPECT_EQ(store.find(sha), path);
+  fs::remove_all(dir);
+}
+
+// An output changed on disk after it was written is refused with a clear reason instead of
+// being streamed under its original checksum.
+TEST(JobManager, DamagedOutputIsRefusedNotServed) {
+  const fs::path dir = freshDir("damaged");
+  JobManagerOptions o;
+  o.state_dir = dir.string();
+  o.worker_threads = 2;
+  JobManager jobs(o);
+  SubmitInput in;
+  in.shot_json = sphereShot(R"({"method": "single", "light_resolution": 8})");
+  const std::string id = jobs.submit(in).id;
+  ASSERT_EQ(waitFinished(jobs, id).state, JobState::kSucceeded);
+  const OutputFile good = jobs.output(id, "v.exr");
+  flipBytes(good.path, 16);
+  try {
+    jobs.output(id, "v.exr");
+    FAIL() << "a damaged output was served";
+  } catch (const FailedPreconditionError& e) {
+    EXPECT_NE(std::string(e.what()).find("damaged"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find(dir.string()), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(jobs.stats().outputs_corrupt, 1u);
   fs::remove_all(dir);
 }
 
