@@ -11,6 +11,8 @@
 #include <mutex>
 #include <string>
 
+#include "core/error.h"
+
 namespace cloudbake {
 
 /// Keeps the `capacity` most recently used values by key. Values are immutable once built
@@ -37,6 +39,8 @@ class MemoryCache {
   }
 
  private:
+  T getOrBuildOnce(const std::string& key, const std::function<T()>& build, bool* was_cached,
+                   bool* is_leader);
   size_t capacity_;
   mutable std::mutex mutex_;
   std::list<std::string> lru_;  // front = most recent
@@ -49,9 +53,23 @@ class MemoryCache {
 template <class T>
 T MemoryCache<T>::getOrBuild(const std::string& key, const std::function<T()>& build,
                              bool* was_cached) {
+  // The leader's cancellation is its own request's: a waiter then builds (or waits) afresh.
+  for (;;) {
+    bool leader = false;
+    try {
+      return getOrBuildOnce(key, build, was_cached, &leader);
+    } catch (const Cancelled&) {
+      if (leader) throw;
+    }
+  }
+}
+
+template <class T>
+T MemoryCache<T>::getOrBuildOnce(const std::string& key, const std::function<T()>& build,
+                                 bool* was_cached, bool* is_leader) {
   std::promise<T> promise;
   std::shared_future<T> future;
-  bool leader = false;
+  bool& leader = *is_leader;
   {
     std::lock_guard<std::mutex> lock(mutex_);
     auto it = values_.find(key);

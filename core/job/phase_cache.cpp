@@ -16,11 +16,12 @@ std::string phaseKey(const PhaseSpec& spec) {
 }
 
 std::shared_ptr<const PhaseFunction> cachedPhase(const PhaseSpec& spec, PhaseCache* cache,
-                                                 bool* was_cached) {
+                                                 bool* was_cached,
+                                                 const std::function<bool()>& keep_going) {
   if (was_cached) *was_cached = false;
-  if (!cache) return makePhaseFunction(spec);
+  if (!cache) return makePhaseFunction(spec, keep_going);
   return cache->getOrBuild(
-      phaseKey(spec), [&] { return makePhaseFunction(spec); }, was_cached);
+      phaseKey(spec), [&] { return makePhaseFunction(spec, keep_going); }, was_cached);
 }
 
 std::string phasePlanLine(const PhaseSpec& spec, const PhaseCache* cache, int threads) {

@@ -20,9 +20,11 @@ class PhaseCache : public MemoryCache<std::shared_ptr<const PhaseFunction>> {
 std::string phaseKey(const PhaseSpec& spec);
 
 /// The phase function of `spec`: from `cache` when there is one (built into it when absent),
-/// else built. `was_cached` (optional) says which.
+/// else built. `was_cached` (optional) says which. `keep_going`: as for makePhaseFunction; a
+/// build cancelled so is not kept, and a caller that was waiting for it builds it itself.
 std::shared_ptr<const PhaseFunction> cachedPhase(const PhaseSpec& spec, PhaseCache* cache,
-                                                 bool* was_cached = nullptr);
+                                                 bool* was_cached = nullptr,
+                                                 const std::function<bool()>& keep_going = {});
 
 /// A dry run's line for a Lorenz-Mie table ("" for analytic phase functions): its predicted build
 /// time on `threads` cores, or that this server holds it already.

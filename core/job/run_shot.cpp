@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <mutex>
 #include <optional>
 #include <utility>
 
@@ -80,7 +81,7 @@ class ShotRun final : public MethodRun {
       scene_ = buildScene(light, opt_.source, [this](const PhaseSpec& spec) {
         const auto t0 = std::chrono::steady_clock::now();
         bool cached = false;
-        auto phase = cachedPhase(spec, opt_.phases, &cached);
+        auto phase = cachedPhase(spec, opt_.phases, &cached, [this] { return keepGoing(); });
         if (spec.type == PhaseSpec::Type::kMie) {
           result_.steps.push_back(
               {"phase", "", -1, secondsSince(t0), {{"cached", cached ? 1.0 : 0.0}}});
@@ -113,6 +114,17 @@ class ShotRun final : public MethodRun {
   bool pollMessage(double fraction, const std::string& message) override {
     progress_.message = message;
     return send(fraction);
+  }
+  /// For long builds on worker threads (a Lorenz-Mie table): thread safe, asks the progress
+  /// callback at most every 0.1 s and answers from its last reply in between.
+  bool keepGoing() {
+    std::lock_guard<std::mutex> lock(keep_going_mutex_);
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_keep_going_ >= std::chrono::milliseconds(100)) {
+      last_keep_going_ = now;
+      keep_going_ = send(progress_.fraction);
+    }
+    return keep_going_;
   }
 
   std::string cached(const std::string& key,
@@ -178,6 +190,9 @@ class ShotRun final : public MethodRun {
   bool density_built_ = false;
   DensityFieldPtr density_;
   std::map<std::string, std::string> header_;
+  std::mutex keep_going_mutex_;
+  std::chrono::steady_clock::time_point last_keep_going_{};
+  bool keep_going_ = true;
   std::string scratch_;  // without a cache: where cached() computes, removed with the run
   int scratch_count_ = 0;
 };

@@ -3,6 +3,7 @@
 
 #include <array>
 #include <complex>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -52,8 +53,11 @@ double estimateMieTableSeconds(const MieTableOptions& options, int threads);
 class MieTablePhase final : public PhaseFunction {
  public:
   /// Builds the table (TBB-parallel over size parameters, deterministic). Throws InputError for
-  /// out-of-range options (naming phase.reff / phase.veff / ...).
-  explicit MieTablePhase(const MieTableOptions& options = {});
+  /// out-of-range options (naming phase.reff / phase.veff / ...). `keep_going` (optional, called
+  /// from worker threads between size parameters, so thread safe and cheap) returning false
+  /// stops the build with Cancelled: the largest tables take tens of seconds.
+  explicit MieTablePhase(const MieTableOptions& options = {},
+                         const std::function<bool()>& keep_going = {});
 
   /// A table from given per-channel values at ascending angles theta_deg (0 first, 180 last);
   /// normalises each channel. Throws InputError on malformed input.

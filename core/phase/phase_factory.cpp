@@ -29,7 +29,8 @@ double parseNumber(const std::string& key, const std::string& text) {
 
 }  // namespace
 
-std::shared_ptr<const PhaseFunction> makePhaseFunction(const PhaseSpec& spec) {
+std::shared_ptr<const PhaseFunction> makePhaseFunction(const PhaseSpec& spec,
+                                                       const std::function<bool()>& keep_going) {
   // Validate the blend ratio first so a bad ratio is reported without building a Mie table.
   if (!std::isfinite(spec.mie_ratio) || spec.mie_ratio < 0.0 || spec.mie_ratio > 1.0) {
     std::ostringstream os;
@@ -51,7 +52,7 @@ std::shared_ptr<const PhaseFunction> makePhaseFunction(const PhaseSpec& spec) {
       MieTableOptions options;
       options.effective_radius_um = spec.effective_radius_um;
       options.effective_variance = spec.effective_variance;
-      base = std::make_shared<MieTablePhase>(options);
+      base = std::make_shared<MieTablePhase>(options, keep_going);
       break;
     }
     default:

@@ -1,6 +1,7 @@
 // Builds a phase function from its user-facing description (shot files, `cloudbake phase`).
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -20,8 +21,10 @@ struct PhaseSpec {
   double mie_ratio = 1.0;
 };
 
-/// Throws InputError naming the parameter when a value is out of range.
-std::shared_ptr<const PhaseFunction> makePhaseFunction(const PhaseSpec& spec);
+/// Throws InputError naming the parameter when a value is out of range. `keep_going`: as for
+/// MieTablePhase (only a Lorenz-Mie table takes long enough to need it).
+std::shared_ptr<const PhaseFunction> makePhaseFunction(
+    const PhaseSpec& spec, const std::function<bool()>& keep_going = {});
 
 /// Parses the compact CLI form, e.g. "isotropic", "hg:g=0.75", "mie_approx:d=20",
 /// "mie:reff=10,veff=0.1"; any form may add "ratio=R" (e.g. "mie:reff=10,ratio=0.3").
