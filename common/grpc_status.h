@@ -35,6 +35,8 @@ inline ErrorKind errorKindFor(grpc::StatusCode code) {
   switch (code) {
     case grpc::StatusCode::INVALID_ARGUMENT:
     case grpc::StatusCode::OUT_OF_RANGE:
+    case grpc::StatusCode::UNAUTHENTICATED:  // a missing or unknown token: the caller's to fix
+    case grpc::StatusCode::PERMISSION_DENIED:
       return ErrorKind::kBadInput;
     case grpc::StatusCode::NOT_FOUND:
       return ErrorKind::kNotFound;

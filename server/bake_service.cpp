@@ -34,8 +34,10 @@ grpc::Status abandoned(const grpc::ServerContext* ctx, const char* rpc) {
 }
 }  // namespace
 
-grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest*,
+grpc::Status BakeServiceImpl::GetServerInfo(Ctx* ctx, const v1::GetServerInfoRequest*,
                                             v1::ServerInfo* reply) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("GetServerInfo", [&] {
     const JobManagerOptions& o = jobs_.options();
     reply->set_version(CLOUDBAKE_VERSION);
@@ -58,6 +60,8 @@ grpc::Status BakeServiceImpl::GetServerInfo(Ctx*, const v1::GetServerInfoRequest
 grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
                                           grpc::ServerReader<v1::UploadAssetRequest>* reader,
                                           v1::UploadAssetResponse* reply) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("UploadAsset", [&] {
     const StreamSlot slot(*this);
     v1::UploadAssetRequest msg;
@@ -94,10 +98,13 @@ grpc::Status BakeServiceImpl::UploadAsset(Ctx* ctx,
 
 grpc::Status BakeServiceImpl::SubmitJob(Ctx* ctx, const v1::SubmitJobRequest* request,
                                         v1::SubmitJobResponse* reply) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("SubmitJob", [&] {
     // A client that gave up while the request was queued gets no job it cannot learn about.
     if (ctx->IsCancelled()) return abandoned(ctx, "SubmitJob");
     SubmitInput input = fromProto(*request);
+    input.owner = who;
     // Staging many assets or planning a big shot can outlast the client's deadline: stop then.
     input.abandoned = [ctx] {
       return ctx->IsCancelled() || ctx->deadline() <= std::chrono::system_clock::now();
@@ -113,6 +120,13 @@ grpc::Status BakeServiceImpl::SubmitJob(Ctx* ctx, const v1::SubmitJobRequest* re
   });
 }
 
+void BakeServiceImpl::checkOwner(const std::string& caller, const std::string& id) const {
+  // Another client's job answers exactly as a job that does not exist: ids reveal nothing.
+  if (auth_.enabled() && jobs_.get(id).owner != caller) {
+    throw NotFoundError("job '" + id.substr(0, 64) + "' not found");
+  }
+}
+
 BakeServiceImpl::StreamSlot::StreamSlot(BakeServiceImpl& service) : service_(service) {
   if (++service_.streams_ > service_.max_streams_) {
     --service_.streams_;
@@ -124,9 +138,12 @@ BakeServiceImpl::StreamSlot::StreamSlot(BakeServiceImpl& service) : service_(ser
 
 grpc::Status BakeServiceImpl::WatchJob(Ctx* ctx, const v1::WatchJobRequest* request,
                                        grpc::ServerWriter<v1::JobEvent>* writer) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("WatchJob", [&] {
     const StreamSlot slot(*this);
     checkJobId(request->job_id());
+    checkOwner(who, request->job_id());
     uint64_t after = request->after_seq();
     for (;;) {
       if (ctx->IsCancelled()) return abandoned(ctx, "WatchJob");
@@ -158,27 +175,41 @@ grpc::Status BakeServiceImpl::WatchJob(Ctx* ctx, const v1::WatchJobRequest* requ
   });
 }
 
-grpc::Status BakeServiceImpl::GetJob(Ctx*, const v1::GetJobRequest* request, v1::Job* reply) {
+grpc::Status BakeServiceImpl::GetJob(Ctx* ctx, const v1::GetJobRequest* request, v1::Job* reply) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("GetJob", [&] {
     checkJobId(request->job_id());
+    checkOwner(who, request->job_id());
     toProto(jobs_.get(request->job_id()), reply);
     return grpc::Status::OK;
   });
 }
 
-grpc::Status BakeServiceImpl::ListJobs(Ctx*, const v1::ListJobsRequest* request,
+grpc::Status BakeServiceImpl::ListJobs(Ctx* ctx, const v1::ListJobsRequest* request,
                                        v1::ListJobsResponse* reply) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("ListJobs", [&] {
-    for (const JobRecord& r : jobs_.list(fromProto(request->state()), request->limit())) {
+    // With tokens a client lists only its own jobs: filter first, then apply the limit.
+    const size_t limit = request->limit();
+    for (const JobRecord& r :
+         jobs_.list(fromProto(request->state()), auth_.enabled() ? 0 : limit)) {
+      if (auth_.enabled() && r.owner != who) continue;
+      if (limit != 0 && size_t(reply->jobs_size()) >= limit) break;
       toProto(r, reply->add_jobs());
     }
     return grpc::Status::OK;
   });
 }
 
-grpc::Status BakeServiceImpl::CancelJob(Ctx*, const v1::CancelJobRequest* request, v1::Job* reply) {
+grpc::Status BakeServiceImpl::CancelJob(Ctx* ctx, const v1::CancelJobRequest* request,
+                                        v1::Job* reply) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("CancelJob", [&] {
     checkJobId(request->job_id());
+    checkOwner(who, request->job_id());
     toProto(jobs_.cancel(request->job_id()), reply);
     spdlog::info("job {}: cancel requested", request->job_id());
     return grpc::Status::OK;
@@ -187,9 +218,12 @@ grpc::Status BakeServiceImpl::CancelJob(Ctx*, const v1::CancelJobRequest* reques
 
 grpc::Status BakeServiceImpl::FetchResult(Ctx* ctx, const v1::FetchResultRequest* request,
                                           grpc::ServerWriter<v1::ResultChunk>* writer) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("FetchResult", [&] {
     const StreamSlot slot(*this);
     checkJobId(request->job_id());
+    checkOwner(who, request->job_id());
     uint32_t chunk = request->chunk_size() == 0 ? kDefaultChunk : request->chunk_size();
     if (chunk < kMinChunk || chunk > kMaxChunk) {
       throw InputError("chunk_size: must be 0 (default 262144) or in [65536, 1048576], got " +
@@ -229,10 +263,13 @@ grpc::Status BakeServiceImpl::FetchResult(Ctx* ctx, const v1::FetchResultRequest
   });
 }
 
-grpc::Status BakeServiceImpl::RenderView(Ctx*, const v1::RenderViewRequest* request,
+grpc::Status BakeServiceImpl::RenderView(Ctx* ctx, const v1::RenderViewRequest* request,
                                          v1::SubmitJobResponse* reply) {
+  std::string who;
+  if (grpc::Status st = auth_.authenticate(*ctx, &who); !st.ok()) return st;
   return guarded("RenderView", [&] {
     checkJobId(request->job_id());
+    checkOwner(who, request->job_id());
     std::string sun;
     if (request->sun_irradiance_size() != 0) {
       if (request->sun_irradiance_size() != 3) {
@@ -251,7 +288,7 @@ grpc::Status BakeServiceImpl::RenderView(Ctx*, const v1::RenderViewRequest* requ
       text << "]";
       sun = text.str();
     }
-    const JobRecord record = jobs_.render(request->job_id(), request->views_json(), sun);
+    const JobRecord record = jobs_.render(request->job_id(), request->views_json(), sun, who);
     toProto(record, reply->mutable_job());
     return grpc::Status::OK;
   });

@@ -7,6 +7,7 @@
 
 #include "cloudbake/v1/bake_service.grpc.pb.h"
 #include "core/job/job_manager.h"
+#include "server/auth.h"
 
 namespace cloudbake::server {
 
@@ -15,8 +16,10 @@ class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
  public:
   /// `max_streams`: streaming calls (uploads, watches, fetches) open at once; more are answered
   /// RESOURCE_EXHAUSTED, so a flood of watchers cannot take a thread each without bound.
-  explicit BakeServiceImpl(JobManager& jobs, size_t max_streams = 256)
-      : jobs_(jobs), max_streams_(max_streams) {}
+  /// `auth`: who may call (default: anyone, anonymously); with tokens each client sees and acts
+  /// on its own jobs only.
+  explicit BakeServiceImpl(JobManager& jobs, size_t max_streams = 256, Authenticator auth = {})
+      : jobs_(jobs), max_streams_(max_streams), auth_(std::move(auth)) {}
   using Ctx = grpc::ServerContext;
   grpc::Status GetServerInfo(Ctx*, const v1::GetServerInfoRequest*, v1::ServerInfo*) override;
   grpc::Status UploadAsset(Ctx*, grpc::ServerReader<v1::UploadAssetRequest>*,
@@ -38,6 +41,8 @@ class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
   size_t openStreams() const { return streams_; }
 
  private:
+  /// NotFoundError unless job `id` belongs to `caller` (any job when tokens are off).
+  void checkOwner(const std::string& caller, const std::string& id) const;
   /// Holds one of the max_streams slots while a streaming call runs.
   class StreamSlot {
    public:
@@ -52,6 +57,7 @@ class BakeServiceImpl final : public cloudbake::v1::BakeService::Service {
 
   JobManager& jobs_;
   size_t max_streams_;
+  Authenticator auth_;
   std::atomic<size_t> streams_{0};
   std::atomic<uint64_t> upload_bytes_{0}, fetch_bytes_{0};
 };

@@ -14,7 +14,9 @@
 #include <thread>
 
 #include "common/exit_codes.h"
+#include "core/job/file_util.h"
 #include "core/job/job_record.h"
+#include "server/auth.h"
 #include "server/bake_service.h"
 #include "server/metrics.h"
 
@@ -88,7 +90,10 @@ struct ServerFlags {
   ServerFlags() { jobs.state_dir = defaultStateDir(); }
 
   std::string listen = "127.0.0.1:50051";
-  std::string metrics_listen;  // empty: no metrics endpoint
+  std::string metrics_listen;     // empty: no metrics endpoint
+  std::string tls_cert, tls_key;  // PEM files; both or neither
+  std::string auth_tokens;        // file of 'NAME TOKEN' lines; empty: no authentication
+  std::string reflection = "auto";
   std::string log_level = "info";
   bool log_json = false;
   cloudbake::JobManagerOptions jobs;
@@ -189,6 +194,25 @@ void addLimitOptions(CLI::App& app, ServerFlags* f) {
       ->capture_default_str();
 }
 
+void addSecurityOptions(CLI::App& app, ServerFlags* f) {
+  app.add_option("--tls-cert", f->tls_cert, "PEM certificate chain: serve TLS (with --tls-key)")
+      ->envname("CLOUDBAKE_TLS_CERT")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-key", f->tls_key, "PEM private key of --tls-cert")
+      ->envname("CLOUDBAKE_TLS_KEY")
+      ->check(CLI::ExistingFile);
+  app.add_option("--auth-tokens", f->auth_tokens,
+                 "file of 'NAME TOKEN' lines: every call needs 'authorization: Bearer TOKEN', and "
+                 "each client sees and acts on its own jobs only (health stays open)")
+      ->envname("CLOUDBAKE_AUTH_TOKENS")
+      ->check(CLI::ExistingFile);
+  app.add_option("--reflection", f->reflection,
+                 "gRPC server reflection: on, off, or auto (on only when listening on loopback)")
+      ->envname("CLOUDBAKE_REFLECTION")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
+}
+
 void addLogOptions(CLI::App& app, ServerFlags* f) {
   app.add_option("--log-level", f->log_level, "trace|debug|info|warn|error")
       ->envname("CLOUDBAKE_LOG_LEVEL")
@@ -222,11 +246,32 @@ void setUpLogging(const ServerFlags& f) {
   }
 }
 
+bool loopbackHost(const std::string& listen) {
+  const std::string host = listen.substr(0, listen.rfind(':'));
+  return host == "127.0.0.1" || host == "localhost" || host == "[::1]" || host == "::1";
+}
+
+/// TLS credentials from the flags, or insecure ones without them. Throws std::runtime_error.
+std::shared_ptr<grpc::ServerCredentials> serverCredentials(const ServerFlags& f) {
+  if (f.tls_cert.empty() && f.tls_key.empty()) return grpc::InsecureServerCredentials();
+  if (f.tls_cert.empty() || f.tls_key.empty()) {
+    throw std::runtime_error("--tls-cert and --tls-key go together");
+  }
+  grpc::SslServerCredentialsOptions ssl;
+  ssl.pem_key_cert_pairs.push_back(
+      {cloudbake::readWholeFile(f.tls_key), cloudbake::readWholeFile(f.tls_cert)});
+  return grpc::SslServerCredentials(ssl);
+}
+
 /// Null, or *bound_port 0, when `listen` cannot be bound.
-std::unique_ptr<grpc::Server> startServer(const std::string& listen, grpc::Service* service,
+std::unique_ptr<grpc::Server> startServer(const ServerFlags& f, grpc::Service* service,
                                           int* bound_port) {
+  const std::string& listen = f.listen;
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  // Reflection describes the whole API to anyone who connects: by default only on loopback.
+  if (f.reflection == "on" || (f.reflection == "auto" && loopbackHost(listen))) {
+    grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  }
   grpc::ServerBuilder builder;
   // Without this gRPC sets SO_REUSEPORT and a second server on the same port starts silently,
   // sharing connections with the first.
@@ -236,7 +281,7 @@ std::unique_ptr<grpc::Server> startServer(const std::string& listen, grpc::Servi
   // tens of MiB, docs/api.md "Large files"), and 4 MiB still fills a 100 ms link at 40 MB/s.
   builder.AddChannelArgument(GRPC_ARG_HTTP2_BDP_PROBE, 0);
   builder.AddChannelArgument(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 4 << 20);
-  builder.AddListeningPort(listen, grpc::InsecureServerCredentials(), bound_port);
+  builder.AddListeningPort(listen, serverCredentials(f), bound_port);
   builder.RegisterService(service);
   return builder.BuildAndStart();
 }
@@ -253,7 +298,18 @@ int serve(const ServerFlags& f) {
     spdlog::error("cannot open state folder {}: {}", o.state_dir, e.what());
     return cloudbake::kFailure;
   }
-  cloudbake::server::BakeServiceImpl service(*jobs, f.max_streams);
+  cloudbake::server::Authenticator auth;
+  std::unique_ptr<grpc::Server> server;
+  int bound_port = 0;
+  try {
+    if (!f.auth_tokens.empty()) {
+      auth = cloudbake::server::Authenticator(cloudbake::server::TokenTable::load(f.auth_tokens));
+    }
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return cloudbake::kBadInput;
+  }
+  cloudbake::server::BakeServiceImpl service(*jobs, f.max_streams, std::move(auth));
   if (!f.metrics_listen.empty()) {
     try {
       cloudbake::JobManager* manager = jobs.get();
@@ -268,8 +324,12 @@ int serve(const ServerFlags& f) {
     const std::string host = f.metrics_listen.substr(0, f.metrics_listen.rfind(':'));
     spdlog::info("metrics on http://{}:{}/metrics", host, metrics.port());
   }
-  int bound_port = 0;
-  std::unique_ptr<grpc::Server> server = startServer(f.listen, &service, &bound_port);
+  try {
+    server = startServer(f, &service, &bound_port);
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return cloudbake::kBadInput;
+  }
   if (!server || bound_port == 0) {
     spdlog::error("cannot listen on {}", f.listen);
     return cloudbake::kUnavailable;
@@ -281,9 +341,10 @@ int serve(const ServerFlags& f) {
   const std::string host = f.listen.substr(0, f.listen.rfind(':'));
   spdlog::info(
       "cloudbake-server {} listening on {}:{} (state {}, {} runner(s), queue bound {}, max "
-      "voxels {}, max frames {})",
+      "voxels {}, max frames {}, {}, {})",
       CLOUDBAKE_VERSION, host, bound_port, o.state_dir, o.max_concurrent_jobs, o.queue_bound,
-      o.limits.max_voxels, o.limits.max_frames);
+      o.limits.max_voxels, o.limits.max_frames, f.tls_cert.empty() ? "plaintext" : "TLS",
+      f.auth_tokens.empty() ? "no tokens" : "tokens required");
   server->Wait();
   // The metrics endpoint reads the job manager and the service: detach it before either goes.
   metrics.detach();
@@ -303,6 +364,7 @@ int main(int argc, char** argv) {
   ServerFlags flags;
   addServiceOptions(app, &flags);
   addLimitOptions(app, &flags);
+  addSecurityOptions(app, &flags);
   addLogOptions(app, &flags);
   app.set_version_flag("--version", std::string("cloudbake-server ") + CLOUDBAKE_VERSION);
   try {

@@ -139,6 +139,32 @@ int jobExitCode(const v1::Job& j) {
   }
 }
 
+/// A small text file an option names; CliError naming the option when it cannot be read.
+std::string readTextFile(const std::string& path, const std::string& option) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in.is_open()) throw CliError{ExitCode::kBadInput, option + " " + path + ": cannot open"};
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw CliError{ExitCode::kBadInput, option + " " + path + ": cannot read"};
+  return text;
+}
+
+/// The bearer token: from --token-file (CLOUDBAKE_TOKEN_FILE), else CLOUDBAKE_TOKEN, else none.
+std::string readToken(const std::string& file) {
+  const char* env = std::getenv("CLOUDBAKE_TOKEN");
+  std::string token = !file.empty() ? readTextFile(file, "--token-file") : env ? env : "";
+  const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; };
+  while (!token.empty() && blank(token.back())) token.pop_back();
+  while (!token.empty() && blank(token.front())) token.erase(token.begin());
+  for (const char c : token) {
+    if (static_cast<unsigned char>(c) <= ' ' || c == 0x7f) {
+      throw CliError{ExitCode::kBadInput,
+                     "token: must be one word of printable characters (--token-file or "
+                     "CLOUDBAKE_TOKEN)"};
+    }
+  }
+  return token;
+}
+
 struct Client {
   std::string server;
   double timeout_s = 10;
@@ -148,13 +174,23 @@ struct Client {
   bool png = false;  // --png: a preview beside each downloaded EXR
   std::shared_ptr<grpc::Channel> channel;
   std::unique_ptr<v1::BakeService::Stub> stub;
+  bool tls = false;    // --tls: TLS with the system's CA certificates
+  std::string tls_ca;  // --tls-ca: TLS trusting this PEM file instead
+  std::string token;   // sent as 'authorization: Bearer TOKEN' on every call
+
+  std::shared_ptr<grpc::ChannelCredentials> credentials() const {
+    if (!tls && tls_ca.empty()) return grpc::InsecureChannelCredentials();
+    grpc::SslCredentialsOptions ssl;
+    if (!tls_ca.empty()) ssl.pem_root_certs = readTextFile(tls_ca, "--tls-ca");
+    return grpc::SslCredentials(ssl);
+  }
 
   /// Fails at once when the connection is refused or the host unreachable (the channel's
   /// first attempt fails), unless --wait-for-server asks to keep trying until --timeout.
   void connect() {
     grpc::ChannelArguments args;
     args.SetMaxReceiveMessageSize(4 << 20);
-    channel = grpc::CreateCustomChannel(server, grpc::InsecureChannelCredentials(), args);
+    channel = grpc::CreateCustomChannel(server, credentials(), args);
     const auto until = deadline();
     grpc_connectivity_state state = channel->GetState(/*try_to_connect=*/true);
     while (state != GRPC_CHANNEL_READY) {
@@ -182,10 +218,17 @@ struct Client {
                    std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
     return command_deadline ? std::min(t, *command_deadline) : t;
   }
-  void shortCall(grpc::ClientContext* ctx) const { ctx->set_deadline(deadline()); }
+  void shortCall(grpc::ClientContext* ctx) const {
+    ctx->set_deadline(deadline());
+    authorize(ctx);
+  }
   /// Streams have no per-call bound (a bake may take hours), only the command's deadline.
   void streamCall(grpc::ClientContext* ctx) const {
     if (command_deadline) ctx->set_deadline(*command_deadline);
+    authorize(ctx);
+  }
+  void authorize(grpc::ClientContext* ctx) const {
+    if (!token.empty()) ctx->AddMetadata("authorization", "Bearer " + token);
   }
 };
 
@@ -912,7 +955,7 @@ struct Commands {
 };
 
 /// Options of every command; `deadline_s` 0: no deadline.
-void addGlobalOptions(CLI::App& app, Client* c, double* deadline_s) {
+void addGlobalOptions(CLI::App& app, Client* c, double* deadline_s, std::string* token_file) {
   const char* env_server = std::getenv("CLOUDBAKE_SERVER");
   c->server = env_server && *env_server ? env_server : "127.0.0.1:50051";
   app.add_option("--server", c->server, "HOST:PORT of cloudbake-server (env CLOUDBAKE_SERVER)");
@@ -928,6 +971,14 @@ void addGlobalOptions(CLI::App& app, Client* c, double* deadline_s) {
                  "briefly unavailable (exponential backoff with jitter; 0: no retry)")
       ->check(CLI::Range(0.0, 86400.0))
       ->capture_default_str();
+  app.add_flag("--tls", c->tls, "connect with TLS, trusting the system's CA certificates");
+  app.add_option("--tls-ca", c->tls_ca,
+                 "connect with TLS, trusting this PEM CA certificate (env CLOUDBAKE_TLS_CA)")
+      ->envname("CLOUDBAKE_TLS_CA");
+  app.add_option("--token-file", *token_file,
+                 "file holding the bearer token to send (env CLOUDBAKE_TOKEN_FILE; or the token "
+                 "itself in env CLOUDBAKE_TOKEN)")
+      ->envname("CLOUDBAKE_TOKEN_FILE");
   app.add_flag("--wait-for-server", c->wait_for_server,
                "keep trying to connect until --timeout instead of failing at once when the "
                "connection is refused (e.g. while the server starts)");
@@ -1023,7 +1074,8 @@ int main(int argc, char** argv) {
   CLI::App app{"cloudctl: client of cloudbake-server"};
   Client c;
   double deadline_s = 0;
-  addGlobalOptions(app, &c, &deadline_s);
+  std::string token_file;
+  addGlobalOptions(app, &c, &deadline_s, &token_file);
   SubmitArgs sa;
   JobArgs ja;
   const Commands cmd = addCommands(app, &sa, &ja);
@@ -1046,6 +1098,7 @@ int main(int argc, char** argv) {
                          std::chrono::microseconds(static_cast<long>(deadline_s * 1e6));
   }
   try {
+    c.token = readToken(token_file);
     return runCommand(cmd, c, sa, ja);
   } catch (const CliError& e) {
     std::cerr << "cloudctl: " << e.message << "\n";

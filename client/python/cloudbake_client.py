@@ -9,6 +9,7 @@ writes them to BUILD/client/python/gen; put that folder on sys.path or PYTHONPAT
     paths = client.fetch_all(job, "out")               # DIR/<view>.exr, DIR/bake.vdb, verified
 """
 
+import collections
 import hashlib
 import json
 import os
@@ -38,11 +39,68 @@ def sha256_file(path):
     return h.hexdigest()
 
 
+def read_token(token=None, token_file=None):
+    """The bearer token: given, else from token_file or CLOUDBAKE_TOKEN_FILE, else
+    CLOUDBAKE_TOKEN, else None (a server without --auth-tokens needs none)."""
+    if token is None:
+        token_file = token_file or os.environ.get("CLOUDBAKE_TOKEN_FILE")
+        if token_file:
+            with open(token_file, encoding="utf-8") as f:
+                token = f.read()
+        else:
+            token = os.environ.get("CLOUDBAKE_TOKEN")
+    token = token.strip() if token else None
+    if token and any(ord(c) <= 32 or ord(c) == 127 for c in token):
+        raise ValueError("token: must be one word of printable characters")
+    return token or None
+
+
+class _BearerToken(grpc.UnaryUnaryClientInterceptor, grpc.UnaryStreamClientInterceptor,
+                   grpc.StreamUnaryClientInterceptor):
+    """Adds 'authorization: Bearer TOKEN' to every call (over TLS or plaintext alike)."""
+
+    def __init__(self, token):
+        self.header = ("authorization", "Bearer " + token)
+
+    def _details(self, details):
+        metadata = list(details.metadata or []) + [self.header]
+        return _Details(details.method, details.timeout, metadata, details.credentials,
+                        getattr(details, "wait_for_ready", None),
+                        getattr(details, "compression", None))
+
+    def intercept_unary_unary(self, continuation, details, request):
+        return continuation(self._details(details), request)
+
+    def intercept_unary_stream(self, continuation, details, request):
+        return continuation(self._details(details), request)
+
+    def intercept_stream_unary(self, continuation, details, request_iterator):
+        return continuation(self._details(details), request_iterator)
+
+
+class _Details(collections.namedtuple(
+        "_Details", ("method", "timeout", "metadata", "credentials", "wait_for_ready",
+                     "compression")), grpc.ClientCallDetails):
+    pass
+
+
 class BakeClient:
-    def __init__(self, address, timeout=10.0):
-        self.channel = grpc.insecure_channel(address)
+    def __init__(self, address, timeout=10.0, tls_ca=None, token=None, token_file=None):
+        """tls_ca: a PEM CA file (or CLOUDBAKE_TLS_CA) to connect with TLS; token/token_file:
+        see read_token."""
+        tls_ca = tls_ca or os.environ.get("CLOUDBAKE_TLS_CA")
+        if tls_ca:
+            with open(tls_ca, "rb") as f:
+                creds = grpc.ssl_channel_credentials(root_certificates=f.read())
+            self.channel = grpc.secure_channel(address, creds)
+        else:
+            self.channel = grpc.insecure_channel(address)
         grpc.channel_ready_future(self.channel).result(timeout=timeout)
-        self.stub = pb_grpc.BakeServiceStub(self.channel)
+        token = read_token(token, token_file)
+        channel = self.channel
+        if token:
+            channel = grpc.intercept_channel(self.channel, _BearerToken(token))
+        self.stub = pb_grpc.BakeServiceStub(channel)
         self.timeout = timeout
 
     def close(self):
@@ -150,8 +208,11 @@ def main():
     parser.add_argument("shot")
     parser.add_argument("--server", default=os.environ.get("CLOUDBAKE_SERVER", "127.0.0.1:50051"))
     parser.add_argument("--out", default="out")
+    parser.add_argument("--tls-ca", help="PEM CA file: connect with TLS (env CLOUDBAKE_TLS_CA)")
+    parser.add_argument("--token-file", help="bearer token file (env CLOUDBAKE_TOKEN_FILE, or "
+                        "the token itself in CLOUDBAKE_TOKEN)")
     args = parser.parse_args()
-    client = BakeClient(args.server)
+    client = BakeClient(args.server, tls_ca=args.tls_ca, token_file=args.token_file)
     try:
         job = client.submit_file(args.shot)
         job = client.wait(job.id, on_event=lambda e: print(

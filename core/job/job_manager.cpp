@@ -426,6 +426,7 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
   r.id = id;
   r.shot_name = job->shot.name;
   r.method = job->shot.bake.method;
+  r.owner = prepared.input.owner;
   for (const Camera& c : job->shot.views) r.views.push_back(c.name);
   r.created = unixNow();
   r.stage = "queued";
@@ -460,7 +461,7 @@ JobRecord JobManager::submit(const SubmitInput& input) {
 }
 
 JobRecord JobManager::render(const std::string& job_id, const std::string& views_json,
-                             const std::string& sun_irradiance_json) {
+                             const std::string& sun_irradiance_json, const std::string& owner) {
   const std::shared_ptr<Job> old = find(job_id);
   SubmitInput input;
   try {
@@ -485,6 +486,7 @@ JobRecord JobManager::render(const std::string& job_id, const std::string& views
     shot["lighting"]["sun"]["irradiance"] = e;
   }
   input.shot_json = shot.dump();
+  input.owner = owner;
   return submit(input);
 }
 

@@ -91,6 +91,8 @@ struct JobManagerOptions {
 /// relative to the shot's folder and content hash of an uploaded asset.
 struct SubmitInput {
   std::string shot_json;
+  /// The authenticated client that submits it (empty: the server has no authentication).
+  std::string owner;
   std::vector<std::pair<std::string, std::string>> assets;  ///< (relative path, sha256)
   int samples = -1;                                         ///< override; -1: the shot's
   /// Reuse a cached render whose sun direction is within this angle (degrees; 0: exact only).
@@ -161,7 +163,7 @@ class JobManager {
   /// shot, optionally with a new sun irradiance (JSON [r,g,b]; empty: unchanged). Reuses the
   /// job's assets; cached parts are not recomputed.
   JobRecord render(const std::string& job_id, const std::string& views_json,
-                   const std::string& sun_irradiance_json);
+                   const std::string& sun_irradiance_json, const std::string& owner = "");
 
   /// Throws NotFoundError.
   JobRecord get(const std::string& id) const;

@@ -51,6 +51,7 @@ Json toJson(const JobRecord& r) {
           {"state", jobStateName(r.state)},
           {"shot_name", r.shot_name},
           {"method", r.method},
+          {"owner", r.owner},
           {"views", r.views},
           {"created", r.created},
           {"started", r.started},
@@ -74,6 +75,7 @@ JobRecord fromJson(const Json& j) {
   r.state = stateFromName(j.at("state").get<std::string>());
   r.shot_name = j.at("shot_name").get<std::string>();
   r.method = j.at("method").get<std::string>();
+  r.owner = j.value("owner", "");  // absent from records written before tokens
   r.views = j.at("views").get<std::vector<std::string>>();
   r.created = j.at("created").get<double>();
   r.started = j.at("started").get<double>();

@@ -20,6 +20,7 @@ struct JobRecord {
   JobState state = JobState::kQueued;
   std::string shot_name;
   std::string method;
+  std::string owner;  ///< the authenticated client that submitted it ("" without tokens)
   std::vector<std::string> views;
   double created = 0, started = 0, finished = 0;
   std::string stage;

@@ -43,6 +43,16 @@ def free_port():
         return s.getsockname()[1]
 
 
+def stop(server, work):
+    """SIGTERM, a kill after 10 s, and the work folder removed."""
+    server.terminate()
+    try:
+        server.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        server.kill()
+    shutil.rmtree(work, ignore_errors=True)
+
+
 def check(cond, what):
     if not cond:
         raise AssertionError(what)
@@ -146,14 +156,51 @@ def main():
             check(e.code() == grpc.StatusCode.NOT_FOUND, "unknown job -> NOT_FOUND")
         client.close()
     finally:
-        server.terminate()
-        try:
-            server.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            server.kill()
-        shutil.rmtree(work, ignore_errors=True)
+        stop(server, work)
     check(server.returncode == 0, "server exited cleanly on SIGTERM")
+    check_tokens()
     return 0
+
+
+def check_tokens():
+    """With --auth-tokens: no token is refused, each client sees only its own jobs."""
+    work = tempfile.mkdtemp(prefix="cloudbake_py_tokens_")
+    address = "127.0.0.1:%d" % free_port()
+    tokens = os.path.join(work, "tokens.txt")
+    with open(tokens, "w") as f:
+        f.write("alice alice-token-0123456789\nbob bob-token-0123456789abc\n")
+    server = subprocess.Popen([SERVER_BIN, "--listen", address, "--cache-dir",
+                               os.path.join(work, "state"), "--threads", "2",
+                               "--log-level", "warn", "--auth-tokens", tokens])
+    try:
+        anonymous = cloudbake_client.BakeClient(address, timeout=15, token="")
+        try:
+            anonymous.stub.ListJobs(pb.ListJobsRequest(), timeout=10)
+            check(False, "a call without a token is refused")
+        except grpc.RpcError as e:
+            check(e.code() == grpc.StatusCode.UNAUTHENTICATED, "no token -> UNAUTHENTICATED")
+        alice = cloudbake_client.BakeClient(address, timeout=15,
+                                            token="alice-token-0123456789")
+        shot_path = os.path.join(work, "sphere.json")
+        with open(shot_path, "w") as f:
+            json.dump(SHOT, f)
+        job = alice.wait(alice.submit_file(shot_path).id)
+        check(job.state == pb.SUCCEEDED, "alice's job succeeded with her token")
+        token_file = os.path.join(work, "bob.token")
+        with open(token_file, "w") as f:
+            f.write("bob-token-0123456789abc\n")
+        bob = cloudbake_client.BakeClient(address, timeout=15, token_file=token_file)
+        listed = bob.stub.ListJobs(pb.ListJobsRequest(), timeout=10).jobs
+        check(len(listed) == 0, "bob lists none of alice's jobs")
+        try:
+            bob.stub.GetJob(pb.GetJobRequest(job_id=job.id), timeout=10)
+            check(False, "bob cannot read alice's job")
+        except grpc.RpcError as e:
+            check(e.code() == grpc.StatusCode.NOT_FOUND, "alice's job is NOT_FOUND for bob")
+        for c in (anonymous, alice, bob):
+            c.close()
+    finally:
+        stop(server, work)
 
 
 if __name__ == "__main__":

@@ -131,8 +131,10 @@ class ServerProc {
   }
   std::string cloudctl(double timeout_s = 5) const {
     return std::string(CLOUDCTL_BIN) + " --server " + address_ + " --timeout " +
-           std::to_string(timeout_s);
+           std::to_string(timeout_s) + client_flags_;
   }
+  /// Flags every cloudctl() command line carries from now on (e.g. " --tls-ca ca.pem").
+  void clientFlags(std::string flags) { client_flags_ = std::move(flags); }
   /// Sends the server's stderr (its log) to `path` from the next start() on.
   void logTo(std::string path) { log_path_ = std::move(path); }
   const std::string& address() const { return address_; }
@@ -151,6 +153,7 @@ class ServerProc {
  private:
   std::string state_dir_;
   std::string log_path_;
+  std::string client_flags_;
   int port_ = 0;
   pid_t pid_ = -1;
   std::string address_;
