@@ -66,7 +66,11 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
   density->setGridClass(openvdb::GRID_FOG_VOLUME);
   grids.push_back(density);
   bool tallies = false;
-  for (const auto& [name, c] : bake.channels) {
+  for (const auto& entry : bake.channels) {
+    // Named, not a structured binding: lambdas below capture it (C++17 clang cannot capture
+    // bindings).
+    const std::string& name = entry.first;
+    const auto& c = entry.second;
     const BakeGrid& cg = bake.gridOf(c);
     if (c.data.size() != cg.voxelCount() * size_t(c.components)) {
       throw InputError(path + ": bake grid '" + name + "' does not match its lattice");

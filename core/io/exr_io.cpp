@@ -9,17 +9,21 @@
 #include <ImfStdIO.h>
 #include <ImfStringAttribute.h>
 #include <ImfTestFile.h>
+#include <openexr.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <exception>
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
+#include <string>
 
 #include "core/error.h"
 #include "core/io/file_sync.h"
@@ -28,8 +32,131 @@ namespace cloudbake {
 namespace {
 
 // Reading refuses images beyond this many pixels, so a corrupt header cannot make us allocate
-// gigabytes (16384^2 is the largest render; maps are far smaller).
-constexpr long long kMaxPixels = 1ll << 28;
+// gigabytes (2^26, 8192^2, is the largest view a server allows: --max-image-pixels).
+constexpr long long kMaxPixels = 1ll << 26;
+// Channel values read at most (512 MiB of floats): beyond any view this product writes (its
+// server's limit is 2^22 pixels a view) and far below what a corrupt header could ask for.
+constexpr long long kMaxValues = 1ll << 27;
+// Data windows past this many pixels a side are refused by OpenEXR itself, before it sizes its
+// line-offset tables from them.
+constexpr int kMaxSide = 1 << 15;
+
+// Bytes Imf::Header reads for a predefined attribute type of fixed layout; -1 for the types
+// whose declared size it uses (string, vectors, unknown types: allocated at that size).
+long long fixedExrAttributeSize(const std::string& type) {
+  static const std::map<std::string, long long> kSizes = {{"box2i", 16},
+                                                          {"box2f", 16},
+                                                          {"compression", 1},
+                                                          {"lineOrder", 1},
+                                                          {"float", 4},
+                                                          {"double", 8},
+                                                          {"int", 4},
+                                                          {"v2i", 8},
+                                                          {"v2f", 8},
+                                                          {"v2d", 16},
+                                                          {"v3i", 12},
+                                                          {"v3f", 12},
+                                                          {"v3d", 24},
+                                                          {"m33f", 36},
+                                                          {"m33d", 72},
+                                                          {"m44f", 64},
+                                                          {"m44d", 128},
+                                                          {"tiledesc", 9},
+                                                          {"envmap", 1},
+                                                          {"keycode", 28},
+                                                          {"timecode", 8},
+                                                          {"rational", 8},
+                                                          {"chromaticities", 32},
+                                                          {"deepImageState", 1}};
+  const auto it = kSizes.find(type);
+  return it == kSizes.end() ? -1 : it->second;
+}
+
+// OpenEXR allocates an attribute's declared size before reading it: a fuzzed header asked for
+// 1.7 GB. Walk every header (all parts of a multi-part file) and refuse a size the file cannot
+// hold, or a header that does not end before the file does.
+void checkExrHeaderSizes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  const long long file_size = static_cast<long long>(in.tellg());
+  unsigned char head[8] = {};
+  in.seekg(0);
+  if (!in.read(reinterpret_cast<char*>(head), 8)) throw InputError(path + ": truncated EXR");
+  const bool multipart = (head[5] & 0x10) != 0;              // version flags, bit 12
+  const size_t max_name = (head[5] & 0x04) != 0 ? 255 : 31;  // bit 10: long names
+  // As OpenEXR reads a name: up to max_name characters and a terminating NUL, stopping at the
+  // NUL; so a name without one ends where OpenEXR's does.
+  // Channel names may be 255 characters whatever the flag says (Imf::ChannelList's reader).
+  auto readName = [&](std::string* s, size_t max = 0) {
+    s->clear();
+    for (size_t n = 0; n <= (max ? max : max_name); ++n) {
+      const int c = in.get();
+      if (c == EOF) throw InputError(path + ": EXR header is truncated");
+      if (c == 0) return;
+      s->push_back(char(c));
+    }
+  };
+  for (int part = 0;; ++part) {
+    std::string name, type;
+    for (readName(&name); !name.empty(); readName(&name)) {
+      readName(&type);
+      unsigned char b[4];
+      if (!in.read(reinterpret_cast<char*>(b), 4)) throw InputError(path + ": truncated EXR");
+      long long size = static_cast<int32_t>(uint32_t(b[0]) | uint32_t(b[1]) << 8 |
+                                            uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24);
+      // Imf::Header reads a known type by its own layout, whatever the declared size says: go
+      // where it goes, so the next attribute is the one it reads next.
+      if (type == "chlist") {
+        std::string channel;
+        for (readName(&channel, 255); !channel.empty(); readName(&channel, 255)) {
+          in.seekg(16, in.cur);
+        }
+        continue;
+      }
+      const long long fixed = fixedExrAttributeSize(type);
+      if (fixed >= 0) size = fixed;
+      if (type == "preview") {  // width and height, then width x height RGBA bytes
+        unsigned char wh[8];
+        if (!in.read(reinterpret_cast<char*>(wh), 8)) throw InputError(path + ": truncated EXR");
+        const auto u32 = [&](int o) {
+          return uint32_t(wh[o]) | uint32_t(wh[o + 1]) << 8 | uint32_t(wh[o + 2]) << 16 |
+                 uint32_t(wh[o + 3]) << 24;
+        };
+        size = static_cast<long long>(u32(0)) * u32(4) * 4;
+      }
+      if (size < 0 || size > file_size - static_cast<long long>(in.tellg())) {
+        throw InputError(path + ": EXR attribute '" + name + "' claims " + std::to_string(size) +
+                         " bytes, more than the file holds");
+      }
+      in.seekg(size, std::ios::cur);
+    }
+    if (!multipart || in.peek() == 0 || part > 100000) return;
+  }
+}
+
+// Allocations of OpenEXR's C core while it parses a header: a header needs kilobytes, so a
+// request past this is a corrupt size, refused instead of granted.
+constexpr size_t kMaxHeaderAllocation = size_t(64) << 20;
+void* boundedAlloc(size_t n) { return n > kMaxHeaderAllocation ? nullptr : std::malloc(n); }
+void quietErrors(exr_const_context_t, exr_result_t, const char*) {}
+
+// The header as OpenEXR's C core reads it, with every allocation bounded and the image limits
+// set: it validates attribute sizes and the data window before Imf::InputFile (which has no
+// such bound) sees the file.
+void checkExrHeaderWithCore(const std::string& path) {
+  exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+  init.alloc_fn = boundedAlloc;
+  init.free_fn = std::free;
+  init.error_handler_fn = quietErrors;
+  init.max_image_width = init.max_image_height = kMaxSide;
+  init.max_tile_width = init.max_tile_height = kMaxSide;
+  exr_context_t ctx = nullptr;
+  const exr_result_t rv = exr_start_read(&ctx, path.c_str(), &init);
+  if (ctx) exr_finish(&ctx);
+  if (rv != EXR_ERR_SUCCESS) {
+    throw InputError(path + ": not a readable OpenEXR file (" + exr_get_default_error_message(rv) +
+                     ")");
+  }
+}
 
 std::vector<std::string> channelNamesFor(int channels) {
   switch (channels) {
@@ -58,6 +185,25 @@ std::string uniqueTempPath(const std::string& path) {
   std::ostringstream os;
   os << path << ".tmp." << ::getpid() << "." << counter++;
   return os.str();
+}
+
+// Before Imf::InputFile sizes anything from an untrusted header (the fuzzing section of
+// docs/api.md).
+void checkExrHeader(const std::string& path) {
+  // isOpenExrFile only checks the magic number; it gives a clearer message than the library's
+  // for the common "not an EXR at all / does not exist" cases.
+  if (FILE* f = std::fopen(path.c_str(), "rb")) {
+    std::fclose(f);
+  } else if (errno == ENOENT) {
+    throw MissingFileError(path + ": file not found");  // exit code 3, as for shots' files
+  } else {
+    throw InputError(path + ": cannot open EXR file (" + std::strerror(errno) + ")");
+  }
+  if (!Imf::isOpenExrFile(path.c_str())) throw InputError(path + ": not an OpenEXR file");
+  checkExrHeaderSizes(path);
+  checkExrHeaderWithCore(path);
+  Imf::Header::setMaxImageSize(kMaxSide, kMaxSide);
+  Imf::Header::setMaxTileSize(kMaxSide, kMaxSide);
 }
 
 }  // namespace
@@ -145,16 +291,7 @@ void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
 }
 
 ExrContents readExr(const std::string& path) {
-  // isOpenExrFile only checks the magic number; it gives a clearer message than the library's
-  // for the common "not an EXR at all / does not exist" cases.
-  if (FILE* f = std::fopen(path.c_str(), "rb")) {
-    std::fclose(f);
-  } else if (errno == ENOENT) {
-    throw MissingFileError(path + ": file not found");  // exit code 3, as for shots' files
-  } else {
-    throw InputError(path + ": cannot open EXR file (" + std::strerror(errno) + ")");
-  }
-  if (!Imf::isOpenExrFile(path.c_str())) throw InputError(path + ": not an OpenEXR file");
+  checkExrHeader(path);
 
   ExrContents out;
   try {
@@ -164,7 +301,7 @@ ExrContents readExr(const std::string& path) {
     const long long w = static_cast<long long>(dw.max.x) - dw.min.x + 1;
     const long long h = static_cast<long long>(dw.max.y) - dw.min.y + 1;
     if (w <= 0 || h <= 0 || w * h > kMaxPixels) {
-      throw InputError(path + ": EXR data window is empty or larger than 2^28 pixels");
+      throw InputError(path + ": EXR data window is empty or larger than 2^26 pixels");
     }
     out.width = static_cast<int>(w);
     out.height = static_cast<int>(h);
@@ -189,7 +326,7 @@ ExrContents readExr(const std::string& path) {
     }
     long long total_channels = 0;
     for (const auto& entry : bases) total_channels += static_cast<long long>(entry.second.size());
-    if (total_channels * w * h > 4 * kMaxPixels) {
+    if (total_channels * w * h > kMaxValues) {
       throw InputError(path + ": EXR has too many channels x pixels to read");
     }
 

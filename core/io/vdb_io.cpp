@@ -17,6 +17,7 @@
 #include "core/volume/grid_volume.h"
 #include "core/volume/openvdb_grid.h"
 #include "core/volume/sources.h"
+#include "core/volume/vdb_header_check.h"
 
 namespace cloudbake {
 namespace {
@@ -214,6 +215,7 @@ void writeVdbFileAtomically(const std::string& path, const openvdb::GridPtrVec& 
 VdbFileContents readVdbFileChecked(const std::string& path) {
   initOpenVdb();
   if (!std::filesystem::is_regular_file(path)) throw InputError(path + ": VDB file not found");
+  checkVdbHeader(path);
   VdbFileContents out;
   try {
     // Like loadVdbVolume: a stream that throws on short reads catches truncated files.

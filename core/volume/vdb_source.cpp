@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/volume/openvdb_grid.h"
 #include "core/volume/sources.h"
+#include "core/volume/vdb_header_check.h"
 
 namespace cloudbake {
 namespace {
@@ -56,6 +57,7 @@ DensityFieldPtr loadVdbVolume(const VdbSourceOptions& options) {
   if (!std::filesystem::is_regular_file(path, ec)) {
     throw InputError(path + ": VDB file not found (or not a regular file)");
   }
+  checkVdbHeader(path);  // before OpenVDB sizes its allocations from the file's lengths
   openvdb::GridBase::Ptr base;
   std::vector<std::string> names;
   try {

@@ -4,12 +4,16 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
+#include <functional>
+#include <vector>
 
 #include "core/error.h"
 #include "core/math/rng.h"
 #include "core/volume/analytic.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/sources.h"
+#include "core/volume/vdb_header_check.h"
 #include "tests/tiny_volume.h"
 
 namespace cloudbake {
@@ -152,6 +156,40 @@ TEST_F(VdbIoTest, FullDiskThrowsStorageFullAndLeavesNoFile) {
   cloud.resolution = 16;
   writeVdb(path, *makePerlinCloud(cloud), {});
   EXPECT_EQ(VdbFileReader(path).grids().size(), 1u);
+}
+
+// A corrupt length in the header (here the first metadata name's, set to 4 GB - 8) is refused
+// by the pre-check naming the path, before OpenVDB would allocate what it declares.
+TEST_F(VdbIoTest, CorruptHeaderLengthIsRefusedBeforeOpenVdbAllocates) {
+  PerlinCloudOptions cloud;
+  cloud.resolution = 16;
+  const std::string path = dir_ + "/header.vdb";
+  VdbWriteOptions o;
+  o.file_metadata["creator"] = "cloudbake test";
+  writeVdb(path, *makePerlinCloud(cloud), o);
+  EXPECT_NO_THROW(checkVdbHeader(path));
+  {
+    // magic 8, version 4, library version 8, offsets flag 1, UUID 36; then the metadata count
+    // (4) and the first name's length.
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(8 + 4 + 8 + 1 + 36 + 4);
+    const unsigned char huge[4] = {0xf8, 0xff, 0xff, 0xff};
+    f.write(reinterpret_cast<const char*>(huge), 4);
+  }
+  for (auto read : std::vector<std::function<void()>>{[&] { checkVdbHeader(path); },
+                                                      [&] { VdbFileReader{path}; },
+                                                      [&] {
+                                                        loadVdbVolume({path, "density"});
+                                                      }}) {
+    try {
+      read();
+      ADD_FAILURE() << "a corrupt header was read";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("more than the file holds"), std::string::npos)
+          << e.what();
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace

@@ -1,0 +1,89 @@
+#include "core/volume/vdb_header_check.h"
+
+#include <cstdint>
+#include <fstream>
+
+#include "core/error.h"
+
+namespace cloudbake {
+namespace {
+
+// A little-endian reader that knows how many bytes remain and refuses to go past them.
+class Bytes {
+ public:
+  explicit Bytes(const std::string& path) : path_(path), in_(path, std::ios::binary) {
+    in_.seekg(0, std::ios::end);
+    size_ = left_ = in_ ? static_cast<long long>(in_.tellg()) : -1;
+    in_.seekg(0);
+    if (left_ < 0) throw InputError(path + ": cannot read the VDB file");
+  }
+  long long position() const { return size_ - left_; }
+  long long size() const { return size_; }
+  void seek(long long to) {
+    in_.seekg(to);
+    left_ = size_ - to;
+  }
+  uint64_t integer(int bytes, const char* what) {
+    need(bytes, what);
+    unsigned char b[8] = {};
+    in_.read(reinterpret_cast<char*>(b), bytes);
+    uint64_t v = 0;
+    for (int i = bytes - 1; i >= 0; --i) v = v << 8 | b[i];
+    return v;
+  }
+  void skip(long long n, const char* what) {
+    need(n, what);
+    in_.seekg(n, std::ios::cur);
+  }
+  /// A length-prefixed string (uint32 length, then the characters), skipped.
+  void string(const char* what) { skip(static_cast<long long>(integer(4, what)), what); }
+
+ private:
+  void need(long long n, const char* what) {
+    if (n < 0 || n > left_) {
+      throw InputError(path_ + ": not a readable OpenVDB file (" + what + " declares " +
+                       std::to_string(n) + " bytes, more than the file holds)");
+    }
+    left_ -= n;
+  }
+  std::string path_;
+  std::ifstream in_;
+  long long size_ = 0, left_ = 0;
+};
+
+}  // namespace
+
+void checkVdbHeader(const std::string& path) {
+  Bytes b(path);
+  if (b.integer(8, "the magic number") != 0x56444220) {
+    throw InputError(path + ": not an OpenVDB file (wrong magic number)");
+  }
+  const uint64_t version = b.integer(4, "the file version");
+  if (version < 211) return;  // older layouts are left to OpenVDB
+  b.skip(8, "the library version");
+  if (version >= 212) b.skip(1, "the grid-offsets flag");
+  if (version >= 220 && version < 222) b.skip(1, "the compression flag");
+  b.skip(version >= 218 ? 36 : 16, "the UUID");
+  const uint64_t entries = b.integer(4, "the metadata count");
+  for (uint64_t i = 0; i < entries; ++i) {
+    b.string("a metadata name");
+    b.string("a metadata type");
+    b.skip(static_cast<long long>(b.integer(4, "a metadata value")), "a metadata value");
+  }
+  // Each grid's descriptor: name, type, instance parent (file version 216 on), then the
+  // offsets of its data and of its end, where the next descriptor starts (files written with
+  // offsets, as ours and io::File's are). A file without usable offsets is checked up to its
+  // first grid.
+  const uint64_t grids = b.integer(4, "the grid count");
+  for (uint64_t g = 0; g < grids; ++g) {
+    b.string("a grid name");
+    b.string("a grid type");
+    if (version >= 216) b.string("a grid's instance parent name");
+    b.skip(16, "a grid's offsets");
+    const auto end = static_cast<long long>(b.integer(8, "a grid's end offset"));
+    if (end <= b.position() || end > b.size()) return;
+    b.seek(end);
+  }
+}
+
+}  // namespace cloudbake
