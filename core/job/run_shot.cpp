@@ -201,6 +201,7 @@ const Scene& ShotRun::scene() {
   Scene& s = const_cast<Scene&>(lights());
   if (density_built_) return s;
   if (density_) {
+    checkTrackableOpticalDepth(shot_, *density_, opt_.source);
     s.medium.density = density_;
     density_built_ = true;
     return s;
@@ -217,6 +218,8 @@ const Scene& ShotRun::scene() {
   s.medium.density = opt_.volumes
                          ? opt_.volumes->getOrBuild(keys_.volume, build, &result_.volume_cached)
                          : build();
+  // Per shot, not in build: a cached field may come from a shot of another extinction.
+  checkTrackableOpticalDepth(shot_, *s.medium.density, opt_.source);
   density_built_ = true;
   result_.steps.push_back(
       {"volume", "", -1, secondsSince(t0), {{"cached", result_.volume_cached ? 1.0 : 0.0}}});

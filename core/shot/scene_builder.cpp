@@ -4,6 +4,7 @@
 #include <type_traits>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/phase/phase_factory.h"
 #include "core/shot/shot_parser.h"
 #include "core/volume/analytic.h"
@@ -75,9 +76,25 @@ DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame
                   [&] { return loadVdbVolume(options); });
 }
 
+void checkTrackableOpticalDepth(const ShotSpec& shot, const DensityField& density,
+                                const std::string& source) {
+  const Bounds3 b = density.bounds();
+  const double size = length(b.max - b.min);
+  const double tau = shot.medium.extinction * density.maxDensity() * size;
+  if (!(tau <= kMaxTrackableOpticalDepth)) {
+    throw InputError(source + ": /medium/extinction: extinction " + str(shot.medium.extinction) +
+                     " x the volume's largest density " + str(density.maxDensity()) +
+                     " x its diagonal " + str(size) + " is " + str(tau) +
+                     " optical depths, beyond the " + str(kMaxTrackableOpticalDepth) +
+                     " that tracking resolves in double precision; lower the extinction or the "
+                     "volume's density");
+  }
+}
+
 Scene buildScene(const ShotSpec& shot, const std::string& source, const PhaseBuilder& phase) {
   Scene scene;
   scene.medium.density = buildVolume(shot.volume, source);
+  checkTrackableOpticalDepth(shot, *scene.medium.density, source);
   scene.medium.extinction = shot.medium.extinction;
   scene.medium.albedo = shot.medium.albedo;
   scene.medium.phase = labelled(source, "/medium/phase", [&] {

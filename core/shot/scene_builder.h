@@ -26,6 +26,17 @@ DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame
 /// Builds a phase function from its description (e.g. through a server's cache).
 using PhaseBuilder = std::function<std::shared_ptr<const PhaseFunction>(const PhaseSpec&)>;
 
+/// Optical depth across a volume (extinction x largest density x bounding-box diagonal) beyond
+/// which trackers stall: an exponential step from a distance t is then below the precision of t
+/// (about 4.5e15 optical depths across; a 16^3 VDB of density 1e38 hung a job). 1e12 is the
+/// densest shot the parser's bounds allow (density and extinction 1e6 over a unit), and it tracks.
+constexpr double kMaxTrackableOpticalDepth = 1e14;
+
+/// InputError naming /medium/extinction when the shot's volume is beyond
+/// kMaxTrackableOpticalDepth; buildScene calls it for every method.
+void checkTrackableOpticalDepth(const ShotSpec& shot, const DensityField& density,
+                                const std::string& source);
+
 /// Medium (density, extinction, albedo, phase function), sun, sky and cameras of a shot.
 /// Throws InputError (with `source` and the JSON pointer) when a part cannot be built. The phase
 /// function comes from `phase` when given, else makePhaseFunction.

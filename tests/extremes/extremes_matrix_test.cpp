@@ -461,6 +461,50 @@ TEST(ExtremesMatrix, OutOfRangeValuesAreClearErrorsNamingTheField) {
   }
 }
 
+// The outside test's hung job (issue 15, defect 3): a 16^3 VDB of density 1e38, albedo 1 and,
+// for the path tracer, max_depth 1e6. The path tracer stalled in it for good (a step below the
+// precision of its distance) without seeing the cancel; every method now refuses it at once,
+// naming /medium/extinction (kMaxTrackableOpticalDepth), and a cancel 1 s in would end it
+// otherwise.
+TEST(ExtremesMatrix, DensityOf1e38EndsOrStopsPromptlyOnCancel) {
+  const std::string path =
+      (fs::temp_directory_path() / ("cloudbake-dense-" + uniqueSuffix() + ".vdb")).string();
+  VdbWriteOptions o;
+  o.voxel_size = 0.125;
+  writeVdb(path, BoxDensity(Vec3(-1), Vec3(1), 1e38), o);
+  for (const std::string& method : methodNames(/*runnable_only=*/true)) {
+    json shot = baseShot();
+    shot["bake"] = cheapBake(method);
+    if (method == "pathtrace") shot["bake"]["max_depth"] = 1000000;
+    shot["volume"] = {{"vdb", {{"path", path}}}};
+    shot["medium"]["albedo"] = 1;
+    const fs::path dir = fs::temp_directory_path() / ("cloudbake-dense-" + uniqueSuffix());
+    RunOptions opt;
+    opt.out_dir = dir.string();
+    opt.threads = 2;
+    const auto t0 = std::chrono::steady_clock::now();
+    auto since = [&] {
+      return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    opt.progress = [&](const RunProgress&) { return since() < 1.0; };
+    std::string how = "finished";
+    try {
+      runShot(parseShot(shot.dump(), ""), opt);
+    } catch (const Cancelled&) {
+      how = "cancelled";
+    } catch (const InputError& e) {
+      how = e.what();
+    }
+    EXPECT_NE(how.find("/medium/extinction: extinction 3 x the volume's largest density 1e+38"),
+              std::string::npos)
+        << method << ": " << how;
+    EXPECT_LT(since(), 2.5) << method << " " << how;
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+  fs::remove(path);
+}
+
 // The benchmark of the matrix: every variant at each method's default knobs (pathtrace 16
 // spp), 32x32, printing the run's seconds and each layer's ratios to its bound (1 = at the
 // bound; ratiosTo).
