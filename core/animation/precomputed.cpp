@@ -495,25 +495,22 @@ void checkPrecomputeInput(const BasicVolumeDatabase& volumes, double extinction,
 }
 
 // What every basic volume shares: the receiver lattice and its mask, and the sample points,
-// both covering the union of the volumes' densities. Returns each volume's density box-filtered
-// onto the receivers, which its cuts march through.
-std::vector<std::vector<float>> placeReceiversAndSamples(const BasicVolumeDatabase& volumes,
-                                                         const PrecomputeOptions& options,
-                                                         PrecomputedDatabase& db) {
+// both covering the union of the volumes' densities.
+void placeReceiversAndSamples(const BasicVolumeDatabase& volumes, const PrecomputeOptions& options,
+                              PrecomputedDatabase& db) {
   const BakeGrid& g = volumes.grid;
   const size_t n = g.voxelCount();
   db.receivers = receiverLattice(g, options.transfer_resolution);
   const BakeGrid& rg = db.receivers;
   // 1 where any basic volume has density, on the lattice and on the receivers.
   std::vector<float> any(n, 0.f), near(rg.voxelCount(), 0.f);
-  std::vector<std::vector<float>> receiver_density(volumes.frames.size());
   for (size_t f = 0; f < volumes.frames.size(); ++f) {
     for (size_t v = 0; v < n; ++v) {
       if (volumes.frames[f][v] > 0) any[v] = 1.f;
     }
-    receiver_density[f] = boxFilter(g, volumes.frames[f], rg);
+    const std::vector<float> receiver_density = boxFilter(g, volumes.frames[f], rg);
     for (size_t v = 0; v < near.size(); ++v) {
-      if (receiver_density[f][v] > 0) near[v] = 1.f;
+      if (receiver_density[v] > 0) near[v] = 1.f;
     }
   }
   // Receivers next to density too: trilinear reads at the cloud's edge weight them. Samples
@@ -522,7 +519,6 @@ std::vector<std::vector<float>> placeReceiversAndSamples(const BasicVolumeDataba
   db.receiver_mask = densitySupport(rg, near);
   const std::vector<uint8_t> spread = densitySupport(g, any);
   db.tree = buildSampleTree(g, spread, options.sample_points, options.seed);
-  return receiver_density;
 }
 
 // The SHEXP tables, fitted on up to 2000 voxels of one basic volume's cloud (the database
@@ -551,20 +547,54 @@ size_t BasicVolumePrecompute::bytes() const {
          cuts.nodes.size() * 4 + cuts.values.size() * 4;
 }
 
-PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double extinction,
-                                           const PrecomputeOptions& options,
-                                           const std::function<bool(double)>& progress) {
+PrecomputedDatabase layoutBasicVolumes(BasicVolumeDatabase volumes, double extinction,
+                                       const PrecomputeOptions& options) {
   checkPrecomputeInput(volumes, extinction, options);
   PrecomputedDatabase db;
   db.extinction = extinction;
-  const std::vector<std::vector<float>> receiver_density =
-      placeReceiversAndSamples(volumes, options, db);
-  const BakeGrid& g = volumes.grid;
-  const BakeGrid& rg = db.receivers;
+  placeReceiversAndSamples(volumes, options, db);
+  db.volumes = std::move(volumes);
+  return db;
+}
 
+BasicVolumePrecompute precomputeBasicVolume(const PrecomputedDatabase& db, size_t f,
+                                            const PrecomputeOptions& options,
+                                            const std::function<bool(double)>& progress) {
+  if (f >= db.volumes.frames.size()) {
+    throw InputError("basic volume " + std::to_string(f) + ": the database has " +
+                     std::to_string(db.volumes.frames.size()));
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const BakeGrid& g = db.volumes.grid;
+  const std::vector<float>& density = db.volumes.frames[f];
+  auto report = [&](double x) { return !progress || progress(x); };
+  BasicVolumePrecompute b;
+  b.optical_depth_sh = projectOpticalDepth(g, density, db.extinction, options.sh_directions,
+                                           [&](double x) { return report(0.3 * x); });
+  // The same box filter the layout's mask came from, so a volume precomputed alone (a farm
+  // task) equals one precomputed with the whole database.
+  b.cuts = computeTransferCuts(db.tree, db.receivers, boxFilter(g, density, db.receivers),
+                               db.extinction, db.receiver_mask, options.cuts,
+                               [&](double x) { return report(0.3 + 0.7 * x); });
+  b.seconds = secondsSince(t0);
+  return b;
+}
+
+void finishDatabase(PrecomputedDatabase& db) {
+  if (db.basic.size() != db.volumes.frames.size() || db.basic.empty() ||
+      db.basic[0].optical_depth_sh.size() != db.volumes.frames[0].size()) {
+    throw InternalError("finishDatabase: every basic volume must be precomputed first");
+  }
+  db.shexp = fitShExp(db.volumes.frames[0], db.basic[0].optical_depth_sh);
+}
+
+PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double extinction,
+                                           const PrecomputeOptions& options,
+                                           const std::function<bool(double)>& progress) {
+  PrecomputedDatabase db = layoutBasicVolumes(std::move(volumes), extinction, options);
   // Basic volumes in parallel (each also parallel inside: TBB shares the threads). Progress
   // is the mean of the volumes' fractions, reported under a lock since any task may report.
-  const size_t nvol = volumes.frames.size();
+  const size_t nvol = db.volumes.frames.size();
   db.basic.resize(nvol);
   std::vector<double> fraction(nvol, 0.0);
   std::mutex progress_mutex;
@@ -577,17 +607,9 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
     return progress(sum / double(nvol));
   };
   parallelFor(0, int64_t(nvol), [&](size_t f) {
-    const auto t0 = std::chrono::steady_clock::now();
-    BasicVolumePrecompute& b = db.basic[f];
-    b.optical_depth_sh =
-        projectOpticalDepth(g, volumes.frames[f], extinction, options.sh_directions,
-                            [&](double x) { return report(f, 0.3 * x); });
-    b.cuts = computeTransferCuts(db.tree, rg, receiver_density[f], extinction, db.receiver_mask,
-                                 options.cuts, [&](double x) { return report(f, 0.3 + 0.7 * x); });
-    b.seconds = secondsSince(t0);
+    db.basic[f] = precomputeBasicVolume(db, f, options, [&](double x) { return report(f, x); });
   });
-  db.shexp = fitShExp(volumes.frames[0], db.basic[0].optical_depth_sh);
-  db.volumes = std::move(volumes);
+  finishDatabase(db);
   return db;
 }
 

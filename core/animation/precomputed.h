@@ -55,6 +55,19 @@ PrecomputedDatabase precomputeBasicVolumes(BasicVolumeDatabase volumes, double e
                                            const PrecomputeOptions& options,
                                            const std::function<bool(double)>& progress = {});
 
+/// The steps of precomputeBasicVolumes, for a farm that precomputes groups of basic volumes as
+/// separate tasks (core/job/task_plan.h); run in order they give the same database bit for bit.
+/// layoutBasicVolumes: what every basic volume shares (lattices, receiver mask, sample tree),
+/// `basic` left empty; InputError as precomputeBasicVolumes.
+PrecomputedDatabase layoutBasicVolumes(BasicVolumeDatabase volumes, double extinction,
+                                       const PrecomputeOptions& options);
+/// Basic volume `f` of a laid-out database; `progress(fraction)` returning false cancels.
+BasicVolumePrecompute precomputeBasicVolume(const PrecomputedDatabase& db, size_t f,
+                                            const PrecomputeOptions& options,
+                                            const std::function<bool(double)>& progress = {});
+/// Fits the SHEXP tables once db.basic holds every basic volume (InternalError otherwise).
+void finishDatabase(PrecomputedDatabase& db);
+
 /// Knobs of a frame's lighting.
 struct FrameLightOptions {
   int max_orders = 64;      ///< multiple-scattering orders after the first, [1, 1000]

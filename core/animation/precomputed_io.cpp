@@ -1,5 +1,6 @@
 #include "core/animation/precomputed_io.h"
 
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +15,8 @@ namespace fs = std::filesystem;
 static_assert(kPrecomputedFileVersion == 2, "update the magic numbers with the version");
 constexpr char kSharedMagic[8] = {'C', 'B', 'P', 'C', 'S', 'H', '0', '2'};
 constexpr char kBasicMagic[8] = {'C', 'B', 'P', 'C', 'B', 'V', '0', '2'};
+constexpr char kLayoutMagic[8] = {'C', 'B', 'P', 'C', 'L', 'Y', '0', '2'};
+constexpr char kDensityMagic[8] = {'C', 'B', 'P', 'C', 'D', 'N', '0', '2'};
 // Far above any lattice the limits allow, so a corrupt size fails here, not in an allocation.
 constexpr uint64_t kMaxCount = uint64_t(1) << 34;
 
@@ -110,6 +113,92 @@ std::string basicName(size_t i) {
   return buf;
 }
 
+// What the layout and the whole database share: the lattices, extinction, the count, the
+// receiver mask and the sample tree.
+void putLayout(Writer& w, const PrecomputedDatabase& db, uint64_t count) {
+  putGrid(w, db.volumes.grid);
+  putGrid(w, db.receivers);
+  w.put(db.extinction);
+  w.put(count);
+  w.array(db.receiver_mask);
+  w.array(db.tree.points);
+  w.array(db.tree.nodes);
+  w.put(db.tree.volume);
+  w.put(db.tree.cell_radius);
+}
+
+uint64_t getLayout(Reader& r, PrecomputedDatabase& db) {
+  db.volumes.grid = getGrid(r);
+  db.receivers = getGrid(r);
+  db.extinction = r.get<double>();
+  const uint64_t count = r.get<uint64_t>();
+  if (count < 1 || count > 100000) throw InputError(r.path() + ": basic volume count invalid");
+  db.receiver_mask = r.array<uint8_t>(db.receivers.voxelCount());
+  db.tree.points = r.array<Vec3>();
+  const uint64_t k = db.tree.points.size();
+  if (k < 1) throw InputError(r.path() + ": no sample points");
+  db.tree.nodes = r.array<SampleTreeNode>(2 * k - 1);
+  for (const SampleTreeNode& n : db.tree.nodes) {
+    const bool leaf = n.left < 0;
+    if (n.begin < 0 || n.end > int64_t(k) || n.begin >= n.end ||
+        (!leaf && (n.left >= int64_t(2 * k - 1) || n.right < 0 || n.right >= int64_t(2 * k - 1)))) {
+      throw InputError(r.path() + ": sample tree is not valid");
+    }
+  }
+  db.tree.volume = r.get<double>();
+  db.tree.cell_radius = r.get<double>();
+  return count;
+}
+
+void putBasic(const std::string& dir, const PrecomputedDatabase& db, size_t i) {
+  const BasicVolumePrecompute& b = db.basic[i];
+  Writer w((fs::path(dir) / basicName(i)).string());
+  w.put(kBasicMagic);
+  w.array(db.volumes.frames[i]);
+  w.array(b.optical_depth_sh);
+  w.array(b.cuts.offsets);
+  w.array(b.cuts.nodes);
+  w.array(b.cuts.values);
+  w.put(b.seconds);
+  w.close();
+}
+
+void getBasic(const std::string& dir, PrecomputedDatabase& db, size_t i) {
+  const size_t n = db.volumes.grid.voxelCount(), nr = db.receivers.voxelCount();
+  BasicVolumePrecompute& b = db.basic[i];
+  Reader r((fs::path(dir) / basicName(i)).string());
+  r.magic(kBasicMagic);
+  db.volumes.frames[i] = r.array<float>(n);
+  b.optical_depth_sh = r.array<ShCoefficients>(n);
+  b.cuts.offsets = r.array<uint64_t>(nr + 1);
+  b.cuts.nodes = r.array<uint32_t>(b.cuts.offsets.back());
+  b.cuts.values = r.array<float>(b.cuts.offsets.back());
+  for (size_t v = 0; v < nr; ++v) {
+    if (b.cuts.offsets[0] != 0 || b.cuts.offsets[v] > b.cuts.offsets[v + 1]) {
+      throw InputError(r.path() + ": cut offsets are not ordered");
+    }
+  }
+  for (uint32_t node : b.cuts.nodes) {
+    if (node >= db.tree.nodes.size()) throw InputError(r.path() + ": cut node out of range");
+  }
+  b.seconds = r.get<double>();
+  r.end();
+}
+
+std::string densityName(size_t i) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "density_%04zu.bin", i);
+  return buf;
+}
+
+void checkRange(const PrecomputedDatabase& db, size_t begin, size_t end, const char* what) {
+  if (begin >= end || end > db.volumes.frames.size()) {
+    throw InternalError(std::string(what) + ": basic volumes [" + std::to_string(begin) + ", " +
+                        std::to_string(end) + ") outside the database's " +
+                        std::to_string(db.volumes.frames.size()));
+  }
+}
+
 }  // namespace
 
 void writePrecomputedDatabase(const std::string& dir, const PrecomputedDatabase& db) {
@@ -117,32 +206,13 @@ void writePrecomputedDatabase(const std::string& dir, const PrecomputedDatabase&
   {
     Writer w((fs::path(dir) / "shared.bin").string());
     w.put(kSharedMagic);
-    putGrid(w, db.volumes.grid);
-    putGrid(w, db.receivers);
-    w.put(db.extinction);
-    w.put(uint64_t(db.basic.size()));
-    w.array(db.receiver_mask);
-    w.array(db.tree.points);
-    w.array(db.tree.nodes);
-    w.put(db.tree.volume);
-    w.put(db.tree.cell_radius);
+    putLayout(w, db, db.basic.size());
     w.array(db.shexp.a());
     w.array(db.shexp.b());
     w.put(db.shexp.range());
     w.close();
   }
-  for (size_t i = 0; i < db.basic.size(); ++i) {
-    const BasicVolumePrecompute& b = db.basic[i];
-    Writer w((fs::path(dir) / basicName(i)).string());
-    w.put(kBasicMagic);
-    w.array(db.volumes.frames[i]);
-    w.array(b.optical_depth_sh);
-    w.array(b.cuts.offsets);
-    w.array(b.cuts.nodes);
-    w.array(b.cuts.values);
-    w.put(b.seconds);
-    w.close();
-  }
+  for (size_t i = 0; i < db.basic.size(); ++i) putBasic(dir, db, i);
 }
 
 PrecomputedDatabase readPrecomputedDatabase(const std::string& dir) {
@@ -151,53 +221,65 @@ PrecomputedDatabase readPrecomputedDatabase(const std::string& dir) {
   {
     Reader r((fs::path(dir) / "shared.bin").string());
     r.magic(kSharedMagic);
-    db.volumes.grid = getGrid(r);
-    db.receivers = getGrid(r);
-    db.extinction = r.get<double>();
-    count = r.get<uint64_t>();
-    if (count < 1 || count > 100000) throw InputError(r.path() + ": basic volume count invalid");
-    db.receiver_mask = r.array<uint8_t>(db.receivers.voxelCount());
-    db.tree.points = r.array<Vec3>();
-    const uint64_t k = db.tree.points.size();
-    if (k < 1) throw InputError(r.path() + ": no sample points");
-    db.tree.nodes = r.array<SampleTreeNode>(2 * k - 1);
-    for (const SampleTreeNode& n : db.tree.nodes) {
-      const bool leaf = n.left < 0;
-      if (n.begin < 0 || n.end > int64_t(k) || n.begin >= n.end ||
-          (!leaf &&
-           (n.left >= int64_t(2 * k - 1) || n.right < 0 || n.right >= int64_t(2 * k - 1)))) {
-        throw InputError(r.path() + ": sample tree is not valid");
-      }
-    }
-    db.tree.volume = r.get<double>();
-    db.tree.cell_radius = r.get<double>();
+    count = getLayout(r, db);
     std::vector<double> a = r.array<double>(), b = r.array<double>();
     db.shexp = ShExp::fromTables(std::move(a), std::move(b), r.get<double>());
     r.end();
   }
-  const size_t n = db.volumes.grid.voxelCount(), nr = db.receivers.voxelCount();
   db.basic.resize(count);
-  for (size_t i = 0; i < count; ++i) {
-    BasicVolumePrecompute& b = db.basic[i];
-    Reader r((fs::path(dir) / basicName(i)).string());
-    r.magic(kBasicMagic);
-    db.volumes.frames.push_back(r.array<float>(n));
-    b.optical_depth_sh = r.array<ShCoefficients>(n);
-    b.cuts.offsets = r.array<uint64_t>(nr + 1);
-    b.cuts.nodes = r.array<uint32_t>(b.cuts.offsets.back());
-    b.cuts.values = r.array<float>(b.cuts.offsets.back());
-    for (size_t v = 0; v < nr; ++v) {
-      if (b.cuts.offsets[0] != 0 || b.cuts.offsets[v] > b.cuts.offsets[v + 1]) {
-        throw InputError(r.path() + ": cut offsets are not ordered");
-      }
-    }
-    for (uint32_t node : b.cuts.nodes) {
-      if (node >= db.tree.nodes.size()) throw InputError(r.path() + ": cut node out of range");
-    }
-    b.seconds = r.get<double>();
-    r.end();
-  }
+  db.volumes.frames.resize(count);
+  for (size_t i = 0; i < count; ++i) getBasic(dir, db, i);
   return db;
+}
+
+void writePrecomputedLayout(const std::string& dir, const PrecomputedDatabase& db) {
+  fs::create_directories(dir);
+  {
+    Writer w((fs::path(dir) / "layout.bin").string());
+    w.put(kLayoutMagic);
+    putLayout(w, db, db.volumes.frames.size());
+    w.close();
+  }
+  for (size_t i = 0; i < db.volumes.frames.size(); ++i) {
+    Writer w((fs::path(dir) / densityName(i)).string());
+    w.put(kDensityMagic);
+    w.array(db.volumes.frames[i]);
+    w.close();
+  }
+}
+
+PrecomputedDatabase readPrecomputedLayout(const std::string& dir) {
+  PrecomputedDatabase db;
+  Reader r((fs::path(dir) / "layout.bin").string());
+  r.magic(kLayoutMagic);
+  const uint64_t count = getLayout(r, db);
+  r.end();
+  db.volumes.frames.resize(count);
+  return db;
+}
+
+void readLayoutDensities(const std::string& dir, PrecomputedDatabase& db, size_t begin,
+                         size_t end) {
+  checkRange(db, begin, end, "readLayoutDensities");
+  for (size_t i = begin; i < end; ++i) {
+    Reader d((fs::path(dir) / densityName(i)).string());
+    d.magic(kDensityMagic);
+    db.volumes.frames[i] = d.array<float>(db.volumes.grid.voxelCount());
+    d.end();
+  }
+}
+
+void writeBasicVolumes(const std::string& dir, const PrecomputedDatabase& db, size_t begin,
+                       size_t end) {
+  checkRange(db, begin, end, "writeBasicVolumes");
+  fs::create_directories(dir);
+  for (size_t i = begin; i < end; ++i) putBasic(dir, db, i);
+}
+
+void readBasicVolumes(const std::string& dir, PrecomputedDatabase& db, size_t begin, size_t end) {
+  checkRange(db, begin, end, "readBasicVolumes");
+  db.basic.resize(db.volumes.frames.size());
+  for (size_t i = begin; i < end; ++i) getBasic(dir, db, i);
 }
 
 }  // namespace cloudbake

@@ -1,12 +1,16 @@
 #include "core/job/bake_cache.h"
 
+#include <signal.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <exception>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <thread>
 #include <vector>
 
 #include "common/json_limits.h"
@@ -20,7 +24,37 @@ using Json = nlohmann::json;
 
 namespace {
 constexpr const char* kManifest = "MANIFEST.json";
+
+std::string thisHost() {
+  const std::string holder = leaseHolderName();
+  return holder.substr(0, holder.rfind(':'));
 }
+
+// Staging folders are named <host>@<pid>-<time>-<n> (uniqueSuffix). Debris: this host's whose
+// process is gone, anyone's older than `stale`, and unnamed ones (a version before sharing).
+bool stagingIsDebris(const fs::directory_entry& dir, std::chrono::hours stale) {
+  const std::string name = dir.path().filename().string();
+  const size_t at = name.rfind('@');
+  if (at == std::string::npos) return true;
+  if (name.substr(0, at) == thisHost()) {
+    const long pid = std::strtol(name.c_str() + at + 1, nullptr, 10);
+    if (pid == long(getpid())) return false;
+    return pid <= 0 || (::kill(pid_t(pid), 0) != 0 && errno == ESRCH);
+  }
+  std::error_code ec;
+  const auto t = fs::last_write_time(dir.path(), ec);
+  return !ec && fs::file_time_type::clock::now() - t > stale;
+}
+
+uint64_t entryBytes(const fs::path& dir) {
+  uint64_t bytes = 0;
+  std::error_code ec;
+  for (const auto& f : fs::directory_iterator(dir, ec)) {
+    if (f.path().filename() != kManifest && f.is_regular_file(ec)) bytes += f.file_size(ec);
+  }
+  return bytes;
+}
+}  // namespace
 
 struct BakeCache::InFlight {
   bool done = false;
@@ -29,29 +63,28 @@ struct BakeCache::InFlight {
 };
 
 BakeCache::BakeCache(std::string root, uint64_t max_bytes)
-    : root_(std::move(root)), max_bytes_(max_bytes) {
-  fs::create_directories(fs::path(root_) / "entries");
-  fs::remove_all(fs::path(root_) / "staging");
-  fs::create_directories(fs::path(root_) / "staging");
+    : BakeCache(std::move(root), [max_bytes] {
+        BakeCacheOptions o;
+        o.max_bytes = max_bytes;
+        return o;
+      }()) {}
+
+BakeCache::BakeCache(std::string root, const BakeCacheOptions& options)
+    : root_(std::move(root)), options_(options), max_bytes_(options.max_bytes) {
+  for (const char* sub : {"entries", "staging", "leases", "trash"}) {
+    fs::create_directories(fs::path(root_) / sub);
+  }
+  removeDebris();
   // Order existing entries by the manifest's mtime (touched on every use) to rebuild the LRU.
   std::vector<std::pair<fs::file_time_type, std::string>> found;
   for (const auto& dir : fs::directory_iterator(fs::path(root_) / "entries")) {
-    const fs::path manifest = dir.path() / kManifest;
     std::error_code ec;
-    const auto t = fs::last_write_time(manifest, ec);
-    if (ec) {  // not an entry we committed: debris from elsewhere
-      fs::remove_all(dir.path(), ec);
-      continue;
-    }
-    found.emplace_back(t, dir.path().filename().string());
+    const auto t = fs::last_write_time(dir.path() / kManifest, ec);
+    if (!ec) found.emplace_back(t, dir.path().filename().string());
   }
   std::sort(found.begin(), found.end());
   for (const auto& [t, key] : found) {
-    uint64_t bytes = 0;
-    std::error_code ec;
-    for (const auto& f : fs::directory_iterator(fs::path(root_) / "entries" / key, ec)) {
-      if (f.path().filename() != kManifest && f.is_regular_file()) bytes += f.file_size();
-    }
+    const uint64_t bytes = entryBytes(entryDir(key));
     index_[key] = {bytes, ++clock_};
     stats_.bytes += bytes;
   }
@@ -60,8 +93,59 @@ BakeCache::BakeCache(std::string root, uint64_t max_bytes)
   evictLocked();
 }
 
+// Staging debris (core/job/bake_cache.h), trash left by a crash between rename and removal,
+// and lease files moved aside by a takeover. Entries are never debris: a folder reaches
+// entries/ only by the rename of a complete staging folder.
+void BakeCache::removeDebris() {
+  std::error_code ec;
+  for (const auto& dir : fs::directory_iterator(fs::path(root_) / "staging", ec)) {
+    if (stagingIsDebris(dir, options_.stale_staging)) fs::remove_all(dir.path(), ec);
+  }
+  for (const auto& dir : fs::directory_iterator(fs::path(root_) / "trash", ec)) {
+    fs::remove_all(dir.path(), ec);
+  }
+  for (const auto& f : fs::directory_iterator(fs::path(root_) / "leases", ec)) {
+    if (f.path().filename().string().find(".stale.") != std::string::npos) fs::remove(f, ec);
+  }
+}
+
+std::string BakeCache::entryDir(const std::string& key) const {
+  return (fs::path(root_) / "entries" / key).string();
+}
+
+// Removal in two steps so another process never sees half an entry: a rename into trash/ (atomic),
+// then the removal of what was renamed.
+void BakeCache::removeDir(const std::string& dir) {
+  const fs::path aside = fs::path(root_) / "trash" / (thisHost() + "@" + uniqueSuffix());
+  std::error_code ec;
+  fs::rename(dir, aside, ec);
+  if (!ec) fs::remove_all(aside, ec);
+}
+
+void BakeCache::dropLocked(const std::string& key) {
+  removeDir(entryDir(key));
+  auto it = index_.find(key);
+  if (it != index_.end()) {
+    stats_.bytes -= it->second.bytes;
+    index_.erase(it);
+  }
+  stats_.entries = index_.size();
+}
+
+// Known to this process, or committed by another since.
+bool BakeCache::presentLocked(const std::string& key) {
+  if (index_.count(key)) return true;
+  std::error_code ec;
+  if (!fs::exists(fs::path(entryDir(key)) / kManifest, ec)) return false;
+  const uint64_t bytes = entryBytes(entryDir(key));
+  index_[key] = {bytes, ++clock_};
+  stats_.bytes += bytes;
+  stats_.entries = index_.size();
+  return true;
+}
+
 bool BakeCache::verifyLocked(const std::string& key) {
-  const fs::path dir = fs::path(root_) / "entries" / key;
+  const fs::path dir = entryDir(key);
   bool ok = false;
   try {
     const Json manifest =
@@ -84,15 +168,13 @@ bool BakeCache::verifyLocked(const std::string& key) {
     ok = false;
   }
   if (!ok) {
-    spdlog::warn("cache: entry {} failed verification; dropped", key);
     std::error_code ec;
-    fs::remove_all(dir, ec);
-    auto it = index_.find(key);
-    if (it != index_.end()) {
-      stats_.bytes -= it->second.bytes;
-      index_.erase(it);
+    if (!fs::exists(dir, ec)) {  // removed by another process meanwhile: just absent
+      dropLocked(key);
+      return false;
     }
-    stats_.entries = index_.size();
+    spdlog::warn("cache: entry {} failed verification; dropped", key);
+    dropLocked(key);
     ++stats_.corrupt;
   }
   return ok;
@@ -101,17 +183,15 @@ bool BakeCache::verifyLocked(const std::string& key) {
 void BakeCache::touch(const std::string& key) {
   index_[key].last_use = ++clock_;
   std::error_code ec;
-  fs::last_write_time(fs::path(root_) / "entries" / key / kManifest,
-                      fs::file_time_type::clock::now(), ec);
+  fs::last_write_time(fs::path(entryDir(key)) / kManifest, fs::file_time_type::clock::now(), ec);
 }
 
 std::optional<std::string> BakeCache::lookup(const std::string& key) {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!index_.count(key)) return std::nullopt;
-  if (!verifyLocked(key)) return std::nullopt;
+  if (!presentLocked(key) || !verifyLocked(key)) return std::nullopt;
   touch(key);
   ++stats_.hits;
-  return (fs::path(root_) / "entries" / key).string();
+  return entryDir(key);
 }
 
 void BakeCache::commit(const std::string& key, const std::string& staging) {
@@ -127,11 +207,18 @@ void BakeCache::commit(const std::string& key, const std::string& staging) {
   }
   writeFileAtomic((fs::path(staging) / kManifest).string(),
                   Json{{"key", key}, {"files", files}}.dump(1));
-  const fs::path dest = fs::path(root_) / "entries" / key;
   std::lock_guard<std::mutex> lock(mutex_);
+  // Another process may have committed the same key (its lease went stale while it still
+  // worked): keep a verified entry, replace a corrupt one.
+  if (presentLocked(key) && verifyLocked(key)) {
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    touch(key);
+    return;
+  }
   std::error_code ec;
-  fs::remove_all(dest, ec);  // a corrupt entry dropped meanwhile, or none
-  fs::rename(staging, dest);
+  fs::rename(staging, entryDir(key), ec);
+  if (ec) throw std::runtime_error("cache: cannot commit entry " + key + ": " + ec.message());
   auto it = index_.find(key);
   if (it != index_.end()) stats_.bytes -= it->second.bytes;
   index_[key] = {bytes, ++clock_};
@@ -141,27 +228,83 @@ void BakeCache::commit(const std::string& key, const std::string& staging) {
   evictLocked();
 }
 
+// Used within min_evict_age by any process: the manifest's mtime is touched on every use.
+bool BakeCache::recentlyUsed(const std::string& key) const {
+  std::error_code ec;
+  const auto t = fs::last_write_time(fs::path(entryDir(key)) / kManifest, ec);
+  return !ec && fs::file_time_type::clock::now() - t < options_.min_evict_age;
+}
+
 void BakeCache::evictLocked() {
   if (max_bytes_ == 0) return;
-  while (stats_.bytes > max_bytes_ && index_.size() > 1) {
-    auto oldest = index_.end();
-    for (auto it = index_.begin(); it != index_.end(); ++it) {
-      if (in_flight_.count(it->first)) continue;
-      if (oldest == index_.end() || it->second.last_use < oldest->second.last_use) oldest = it;
-    }
-    if (oldest == index_.end()) return;
-    // The newest entry is the one just committed: keep it even when it alone exceeds the bound.
-    uint64_t newest = 0;
-    for (const auto& [k, e] : index_) newest = std::max(newest, e.last_use);
-    if (oldest->second.last_use == newest) return;
-    std::error_code ec;
-    fs::remove_all(fs::path(root_) / "entries" / oldest->first, ec);
-    stats_.bytes -= oldest->second.bytes;
-    spdlog::debug("cache: evicted {} ({} bytes)", oldest->first, oldest->second.bytes);
-    index_.erase(oldest);
+  // The newest entry is the one just committed: kept even when it alone exceeds the bound.
+  uint64_t newest = 0;
+  for (const auto& [k, e] : index_) newest = std::max(newest, e.last_use);
+  std::vector<std::pair<uint64_t, std::string>> by_age;
+  for (const auto& [k, e] : index_) {
+    if (e.last_use != newest && !in_flight_.count(k)) by_age.emplace_back(e.last_use, k);
+  }
+  std::sort(by_age.begin(), by_age.end());
+  for (const auto& [use, key] : by_age) {
+    if (stats_.bytes <= max_bytes_) break;
+    if (recentlyUsed(key)) continue;
+    const uint64_t bytes = index_[key].bytes;
+    dropLocked(key);
+    spdlog::debug("cache: evicted {} ({} bytes)", key, bytes);
     ++stats_.evicted;
   }
-  stats_.entries = index_.size();
+}
+
+// Computes `key` into a fresh staging folder and commits it; the staging folder is removed on
+// failure.
+void BakeCache::computeInto(const std::string& key, const ComputeFn& compute) {
+  const std::string staging =
+      (fs::path(root_) / "staging" / (thisHost() + "@" + uniqueSuffix())).string();
+  try {
+    fs::create_directories(staging);
+    compute(staging);
+    commit(key, staging);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    throw;
+  }
+}
+
+// Single flight across processes: compute under the key's lease, or wait while another process
+// holds it live, until its entry appears (a hit) or its lease ends without one (then take it).
+std::string BakeCache::computeShared(const std::string& key, const ComputeFn& compute,
+                                     const std::function<bool()>& should_stop) {
+  const std::string lease_path = (fs::path(root_) / "leases" / (key + ".lease")).string();
+  LeaseObserver observer;
+  bool waited = false;
+  for (;;) {
+    bool took_over = false;
+    std::unique_ptr<Lease> lease =
+        Lease::tryAcquire(lease_path, options_.lease, observer, &took_over);
+    if (lease) {
+      if (took_over) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        ++stats_.leases_taken_over;
+      }
+      {
+        // Committed by the holder we waited for, between our last look and its release.
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (presentLocked(key) && verifyLocked(key)) return entryDir(key);
+      }
+      computeInto(key, compute);
+      return entryDir(key);
+    }
+    if (!waited) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      ++stats_.shared_across_processes;
+      waited = true;
+    }
+    std::this_thread::sleep_for(options_.poll);
+    if (should_stop && should_stop()) throw Cancelled("cancelled while waiting");
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (presentLocked(key) && verifyLocked(key)) return entryDir(key);
+  }
 }
 
 std::string BakeCache::getOrCompute(const std::string& key, const ComputeFn& compute,
@@ -169,10 +312,10 @@ std::string BakeCache::getOrCompute(const std::string& key, const ComputeFn& com
   std::unique_lock<std::mutex> lock(mutex_);
   bool waited = false;
   for (;;) {
-    if (index_.count(key) && verifyLocked(key)) {
+    if (presentLocked(key) && verifyLocked(key)) {
       touch(key);
       ++stats_.hits;
-      return (fs::path(root_) / "entries" / key).string();
+      return entryDir(key);
     }
     auto it = in_flight_.find(key);
     if (it == in_flight_.end()) break;
@@ -190,34 +333,27 @@ std::string BakeCache::getOrCompute(const std::string& key, const ComputeFn& com
         continue;  // the computing request was cancelled, not ours: take over
       }
     }
-    if (!flight->path.empty()) {
-      // Served by the identical computation we waited for.
-      return flight->path;
-    }
+    if (!flight->path.empty()) return flight->path;  // the identical computation we waited for
   }
   ++stats_.misses;
   auto flight = std::make_shared<InFlight>();
   in_flight_[key] = flight;
   lock.unlock();
-  const std::string staging = (fs::path(root_) / "staging" / uniqueSuffix()).string();
   std::exception_ptr error;
+  std::string path;
   try {
-    fs::create_directories(staging);
-    compute(staging);
-    commit(key, staging);
+    path = computeShared(key, compute, should_stop);
   } catch (...) {
     error = std::current_exception();
-    std::error_code ec;
-    fs::remove_all(staging, ec);
   }
   lock.lock();
   flight->done = true;
   flight->error = error;
-  if (!error) flight->path = (fs::path(root_) / "entries" / key).string();
+  flight->path = path;
   in_flight_.erase(key);
   cv_.notify_all();
   if (error) std::rethrow_exception(error);
-  return flight->path;
+  return path;
 }
 
 BakeCacheStats BakeCache::stats() const {

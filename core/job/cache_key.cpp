@@ -154,6 +154,15 @@ ShotCacheKeys computeCacheKeys(const ShotSpec& shot) {
     pre["volume"] = keys.volume;
     pre["algorithm"] = salt;
     keys.precompute = keyOf("precompute", pre);
+    // The database's parts, which farm tasks compute apart (RunScope); a whole run never
+    // stores them.
+    if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
+      keys.precompute_layout = keyOf("precompute-layout", pre);
+      for (int i = 0; i < seq->frames; ++i) {
+        pre["basic_volume"] = i;
+        keys.precompute_basic.push_back(keyOf("precompute-basic", pre));
+      }
+    }
   }
 
   for (const Json& view : canonical["views"]) {

@@ -43,6 +43,9 @@ void checkRunOptions(const RunOptions& opt) {
                      std::to_string(opt.png_exposure));
   }
   checkSamplesOverride(opt.samples, "samples");
+  if (!opt.scope.all() && !opt.cache) {
+    throw InputError("scope: a part of a shot (a farm task) needs a bake cache");
+  }
 }
 
 void makeOutputFolder(const std::string& dir) {
@@ -73,6 +76,7 @@ class ShotRun final : public MethodRun {
   int threads() const override { return opt_.threads; }
   const std::string& source() const override { return opt_.source; }
   RunResult& result() override { return result_; }
+  const RunScope& scope() const override { return opt_.scope; }
 
   const Scene& lights() override {
     if (!scene_) {
@@ -311,8 +315,7 @@ namespace {
 
 // auto.json: the choice, what it rested on, and the bake's own error estimates when the chosen
 // method gives them.
-void writeAutoRecord(MethodRun& run, const AutoChoice& choice) {
-  nlohmann::json record = choice.toJson();
+void writeAutoRecord(MethodRun& run, nlohmann::json record) {
   record["bake_estimates"] = run.result().bake_estimates;
   run.writeOutput("auto.json",
                   [&](const std::string& path) { writeFileAtomic(path, record.dump(1) + "\n"); });
@@ -371,26 +374,27 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
 
   // Auto resolves into the chosen method's shot before anything is baked, so its cache entries
   // are those of a shot naming that method; the density it measured is reused.
-  std::optional<AutoChoice> choice;
+  std::optional<RunOptions::AutoPreset> chosen = opt.auto_preset;
   std::vector<StepTime> auto_steps;
   DensityFieldPtr density;
-  if (isAutoShot(shot)) {
-    choice = chooseAutoForRun(shot, opt, &auto_steps, &density);
-    shot = choice->shot;
+  if (isAutoShot(shot) && !chosen) {
+    const AutoChoice choice = chooseAutoForRun(shot, opt, &auto_steps, &density);
+    chosen = RunOptions::AutoPreset{choice.shot, autoSummary(choice), choice.toJson()};
     if (opt.progress) {
       RunProgress p;
       p.stage = "build";
-      p.message = choice->planLines().front();
+      p.message = choice.planLines().front();
       if (!opt.progress(p)) throw Cancelled();
     }
   }
+  if (isAutoShot(shot)) shot = chosen->shot;
   if (opt.samples != -1) shot.bake.samples = opt.samples;
 
   const bool need_keys = opt.cache || opt.volumes;
   ShotRun run(shot, opt, need_keys ? computeCacheKeys(shot) : ShotCacheKeys{});
-  if (choice) {
+  if (isAutoShot(shot_in)) {
     run.result().steps = auto_steps;
-    run.setHeader({{"cloudbake:auto", autoSummary(*choice)}});
+    run.setHeader({{"cloudbake:auto", chosen->summary}});
     if (density) run.setDensity(density);
   }
   run.report("build", 0, "building " + std::string(volumeTypeName(shot.volume)) + " volume");
@@ -399,7 +403,7 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   if (!opt.cache && !methodOf(shot).info().animates) run.scene();
   run.lights();
   runMethod(methodOf(shot), run, opt.source);
-  if (choice) writeAutoRecord(run, *choice);
+  if (isAutoShot(shot_in) && opt.scope.writesShotFiles()) writeAutoRecord(run, chosen->record);
   RunResult result = run.result();
   result.method = shot.bake.method;
   result.seconds = secondsSince(t_start);

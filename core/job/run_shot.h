@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -45,6 +46,18 @@ struct RunOptions {
   /// Most bake.samples and photon-lattice voxels method `auto` may choose (0: no limit beyond
   /// the methods' own ranges).
   int max_samples = 0;
+  /// The part of the shot to compute (a farm task, core/job/task_plan.h); all by default. A
+  /// part other than all needs `cache`, where the parts meet.
+  RunScope scope;
+  /// A shot of method `auto` whose choice was made already (by a farm plan, so its tasks do
+  /// not each measure the scene): runShot runs `shot` with `summary` in every view's header
+  /// and writes `record` (AutoChoice::toJson) as auto.json.
+  struct AutoPreset {
+    ShotSpec shot;
+    std::string summary;
+    nlohmann::json record;
+  };
+  std::optional<AutoPreset> auto_preset;
 };
 
 /// InputError naming `field` unless `samples` is -1 (unset) or in [1, 1e6]: the one check of

@@ -243,6 +243,7 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
   }
 
   for (int i = 0; i < n_views; ++i) {
+    if (!run.scope().renders(i)) continue;
     const Camera& camera = lights.cameras[size_t(i)];
     const std::string label = "view '" + camera.name + "' " + std::to_string(camera.width_px) +
                               "x" + std::to_string(camera.height_px) + " from the bake";
@@ -260,7 +261,7 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
     run.report("render", v1, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s",
                camera.name);
   }
-  if (shot.outputs.vdb) {
+  if (shot.outputs.vdb && run.scope().writesShotFiles()) {
     run.report("vdb", start.back() / total, "writing bake.vdb (the baked light)");
     if (!entry.empty()) {
       run.copyOutput(kBakeFile, (fs::path(entry) / kBakeFile).string());

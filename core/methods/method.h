@@ -63,6 +63,8 @@ class MethodRun {
   virtual int threads() const = 0;                ///< 0: the caller's TBB arena
   virtual const std::string& source() const = 0;  ///< prefix of error messages
   virtual RunResult& result() = 0;
+  /// The part of the shot this run computes (everything unless it is a farm task).
+  virtual const RunScope& scope() const = 0;
 
   /// Medium (extinction, albedo, phase), sun, sky and cameras; the density is a stand-in.
   virtual const Scene& lights() = 0;

@@ -179,6 +179,7 @@ class PathtraceMethod final : public BakeMethod {
     const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
     const double total = std::max(1, n_views + (shot.outputs.vdb ? 1 : 0));
     for (int i = 0; i < n_views; ++i) {
+      if (!run.scope().renders(i)) continue;
       const Camera& camera = shot.views[size_t(i)];
       const std::string label = "view '" + camera.name + "' " + std::to_string(camera.width_px) +
                                 "x" + std::to_string(camera.height_px) + ", " +
@@ -210,7 +211,7 @@ class PathtraceMethod final : public BakeMethod {
       run.report("render", (i + 1) / total, label + how + fixed(secondsSince(t0), 2) + " s",
                  camera.name);
     }
-    if (shot.outputs.vdb) {
+    if (shot.outputs.vdb && run.scope().writesShotFiles()) {
       run.report("vdb", n_views / total, "writing bake.vdb");
       writeDensityVdb(run);
     }

@@ -78,12 +78,103 @@ VolumeFrames sequenceFrames(MethodRun& run, const SequenceVolumeSpec& seq) {
   return frames;
 }
 
+// Reading a cache entry the cache verified: unreadable data is our fault, not input.
+template <class F>
+void readCached(const char* what, F&& read) {
+  try {
+    read();
+  } catch (const InputError& e) {
+    throw InternalError(std::string("cached ") + what + " unreadable: " + e.what());
+  }
+}
+
+// The database's layout (every basic volume on one lattice, receivers, sample tree) from the
+// cache, else built and committed; `entry` receives its folder. Densities are held only when
+// it was built here (readLayoutDensities reads the others on demand).
+PrecomputedDatabase obtainLayout(MethodRun& run, const PrecomputedShotOptions& o,
+                                 std::string* entry) {
+  const auto* seq = std::get_if<SequenceVolumeSpec>(&run.shot().volume);
+  if (!seq || run.keys().precompute_layout.empty() || !run.hasCache()) {
+    throw InternalError("the database's parts need a sequence volume and a cache");
+  }
+  PrecomputedDatabase layout;
+  bool computed = false;
+  *entry = run.cached(
+      run.keys().precompute_layout,
+      [&](const std::string& staging) {
+        run.report("bake", 0, "laying out " + std::to_string(o.basic_volumes) + " basic volumes");
+        BasicVolumeDatabase vols =
+            buildBasicVolumes(sequenceFrames(run, *seq), o.light_resolution,
+                              [&](double f) { return run.pollMessage(0.1 * f, "basic volumes"); });
+        layout = layoutBasicVolumes(std::move(vols), run.lights().medium.extinction, o.precompute);
+        writePrecomputedLayout(staging, layout);
+      },
+      &computed);
+  if (!computed) readCached("layout", [&] { layout = readPrecomputedLayout(*entry); });
+  layout.basic.resize(layout.volumes.frames.size());
+  return layout;
+}
+
+// Basic volume `i` of a laid-out `db` from the cache, else precomputed and committed.
+void obtainBasicVolume(MethodRun& run, PrecomputedDatabase& db, const PrecomputedShotOptions& o,
+                       const std::string& layout_entry, size_t i) {
+  const size_t n = db.volumes.frames.size();
+  bool computed = false;
+  const std::string entry = run.cached(
+      run.keys().precompute_basic.at(i),
+      [&](const std::string& staging) {
+        if (db.volumes.frames[i].empty()) {
+          readCached("layout", [&] { readLayoutDensities(layout_entry, db, i, i + 1); });
+        }
+        db.basic[i] = precomputeBasicVolume(db, i, o.precompute, [&](double f) {
+          return run.pollMessage(0.1 + 0.4 * (double(i) + f) / double(n),
+                                 "precomputing basic volume " + std::to_string(i));
+        });
+        writeBasicVolumes(staging, db, i, i + 1);
+      },
+      &computed);
+  if (!computed) readCached("basic volume", [&] { readBasicVolumes(entry, db, i, i + 1); });
+}
+
+// A farm task's part of the database: its layout, or basic volumes [begin, end) of it. Each
+// basic volume is dropped once committed, so a task's memory is one volume's.
+void runDatabasePart(MethodRun& run, const PrecomputedShotOptions& o) {
+  const RunScope& scope = run.scope();
+  std::string layout_entry;
+  PrecomputedDatabase db = obtainLayout(run, o, &layout_entry);
+  if (scope.part != RunScope::Part::kPrecompute) return;
+  if (scope.begin < 0 || scope.end > int(db.volumes.frames.size()) || scope.begin >= scope.end) {
+    throw InputError(run.source() + ": task: basic volumes [" + std::to_string(scope.begin) + ", " +
+                     std::to_string(scope.end) + ") outside the database's " +
+                     std::to_string(db.volumes.frames.size()));
+  }
+  for (int i = scope.begin; i < scope.end; ++i) {
+    obtainBasicVolume(run, db, o, layout_entry, size_t(i));
+    db.basic[size_t(i)] = {};
+    db.volumes.frames[size_t(i)] = {};
+  }
+}
+
+// The whole database from its parts in the cache (those a farm's tasks left; any missing one
+// is computed here): the same database a whole run builds at once.
+PrecomputedDatabase assembleDatabase(MethodRun& run, const PrecomputedShotOptions& o) {
+  std::string layout_entry;
+  PrecomputedDatabase db = obtainLayout(run, o, &layout_entry);
+  for (size_t i = 0; i < db.volumes.frames.size(); ++i) {
+    obtainBasicVolume(run, db, o, layout_entry, i);
+  }
+  finishDatabase(db);
+  return db;
+}
+
 // The database's precompute: from the cache when it holds it, else built and committed.
 PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions& o) {
   const ShotSpec& shot = run.shot();
   auto build = [&]() {
     const auto t0 = std::chrono::steady_clock::now();
     run.report("bake", 0, "building " + std::to_string(o.basic_volumes) + " basic volume(s)");
+    const bool sequence = std::holds_alternative<SequenceVolumeSpec>(shot.volume);
+    if (sequence && !run.scope().all()) return assembleDatabase(run, o);
     BasicVolumeDatabase vols;
     if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
       vols = buildBasicVolumes(sequenceFrames(run, *seq), o.light_resolution, [&](double f) {
@@ -159,6 +250,7 @@ std::vector<BlendFrame> walkDatabase(MethodRun& run, const PrecomputedDatabase& 
         transitionProbabilities(frameDistances(db.volumes.frames), n, o.walk);
     walk = endlessWalk(p, n, o.frames, o.walk);
   }
+  if (!run.scope().writesShotFiles()) return walk;
   Json animation = {{"basic_volumes", n}, {"frames", Json::array()}};
   for (const BlendFrame& f : walk) {
     animation["frames"].push_back({{"a", f.a}, {"b", f.b}, {"w", f.w}});
@@ -354,7 +446,9 @@ bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o) {
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
   const FrameProgress progress{double(o.frames) * per_frame, per_frame};
-  for (int f = 0; f < o.frames; ++f) renderFrame(run, light, BlendFrame{0, 0, 1}, f, progress);
+  for (int f = 0; f < o.frames; ++f) {
+    if (run.scope().renders(f)) renderFrame(run, light, BlendFrame{0, 0, 1}, f, progress);
+  }
   return true;
 }
 
@@ -362,8 +456,15 @@ void PrecomputedMethod::run(MethodRun& run) const {
   const ShotSpec& shot = run.shot();
   const PrecomputedShotOptions o = precomputedOptions(shot);
   if (renderEmptyCloud(run, o)) return;
+  const RunScope& scope = run.scope();
+  if (scope.part == RunScope::Part::kLayout || scope.part == RunScope::Part::kPrecompute) {
+    runDatabasePart(run, o);
+    return;
+  }
   const PrecomputedDatabase db = obtainDatabase(run, o);
+  if (scope.part == RunScope::Part::kBake) return;
   const std::vector<BlendFrame> walk = walkDatabase(run, db, o);
+  if (!scope.rendersAny()) return;
 
   const Scene& lights = run.lights();
   const std::array<ShCoefficients, 3> sky_sh =
@@ -374,6 +475,7 @@ void PrecomputedMethod::run(MethodRun& run) const {
   const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
   const FrameProgress progress{double(o.frames) * per_frame, per_frame};
   for (int f = 0; f < o.frames; ++f) {
+    if (!scope.renders(f)) continue;
     const BlendFrame& bf = walk[size_t(f)];
     const auto t0 = std::chrono::steady_clock::now();
     FrameLightStats stats;

@@ -50,11 +50,41 @@ struct ShotCacheKeys {
   /// phase, views, frames and the walk's knobs, so every lighting and every animation of the
   /// same database reuses it. Empty for other methods.
   std::string precompute;
+  /// Its parts, for `sequence` volumes only: the layout (lattice densities, receivers, sample
+  /// tree) and each basic volume's precompute, which farm tasks compute apart (RunScope).
+  std::string precompute_layout;
+  std::vector<std::string> precompute_basic;
   /// The material of `bake`, `light` and each view's key without the sun direction (JSON
   /// text), so the key of another direction is one hash (lightKeyAt, viewKeyAt).
   std::string bake_material;
   std::string light_material;
   std::vector<std::string> view_materials;
+};
+
+/// Which part of a shot a run computes: all of it (the default), or one task of a farm plan
+/// (core/job/task_plan.h). Tasks run in the plan's order over one bake cache leave exactly the
+/// files the whole run writes, since each computes the same cache entries and outputs as the
+/// whole run and skips the rest.
+/// - kLayout (precomputed, sequences): the database's shared layout, into the cache.
+/// - kPrecompute: basic volumes [begin, end) of the layout, into the cache.
+/// - kBake: the light bake of the shot's sun direction (precomputed: the whole database), into
+///   the cache; writes no output.
+/// - kRender: views [begin, end) (precomputed: frames [begin, end), every view).
+/// - kGather: the shot's own files (bake.vdb, animation.json, auto.json), no views.
+struct RunScope {
+  enum class Part { kAll, kLayout, kPrecompute, kBake, kRender, kGather };
+  Part part = Part::kAll;
+  int begin = 0;
+  int end = 0;
+
+  bool all() const { return part == Part::kAll; }
+  /// View `i` (or frame `i` of precomputed) is rendered by this run.
+  bool renders(int i) const {
+    return part == Part::kAll || (part == Part::kRender && i >= begin && i < end);
+  }
+  bool rendersAny() const { return part == Part::kAll || part == Part::kRender; }
+  /// bake.vdb, animation.json and auto.json.
+  bool writesShotFiles() const { return part == Part::kAll || part == Part::kGather; }
 };
 
 /// Where a run is: `stage` is "build", "render", "vdb" or "done"; `fraction` in [0, 1] of the

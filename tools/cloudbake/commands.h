@@ -21,6 +21,8 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code);
 void addMethodsCommand(CLI::App& app, int* exit_code);
 /// `cloudbake preview`: an sRGB PNG of an EXR's layer (cmd_preview.cpp).
 void addPreviewCommand(CLI::App& app, int* exit_code);
+/// `cloudbake plan` and `cloudbake run-task`: a shot as farm tasks (cmd_farm.cpp).
+void addFarmCommands(CLI::App& app, int* exit_code);
 /// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
 void addRenderCommand(CLI::App& app, int* exit_code);
 

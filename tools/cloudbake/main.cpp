@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
   addMieCommand(app, &exit_code);
   addPhaseCommand(app, &exit_code);
   addRenderCommand(app, &exit_code);
+  addFarmCommands(app, &exit_code);
   addCompareCommand(app, &exit_code);
   addPreviewCommand(app, &exit_code);
   addBakeSliceCommand(app, &exit_code);

@@ -275,7 +275,10 @@ TEST(BakeCache, CorruptEntryIsDroppedAndRebuiltNeverServed) {
 
 TEST(BakeCache, EvictsLeastRecentlyUsedUnderTheSizeBound) {
   const fs::path dir = freshDir("lru");
-  BakeCache cache(dir.string(), 2500);  // room for two 1000-byte entries (+ manifests)
+  BakeCacheOptions options;
+  options.max_bytes = 2500;  // room for two 1000-byte entries (+ manifests)
+  options.min_evict_age = std::chrono::seconds(0);
+  BakeCache cache(dir.string(), options);
   auto fill = [](const std::string& staging) {
     writeFileAtomic(staging + "/data", std::string(1000, 'x'));
   };

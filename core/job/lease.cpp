@@ -1,0 +1,155 @@
+#include "core/job/lease.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "core/error.h"
+#include "core/job/file_util.h"
+
+namespace cloudbake {
+namespace {
+
+std::string hostName() {
+  char buf[256] = {};
+  if (gethostname(buf, sizeof buf - 1) != 0) return "unknown-host";
+  return buf;
+}
+
+// False when the file does not exist (released or renamed away).
+bool readSmallFile(const std::string& path, std::string* out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  std::ostringstream s;
+  s << in.rdbuf();
+  *out = s.str();
+  return true;
+}
+
+// False when the file exists already; throws on any other failure.
+bool createExclusive(const std::string& path, const std::string& content) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    if (errno == EEXIST) return false;
+    throw std::runtime_error(path + ": cannot create the lease: " + std::strerror(errno));
+  }
+  const bool ok =
+      ::write(fd, content.data(), content.size()) == ssize_t(content.size()) && ::fsync(fd) == 0;
+  const bool closed = ::close(fd) == 0;
+  if (!ok || !closed) {
+    ::unlink(path.c_str());
+    throw std::runtime_error(path + ": cannot write the lease");
+  }
+  return true;
+}
+
+std::string holderOf(const std::string& content) {
+  const std::string prefix = "holder=";
+  if (content.rfind(prefix, 0) != 0) return "";
+  return content.substr(prefix.size(), content.find('\n') - prefix.size());
+}
+
+// A holder on this host whose process is gone (killed mid-compute): stale without waiting.
+bool deadOnThisHost(const std::string& holder) {
+  const size_t colon = holder.rfind(':');
+  if (colon == std::string::npos || holder.substr(0, colon) != hostName()) return false;
+  const long pid = std::strtol(holder.c_str() + colon + 1, nullptr, 10);
+  if (pid <= 0 || pid == long(getpid())) return false;
+  return ::kill(pid_t(pid), 0) != 0 && errno == ESRCH;
+}
+
+std::string leaseContent(unsigned long beat) {
+  return "holder=" + leaseHolderName() + "\nbeat=" + std::to_string(beat) + "\n";
+}
+
+// Renames a lease judged stale out of the way. True when this caller moved exactly what it saw;
+// a fresh lease moved by mistake (taken meanwhile) is put back.
+bool moveStaleAside(const std::string& path, const std::string& seen) {
+  const std::string aside = path + ".stale." + uniqueSuffix();
+  if (::rename(path.c_str(), aside.c_str()) != 0) return false;
+  std::string moved;
+  const bool same = readSmallFile(aside, &moved) && moved == seen;
+  if (!same && ::link(aside.c_str(), path.c_str()) != 0) {
+    // Its holder sees the loss at its next beat and stops claiming it.
+  }
+  ::unlink(aside.c_str());
+  return same;
+}
+
+}  // namespace
+
+std::string leaseHolderName() { return hostName() + ":" + std::to_string(getpid()); }
+
+std::unique_ptr<Lease> Lease::tryAcquire(const std::string& path, const LeaseOptions& options,
+                                         LeaseObserver& observer, bool* took_over) {
+  if (options.heartbeat.count() <= 0 || options.stale_after < 3 * options.heartbeat) {
+    throw InputError("lease: stale_after must be at least three heartbeats");
+  }
+  bool stale_moved = false;
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    const std::string content = leaseContent(0);
+    if (createExclusive(path, content)) {
+      if (took_over) *took_over = stale_moved;
+      return std::unique_ptr<Lease>(new Lease(path, content, options));
+    }
+    std::string seen;
+    if (!readSmallFile(path, &seen)) continue;  // released meanwhile
+    const auto now = std::chrono::steady_clock::now();
+    if (seen != observer.content) observer = {seen, now};
+    const bool stale =
+        deadOnThisHost(holderOf(seen)) || now - observer.changed >= options.stale_after;
+    if (!stale || !moveStaleAside(path, seen)) return nullptr;
+    observer = {};
+    stale_moved = true;
+  }
+  return nullptr;
+}
+
+Lease::Lease(std::string path, std::string content, const LeaseOptions& options)
+    : path_(std::move(path)), content_(std::move(content)), options_(options) {
+  thread_ = std::thread([this] { beat(); });
+}
+
+Lease::~Lease() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  thread_.join();
+  std::string now;
+  if (!lost_ && readSmallFile(path_, &now) && now == content_) ::unlink(path_.c_str());
+}
+
+bool Lease::held() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return !lost_;
+}
+
+void Lease::beat() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  unsigned long count = 0;
+  while (!cv_.wait_for(lock, options_.heartbeat, [this] { return stop_; })) {
+    std::string now;
+    if (!readSmallFile(path_, &now) || now != content_) {
+      lost_ = true;  // taken over (we stalled past stale_after): stop claiming it
+      return;
+    }
+    const std::string next = leaseContent(++count);
+    try {
+      writeFileAtomic(path_, next);
+      content_ = next;
+    } catch (const std::exception&) {
+      // A missed beat; the next one retries. Observers wait stale_after, several beats.
+    }
+  }
+}
+
+}  // namespace cloudbake
