@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <limits>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -126,7 +127,11 @@ LightingSpec parseLighting(const Object& o) {
     Object sun(r, *v, o.path("sun"), {"direction", "irradiance"});
     l.has_sun = true;
     const Vec3 d = r.vec3(sun.required("direction"), sun.path("direction"));
-    const Vec3 unit = directionOf(d);
+    // A vector already of unit length (as serializeShot writes it) is kept bit for bit, so that
+    // parseShot(serializeShot(s)) gives back s: normalising again can move the last bit.
+    const Vec3 unit = std::abs(length(d) - 1.0) <= 4 * std::numeric_limits<double>::epsilon()
+                          ? d
+                          : directionOf(d);
     if (!(length(unit) > 0)) {
       r.fail(sun.path("direction"), "must be a non-zero vector (towards the sun), got [" +
                                         exactNumber(d.x) + ", " + exactNumber(d.y) + ", " +

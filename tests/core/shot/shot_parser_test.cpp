@@ -130,6 +130,21 @@ TEST(ShotParser, OtherVolumesSkyFormsAndMethodKnobs) {
   EXPECT_EQ(proc->perlin.size, Vec3(2, 2, 1));
 }
 
+TEST(ShotParser, ASerializedSunDirectionParsesBackBitForBit) {
+  // Farm tasks re-read the planned shot: a direction normalised twice can move its last bit
+  // (and the render with it). These directions each did before the fix.
+  for (const auto& d : {Vec3(0.5, 0.2, 1), Vec3(0.3, 0.2, 1), Vec3(0.9, 0.3, 0.25)}) {
+    json j = json::parse(kDesignSlab);
+    j["lighting"]["sun"]["direction"] = {d.x, d.y, d.z};
+    const ShotSpec a = parseShot(j.dump(), "");
+    const ShotSpec b = parseShot(serializeShot(a), "");
+    EXPECT_EQ(a.lighting.sun.direction.x, b.lighting.sun.direction.x);
+    EXPECT_EQ(a.lighting.sun.direction.y, b.lighting.sun.direction.y);
+    EXPECT_EQ(a.lighting.sun.direction.z, b.lighting.sun.direction.z);
+    EXPECT_NEAR(length(b.lighting.sun.direction), 1.0, 1e-15);
+  }
+}
+
 TEST(ShotParser, CanonicalFormRoundTripsAndIgnoresSpelling) {
   const ShotSpec a = parseShot(kDesignSlab, "");
   const std::string text = serializeShot(a);
