@@ -114,6 +114,11 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
                  "folder for the job store, result cache and uploaded assets")
       ->envname("CLOUDBAKE_CACHE_DIR")
       ->capture_default_str();
+  app.add_option("--shared-dir", o.shared_dir,
+                 "folder shared with other replicas and farm tasks (may be NFS): the result "
+                 "cache lives there, so one replica's bake is a hit on the others "
+                 "(docs/deployment.md)")
+      ->envname("CLOUDBAKE_SHARED_DIR");
   app.add_option("--cache-size", o.cache_max_bytes,
                  "bound of the result cache (bytes, or with a unit: 512MB, 2GB; 0: unbounded)")
       ->envname("CLOUDBAKE_CACHE_SIZE")

@@ -165,8 +165,9 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
                              " is in use by another cloudbake-server process");
   }
   store_ = std::make_unique<JobStore>((fs::path(options_.state_dir) / "jobs").string());
-  cache_ = std::make_unique<BakeCache>((fs::path(options_.state_dir) / "cache").string(),
-                                       options_.cache_max_bytes);
+  const fs::path cache_root =
+      fs::path(options_.shared_dir.empty() ? options_.state_dir : options_.shared_dir) / "cache";
+  cache_ = std::make_unique<BakeCache>(cache_root.string(), options_.cache_max_bytes);
   assets_ = std::make_unique<AssetStore>((fs::path(options_.state_dir) / "assets").string(),
                                          options_.max_upload_bytes);
   directions_ =

@@ -62,6 +62,11 @@ struct JobFinished {
 /// assets/.
 struct JobManagerOptions {
   std::string state_dir;
+  /// Optional: a folder shared with other servers and farm tasks (`cloudbake run-task
+  /// --cache-dir`), possibly on NFS: the result cache lives in shared_dir/cache instead of
+  /// state_dir/cache, so a bake one replica made is a hit on every other (core/job/bake_cache.h
+  /// is safe across processes and hosts). Jobs, assets and the lock stay in state_dir.
+  std::string shared_dir;
   unsigned worker_threads = 0;       ///< threads of each job's task_arena; 0: all hardware
   unsigned max_concurrent_jobs = 1;  ///< runners
   /// Queued (not running) jobs plus submits and dry runs being prepared (staging assets,

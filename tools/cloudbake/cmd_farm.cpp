@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -79,6 +80,19 @@ void plan(const PlanOptions& opt) {
             << " s predicted in all; --json writes the plan for run-task\n";
 }
 
+// Bytes this process read and wrote through system calls (Linux /proc/self/io: rchar, wchar),
+// which on a farm node is mostly the shared folder: for sizing the farm's storage.
+std::pair<uint64_t, uint64_t> ioBytes() {
+  std::ifstream in("/proc/self/io");
+  std::string key;
+  uint64_t value = 0, read = 0, written = 0;
+  while (in >> key >> value) {
+    if (key == "rchar:") read = value;
+    if (key == "wchar:") written = value;
+  }
+  return {read, written};
+}
+
 void runTaskCommand(const RunTaskOptions& opt) {
   const auto limit = limitThreads(opt.threads);
   const TaskPlan p = planFromJson(readWholeFile(opt.plan), opt.plan);
@@ -109,6 +123,12 @@ void runTaskCommand(const RunTaskOptions& opt) {
     return;
   }
   for (const OutputFile& f : r.run.files) std::cout << f.path << "\n";
+  if (!opt.quiet) {
+    const auto [read, written] = ioBytes();
+    std::fprintf(stderr, "%s: done in %.2f s; read %llu bytes, wrote %llu bytes\n",
+                 opt.task.c_str(), r.run.seconds, (unsigned long long)read,
+                 (unsigned long long)written);
+  }
 }
 
 }  // namespace

@@ -769,6 +769,32 @@ TEST(JobStore, CorruptRecordIsReportedFailedNotDropped) {
   fs::remove_all(dir);
 }
 
+// Two servers (replicas) with their own state folders on one shared folder: a bake made by one
+// is a cache hit on the other.
+TEST(JobManager, ReplicasOnOneSharedFolderShareTheirBakes) {
+  const fs::path dir = freshDir("replicas");
+  auto options = [&](const std::string& name) {
+    JobManagerOptions o;
+    o.state_dir = (dir / name).string();
+    o.shared_dir = (dir / "shared").string();
+    o.worker_threads = 2;
+    return o;
+  };
+  JobManager a(options("a")), b(options("b"));
+  SubmitInput in;
+  in.shot_json = sphereShot(R"({"method": "single", "light_resolution": 8})");
+  const JobRecord first = waitFinished(a, a.submit(in).id);
+  ASSERT_EQ(first.state, JobState::kSucceeded);
+  EXPECT_EQ(first.bakes_computed, 1);
+  const JobRecord second = waitFinished(b, b.submit(in).id);
+  ASSERT_EQ(second.state, JobState::kSucceeded);
+  EXPECT_EQ(second.bakes_computed, 0);
+  EXPECT_EQ(second.bakes_cached, 1);
+  EXPECT_TRUE(fs::exists(dir / "shared" / "cache" / "entries"));
+  EXPECT_FALSE(fs::exists(dir / "a" / "cache"));
+  fs::remove_all(dir);
+}
+
 TEST(JobManager, RunningJobFoundAfterACrashIsMarkedFailed) {
   const fs::path dir = freshDir("crash");
   {
