@@ -23,3 +23,10 @@ trap 'rm -f "$help"' EXIT
 version="$("$server" --version | awk '{print $2}')"
 NODE_PATH="$cache/node_modules" node "$root/deploy/k8s/check/check.cjs" \
   "$root/deploy/k8s/base" "$help" "$version"
+# The farm's Indexed Jobs, generated from a plan of the bundled endless animation.
+farm="$(mktemp -d)"
+trap 'rm -f "$help"; rm -rf "$farm"' EXIT
+"$build/tools/cloudbake/cloudbake" plan "$root/examples/endless_cloud.json" --tasks 4 --json \
+  >"$farm/plan.json"
+python3 "$root/deploy/k8s/farm/plan-to-jobs" "$farm/plan.json" --out "$farm/jobs" >/dev/null
+NODE_PATH="$cache/node_modules" node "$root/deploy/k8s/check/farm.cjs" "$farm/jobs" "$farm/plan.json"
