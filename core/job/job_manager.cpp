@@ -131,6 +131,10 @@ SubmitInput readSubmission(const std::string& job_dir) {
 
 }  // namespace
 
+// How often a running job's progress is published to the shared folder (and another replica's
+// cancel request looked for).
+constexpr auto kPublishInterval = std::chrono::seconds(1);
+
 struct JobManager::Job {
   JobRecord record;
   ShotSpec shot;
@@ -145,6 +149,7 @@ struct JobManager::Job {
   std::chrono::steady_clock::time_point last_access = std::chrono::steady_clock::now();
   double last_fraction = -1;
   std::string last_message;
+  std::chrono::steady_clock::time_point last_publish{};  // progress published to shared_dir
 };
 
 struct JobManager::Prepared {
@@ -170,6 +175,9 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
   cache_ = std::make_unique<BakeCache>(cache_root.string(), options_.cache_max_bytes);
   assets_ = std::make_unique<AssetStore>((fs::path(options_.state_dir) / "assets").string(),
                                          options_.max_upload_bytes);
+  if (!options_.shared_dir.empty()) {
+    shared_jobs_ = std::make_unique<SharedJobs>((fs::path(options_.shared_dir) / "jobs").string());
+  }
   directions_ =
       std::make_unique<DirectionIndex>((fs::path(options_.state_dir) / "directions").string());
   std::error_code ec;
@@ -204,6 +212,7 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
     pushEventLocked(
         *job, job->record.stage.empty() ? "restored" : job->record.stage, job->record.fraction,
         job->record.error.empty() ? "restored after server restart" : job->record.error);
+    publishLocked(*job);
     jobs_[record.id] = job;
   }
   if (!jobs_.empty()) {
@@ -241,7 +250,10 @@ void JobManager::prune() {
       doomed.push_back(id);
     }
   }
-  for (const std::string& id : doomed) store_->remove(id);
+  for (const std::string& id : doomed) {
+    store_->remove(id);
+    if (shared_jobs_) shared_jobs_->remove(id);
+  }
   if (!doomed.empty()) {
     spdlog::info("job store: pruned {} finished job(s) (--keep-jobs-hours, --max-finished-jobs)",
                  doomed.size());
@@ -500,9 +512,46 @@ std::shared_ptr<JobManager::Job> JobManager::find(const std::string& id) const {
 }
 
 JobRecord JobManager::get(const std::string& id) const {
+  if (auto other = foreign(id)) return *other;
   auto job = find(id);
   std::lock_guard<std::mutex> lock(mutex_);
   return job->record;
+}
+
+std::optional<JobRecord> JobManager::foreign(const std::string& id) const {
+  if (!shared_jobs_) return std::nullopt;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (jobs_.count(id)) return std::nullopt;  // ours
+  }
+  return shared_jobs_->record(id);
+}
+
+// Events of a job another replica runs, from what it published: one event per publication
+// (seq is the publication's revision), waiting up to `wait` for a new one.
+std::vector<JobEvent> JobManager::foreignEvents(const std::string& id, uint64_t after,
+                                                std::chrono::milliseconds wait,
+                                                JobRecord* record) const {
+  const auto until = std::chrono::steady_clock::now() + wait;
+  for (;;) {
+    const std::optional<JobRecord> r = shared_jobs_->record(id);
+    if (!r) throw NotFoundError("job '" + id.substr(0, 64) + "' not found");
+    const PublishedProgress p = shared_jobs_->progress(id);
+    if (record) *record = *r;
+    if (p.revision > after) {
+      JobEvent e;
+      e.seq = p.revision;
+      e.time = unixNow();
+      e.state = r->state;
+      e.stage = p.stage;
+      e.fraction = p.fraction;
+      e.eta_s = r->terminal() ? 0 : -1;
+      e.message = p.message;
+      return {e};
+    }
+    if (r->terminal() || std::chrono::steady_clock::now() >= until) return {};
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
 }
 
 std::vector<JobRecord> JobManager::list(std::optional<JobState> state, size_t limit) const {
@@ -519,6 +568,11 @@ std::vector<JobRecord> JobManager::list(std::optional<JobState> state, size_t li
 }
 
 JobRecord JobManager::cancel(const std::string& id) {
+  if (auto other = foreign(id)) {
+    // The replica that runs it stops it within about a second of seeing the request.
+    if (!other->terminal()) shared_jobs_->requestCancel(id);
+    return *other;
+  }
   auto job = find(id);
   std::lock_guard<std::mutex> lock(mutex_);
   if (job->record.state == JobState::kQueued) {
@@ -536,6 +590,7 @@ JobRecord JobManager::cancel(const std::string& id) {
 
 std::vector<JobEvent> JobManager::events(const std::string& id, uint64_t after,
                                          std::chrono::milliseconds wait, JobRecord* record) const {
+  if (foreign(id)) return foreignEvents(id, after, wait, record);
   auto job = find(id);
   std::unique_lock<std::mutex> lock(mutex_);
   auto ready = [&] {
@@ -566,21 +621,30 @@ OutputFile JobManager::output(const std::string& id, const std::string& name) co
 }
 
 OutputFile JobManager::recordedOutput(const std::string& id, const std::string& name) const {
-  auto job = find(id);
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (job->record.state != JobState::kSucceeded) {
-    throw FailedPreconditionError("job " + id + " is " + jobStateName(job->record.state) +
+  JobRecord record;
+  std::string dir;
+  if (auto other = foreign(id)) {
+    record = *other;
+    dir = shared_jobs_->outputDir(id);
+  } else {
+    auto job = find(id);
+    std::lock_guard<std::mutex> lock(mutex_);
+    record = job->record;
+    dir = store_->outputDir(id);
+  }
+  if (record.state != JobState::kSucceeded) {
+    throw FailedPreconditionError("job " + id + " is " + jobStateName(record.state) +
                                   "; results exist only for SUCCEEDED jobs");
   }
-  for (const OutputFile& f : job->record.outputs) {
+  for (const OutputFile& f : record.outputs) {
     if (f.name == name) {
       OutputFile out = f;
-      out.path = (fs::path(store_->outputDir(id)) / f.name).string();
+      out.path = (fs::path(dir) / f.name).string();
       return out;
     }
   }
   std::string names;
-  for (const OutputFile& f : job->record.outputs) names += (names.empty() ? "" : ", ") + f.name;
+  for (const OutputFile& f : record.outputs) names += (names.empty() ? "" : ", ") + f.name;
   throw NotFoundError("job " + id + " has no output '" + name.substr(0, 256) +
                       "' (it has: " + names + ")");
 }
@@ -612,6 +676,16 @@ void JobManager::saveLocked(const Job& job) {
     store_->save(job.record);
   } catch (const std::exception& e) {
     spdlog::error("job {}: cannot save record: {}", job.record.id, e.what());
+  }
+  publishLocked(job);
+}
+
+void JobManager::publishLocked(const Job& job) {
+  if (!shared_jobs_) return;
+  try {
+    shared_jobs_->publish(job.record, store_->outputDir(job.record.id), job.last_message);
+  } catch (const std::exception& e) {
+    spdlog::error("job {}: cannot publish to the shared folder: {}", job.record.id, e.what());
   }
 }
 
@@ -756,6 +830,12 @@ RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {
                       p.message == job->last_message ? std::string() : p.message);
       job->last_message = p.message;
     }
+    if (shared_jobs_ && std::chrono::steady_clock::now() - job->last_publish >= kPublishInterval) {
+      // Progress for the other replicas, and their cancel requests, about once a second.
+      job->last_publish = std::chrono::steady_clock::now();
+      publishLocked(*job);
+      if (shared_jobs_->cancelRequested(job->record.id)) job->cancel = true;
+    }
     if (options_.max_job_seconds > 0 &&
         std::chrono::duration<double>(std::chrono::steady_clock::now() - job->started).count() >
             options_.max_job_seconds) {
@@ -842,6 +922,7 @@ void JobManager::finishJob(Job& job, const RunResult& result, Outcome* outcome) 
   }
   pushEventLocked(job, "done", r.fraction,
                   outcome->state == JobState::kSucceeded ? successMessage(result) : outcome->error);
+  publishLocked(job);
 }
 
 void JobManager::setOutcome(JobRecord* r, const Outcome& outcome) {

@@ -25,6 +25,7 @@
 #include "core/job/job_record.h"
 #include "core/job/phase_cache.h"
 #include "core/job/run_shot.h"
+#include "core/job/shared_jobs.h"
 #include "core/job/verified_files.h"
 #include "core/job/volume_cache.h"
 #include "core/shot/shot.h"
@@ -65,7 +66,10 @@ struct JobManagerOptions {
   /// Optional: a folder shared with other servers and farm tasks (`cloudbake run-task
   /// --cache-dir`), possibly on NFS: the result cache lives in shared_dir/cache instead of
   /// state_dir/cache, so a bake one replica made is a hit on every other (core/job/bake_cache.h
-  /// is safe across processes and hosts). Jobs, assets and the lock stay in state_dir.
+  /// is safe across processes and hosts), and every job's record, progress and outputs are
+  /// published to shared_dir/jobs (core/job/shared_jobs.h), so every replica answers get,
+  /// events, output and cancel for any job. Each replica runs the jobs it accepted; its queue,
+  /// assets and lock stay in state_dir.
   std::string shared_dir;
   unsigned worker_threads = 0;       ///< threads of each job's task_arena; 0: all hardware
   unsigned max_concurrent_jobs = 1;  ///< runners
@@ -202,6 +206,12 @@ class JobManager {
   void pushEventLocked(Job& job, const std::string& stage, double fraction,
                        const std::string& message);
   void saveLocked(const Job& job);
+  /// Publishes the job to shared_dir (when set); failures are logged, not fatal.
+  void publishLocked(const Job& job);
+  /// A job another replica published (nullopt without shared_dir or when unknown there).
+  std::optional<JobRecord> foreign(const std::string& id) const;
+  std::vector<JobEvent> foreignEvents(const std::string& id, uint64_t after,
+                                      std::chrono::milliseconds wait, JobRecord* record) const;
   void runnerLoop();
   void runJob(const std::shared_ptr<Job>& job);
   /// The caches and limits every run, and method auto's choice in a plan, use.
@@ -219,6 +229,7 @@ class JobManager {
   std::unique_ptr<JobStore> store_;
   std::unique_ptr<BakeCache> cache_;
   std::unique_ptr<AssetStore> assets_;
+  std::unique_ptr<SharedJobs> shared_jobs_;
   VolumeCache volumes_;
   PhaseCache phases_;
   std::unique_ptr<DirectionIndex> directions_;

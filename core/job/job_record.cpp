@@ -166,6 +166,19 @@ std::vector<JobRecord> JobStore::loadAll() const {
   return records;
 }
 
+std::optional<JobRecord> JobStore::load(const std::string& id) const {
+  if (!isJobId(id)) return std::nullopt;
+  const fs::path file = fs::path(jobDir(id)) / "job.json";
+  std::error_code ec;
+  if (!fs::exists(file, ec)) return std::nullopt;
+  try {
+    return fromJson(parseJsonLimited(readWholeFile(file.string()), file.string()));
+  } catch (const std::exception& e) {
+    spdlog::warn("job store: {}: unreadable record: {}", file.string(), printable(e.what()));
+    return std::nullopt;
+  }
+}
+
 void JobStore::remove(const std::string& id) const {
   std::error_code ec;
   fs::remove_all(jobDir(id), ec);

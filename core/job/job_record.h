@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,8 @@ class JobStore {
   void save(const JobRecord& record) const;
   /// Every record found, oldest first. Unreadable records are logged and skipped.
   std::vector<JobRecord> loadAll() const;
+  /// Job `id`'s record, or nullopt when it has none (or it cannot be read).
+  std::optional<JobRecord> load(const std::string& id) const;
   std::string jobDir(const std::string& id) const;
   std::string inputDir(const std::string& id) const;
   std::string outputDir(const std::string& id) const;

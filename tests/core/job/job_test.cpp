@@ -769,18 +769,20 @@ TEST(JobStore, CorruptRecordIsReportedFailedNotDropped) {
   fs::remove_all(dir);
 }
 
+// A replica: its own state folder `name` under `dir`, and dir/shared shared with the others.
+JobManagerOptions replicaOptions(const fs::path& dir, const std::string& name) {
+  JobManagerOptions o;
+  o.state_dir = (dir / name).string();
+  o.shared_dir = (dir / "shared").string();
+  o.worker_threads = 2;
+  return o;
+}
+
 // Two servers (replicas) with their own state folders on one shared folder: a bake made by one
 // is a cache hit on the other.
 TEST(JobManager, ReplicasOnOneSharedFolderShareTheirBakes) {
   const fs::path dir = freshDir("replicas");
-  auto options = [&](const std::string& name) {
-    JobManagerOptions o;
-    o.state_dir = (dir / name).string();
-    o.shared_dir = (dir / "shared").string();
-    o.worker_threads = 2;
-    return o;
-  };
-  JobManager a(options("a")), b(options("b"));
+  JobManager a(replicaOptions(dir, "a")), b(replicaOptions(dir, "b"));
   SubmitInput in;
   in.shot_json = sphereShot(R"({"method": "single", "light_resolution": 8})");
   const JobRecord first = waitFinished(a, a.submit(in).id);
@@ -792,6 +794,50 @@ TEST(JobManager, ReplicasOnOneSharedFolderShareTheirBakes) {
   EXPECT_EQ(second.bakes_cached, 1);
   EXPECT_TRUE(fs::exists(dir / "shared" / "cache" / "entries"));
   EXPECT_FALSE(fs::exists(dir / "a" / "cache"));
+
+  // Either replica answers for any job: status, events, outputs.
+  const JobRecord seen = b.get(first.id);
+  EXPECT_EQ(seen.state, JobState::kSucceeded);
+  EXPECT_EQ(seen.bakes_computed, 1);
+  const OutputFile here = a.output(first.id, "v.exr"), there = b.output(first.id, "v.exr");
+  EXPECT_EQ(there.sha256, here.sha256);
+  EXPECT_EQ(sha256File(there.path), here.sha256);
+  JobRecord r;
+  const std::vector<JobEvent> events = b.events(first.id, 0, std::chrono::milliseconds(0), &r);
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state, JobState::kSucceeded);
+  EXPECT_TRUE(b.events(first.id, events.back().seq, std::chrono::milliseconds(0), &r).empty());
+  EXPECT_THROW(b.get("j0123456789abcdef"), NotFoundError);
+  EXPECT_THROW(b.output(first.id, "nope.exr"), NotFoundError);
+  fs::remove_all(dir);
+}
+
+// A job one replica runs is cancelled through another within a few seconds, and a damaged
+// published output is refused there as on its own replica.
+TEST(JobManager, AJobIsCancelledThroughAnotherReplica) {
+  const fs::path dir = freshDir("replica_cancel");
+  JobManagerOptions oa = replicaOptions(dir, "a"), ob = replicaOptions(dir, "b");
+  oa.limits.max_samples = 1000000;  // minutes of work: it must still run when cancelled
+  ob.limits.max_samples = oa.limits.max_samples;
+  JobManager a(oa), b(ob);
+  SubmitInput in;
+  in.shot_json = sphereShot(R"({"method": "pathtrace", "samples": 1000000, "max_depth": 1000})");
+  const std::string id = a.submit(in).id;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (b.get(id).state != JobState::kRunning && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_EQ(b.get(id).state, JobState::kRunning);
+  const auto t0 = std::chrono::steady_clock::now();
+  b.cancel(id);
+  const JobRecord done = waitFinished(a, id);
+  EXPECT_EQ(done.state, JobState::kCancelled);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+  for (int i = 0; i < 50 && !b.get(id).terminal(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(b.get(id).state, JobState::kCancelled);
+  EXPECT_THROW(b.output(id, "v.exr"), FailedPreconditionError);
   fs::remove_all(dir);
 }
 
