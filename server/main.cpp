@@ -10,6 +10,7 @@
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdlib>
+#include <filesystem>
 #include <string_view>
 #include <thread>
 
@@ -104,6 +105,35 @@ struct ServerFlags {
   size_t max_streams = 256;
   double keep_jobs_hours = jobs.keep_finished_seconds / 3600.0;
 };
+
+// The farm executor's flags (docs/deployment.md, "Farm").
+void addExecutorOptions(CLI::App& app, ServerFlags* f) {
+  cloudbake::JobManagerOptions& o = f->jobs;
+  app.add_option("--executor", o.executor,
+                 "where jobs run: local (this process) or slurm (farm tasks on the cluster of "
+                 "sbatch; needs --shared-dir; docs/deployment.md)")
+      ->envname("CLOUDBAKE_EXECUTOR")
+      ->check(CLI::IsMember({"local", "slurm"}))
+      ->capture_default_str();
+  app.add_option("--slurm-cloudbake", o.slurm.cloudbake,
+                 "the cloudbake binary as the Slurm nodes run it (default: the one installed "
+                 "beside this server)")
+      ->envname("CLOUDBAKE_SLURM_CLOUDBAKE");
+  app.add_option("--slurm-tasks", o.slurm.tasks, "most farm tasks per stage of a job")
+      ->envname("CLOUDBAKE_SLURM_TASKS")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str();
+  app.add_option("--slurm-cpus-per-task", o.slurm.cpus_per_task, "CPUs each farm task asks")
+      ->envname("CLOUDBAKE_SLURM_CPUS_PER_TASK")
+      ->check(CLI::Range(1, 4096))
+      ->capture_default_str();
+  app.add_option("--slurm-partition", o.slurm.partition, "Slurm partition (default: the default)")
+      ->envname("CLOUDBAKE_SLURM_PARTITION");
+  app.add_option("--slurm-retries", o.slurm.retries, "extra attempts of a failed farm task")
+      ->envname("CLOUDBAKE_SLURM_RETRIES")
+      ->check(CLI::Range(0, 10))
+      ->capture_default_str();
+}
 
 void addServiceOptions(CLI::App& app, ServerFlags* f) {
   cloudbake::JobManagerOptions& o = f->jobs;
@@ -296,6 +326,12 @@ int serve(const ServerFlags& f) {
   cloudbake::JobManagerOptions o = f.jobs;
   cloudbake::server::ServerMetrics metrics;
   o.on_job_finished = [&metrics](const cloudbake::JobFinished& job) { metrics.observe(job); };
+  if (o.slurm.cloudbake.empty()) {
+    // Installed together (bin/cloudbake beside bin/cloudbake-server), as the nodes run it.
+    std::error_code ec;
+    o.slurm.cloudbake =
+        (std::filesystem::read_symlink("/proc/self/exe", ec).parent_path() / "cloudbake").string();
+  }
   std::unique_ptr<cloudbake::JobManager> jobs;
   try {
     jobs = std::make_unique<cloudbake::JobManager>(o);
@@ -368,6 +404,7 @@ int main(int argc, char** argv) {
   CLI::App app{"cloudbake-server: cloud-lighting bake service (gRPC)"};
   ServerFlags flags;
   addServiceOptions(app, &flags);
+  addExecutorOptions(app, &flags);
   addLimitOptions(app, &flags);
   addSecurityOptions(app, &flags);
   addLogOptions(app, &flags);

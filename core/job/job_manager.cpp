@@ -160,6 +160,13 @@ struct JobManager::Prepared {
 
 JobManager::JobManager(JobManagerOptions options) : options_(std::move(options)) {
   if (options_.state_dir.empty()) throw InputError("state_dir: must not be empty");
+  if (options_.executor != "local" && options_.executor != "slurm") {
+    throw InputError("--executor: must be local or slurm, got '" + options_.executor + "'");
+  }
+  if (options_.executor == "slurm" && options_.shared_dir.empty()) {
+    throw InputError("--executor slurm: needs --shared-dir, a folder every node sees");
+  }
+  options_.slurm.shared_dir = options_.shared_dir;
   fs::create_directories(options_.state_dir);
   // One process per state folder: two would share queue files and cache entries unsafely.
   const std::string lock_path = (fs::path(options_.state_dir) / "LOCK").string();
@@ -853,7 +860,11 @@ RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcom
     const int threads =
         options_.worker_threads > 0 ? int(options_.worker_threads) : tbb::task_arena::automatic;
     tbb::task_arena arena(threads);
-    arena.execute([&] { result = runShot(job.shot, ro); });
+    if (options_.executor == "slurm") {
+      arena.execute([&] { result = runShotOnSlurm(sharedShot(job), ro, options_.slurm); });
+    } else {
+      arena.execute([&] { result = runShot(job.shot, ro); });
+    }
   } catch (const Cancelled&) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (job.overtime) {
@@ -875,6 +886,10 @@ RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcom
     outcome->state = JobState::kFailed;
     outcome->error = clientPaths(e.what(), store_->inputDir(job.record.id));
     outcome->error_is_input = true;
+  } catch (const FarmTaskFailed& e) {
+    outcome->state = JobState::kFailed;
+    outcome->error = e.what();
+    spdlog::error("job {}: {}", job.record.id, e.what());
   } catch (const std::exception& e) {
     // Internal details stay in the server log; the client learns where to look.
     outcome->state = JobState::kFailed;
@@ -883,6 +898,29 @@ RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcom
     spdlog::error("job {}: {}", job.record.id, e.what());
   }
   return result;
+}
+
+ShotSpec JobManager::sharedShot(const Job& job) const {
+  const std::string from = store_->inputDir(job.record.id);
+  const std::string to =
+      (fs::path(options_.shared_dir) / "inputs" / job.record.id / "input").string();
+  std::error_code ec;
+  for (const auto& f : fs::recursive_directory_iterator(from, ec)) {
+    if (!f.is_regular_file()) continue;
+    const fs::path dest = fs::path(to) / fs::relative(f.path(), from);
+    if (!fs::exists(dest)) linkOrCopy(f.path().string(), dest.string());
+  }
+  // The shot names its files by absolute path inside its input folder: the same names under
+  // the shared copy.
+  std::string text = serializeShot(job.shot);
+  const std::string quoted = "\"" + from + "/";
+  for (size_t at = 0; (at = text.find(quoted, at)) != std::string::npos;) {
+    text.replace(at, quoted.size(), "\"" + to + "/");
+    at += to.size() + 2;
+  }
+  ParseOptions po;
+  po.source_name = "shot.json";
+  return parseShot(text, "", po);
 }
 
 void JobManager::finishJob(Job& job, const RunResult& result, Outcome* outcome) {

@@ -26,6 +26,7 @@
 #include "core/job/phase_cache.h"
 #include "core/job/run_shot.h"
 #include "core/job/shared_jobs.h"
+#include "core/job/slurm_executor.h"
 #include "core/job/verified_files.h"
 #include "core/job/volume_cache.h"
 #include "core/shot/shot.h"
@@ -71,6 +72,11 @@ struct JobManagerOptions {
   /// events, output and cancel for any job. Each replica runs the jobs it accepted; its queue,
   /// assets and lock stay in state_dir.
   std::string shared_dir;
+  /// "local" (default): jobs run in this process's TBB arena. "slurm": each job runs as farm
+  /// tasks on Slurm (core/job/slurm_executor.h) with `slurm` and shared_dir (required), its
+  /// inputs copied to shared_dir/inputs/<job id> so the nodes can read them.
+  std::string executor = "local";
+  SlurmOptions slurm;
   unsigned worker_threads = 0;       ///< threads of each job's task_arena; 0: all hardware
   unsigned max_concurrent_jobs = 1;  ///< runners
   /// Queued (not running) jobs plus submits and dry runs being prepared (staging assets,
@@ -218,6 +224,8 @@ class JobManager {
   RunOptions autoRunOptions();
   RunOptions runOptions(const std::shared_ptr<Job>& job);
   RunResult runInArena(Job& job, const RunOptions& ro, Outcome* outcome);
+  /// The job's shot with its files copied to the shared folder, for the farm's nodes.
+  ShotSpec sharedShot(const Job& job) const;
   OutputFile recordedOutput(const std::string& id, const std::string& name) const;
   void reportFinished(const Job& job, const RunResult& result, const Outcome& outcome);
   /// Records the outcome durably; a success whose record cannot be saved becomes a failure.

@@ -4,7 +4,8 @@
 #   1. an endless animation split into 11 tasks over Slurm equals `cloudbake render` bit for bit;
 #   2. a task killed with SIGKILL mid-way is retried and the result is still identical;
 #   3. a cancelled plan leaves no task running;
-#   4. a failing task fails the plan, and the report shows its log line.
+#   4. a failing task fails the plan, and the report shows its log line;
+#   5. cloudbake-server --executor slurm runs a job as farm tasks (identical files) and cancels one.
 # Usage: tests/farm/slurm_test.sh [BUILD_DIR]. Needs root, slurm-wlm and munge; skips (exit 0,
 # saying why) where they are absent.
 set -euo pipefail
@@ -138,4 +139,28 @@ set -e
 grep -q "task render.000: failed" "$work/fails.err" || fail "no failed task reported: $(cat "$work/fails.err")"
 grep -q "moved.vdb" "$work/fails.err" || fail "the report does not show the log line: $(cat "$work/fails.err")"
 grep -q "attempt 2" "$(plan_logs "$work/fails.plan.json")/render.log" || fail "not retried"
+echo "== 5. cloudbake-server --executor slurm runs each job as farm tasks"
+port=$(python3 -c "import socket; s = socket.socket(); s.bind(('127.0.0.1', 0)); print(s.getsockname()[1])")
+cloudctl=("$build/client/cloudctl" --server "127.0.0.1:$port" --timeout 300)
+"$build/server/cloudbake-server" --listen "127.0.0.1:$port" --cache-dir "$work/server-state" \
+  --shared-dir "$work/server-shared" --executor slurm --slurm-cloudbake "$cloudbake" \
+  --slurm-tasks 4 --slurm-cpus-per-task 1 --log-level warn 2>"$work/server.log" &
+server_pid=$!
+trap 'kill $server_pid 2>/dev/null || true; cleanup' EXIT
+"${cloudctl[@]}" --wait-for-server health >/dev/null
+"${cloudctl[@]}" submit "$work/anim.json" --out "$work/server-out" --quiet >/dev/null ||
+  fail "the server's Slurm job failed: $(tail -5 "$work/server.log")"
+same_files "$work/single" "$work/server-out"
+job=$("${cloudctl[@]}" submit "$work/cancel.json" --detach)
+wait_for_task render.000 >/dev/null
+"${cloudctl[@]}" cancel "$job" >/dev/null
+for _ in $(seq 100); do
+  [[ $("${cloudctl[@]}" --json status "$job" | python3 -c "import json,sys; print(json.load(sys.stdin)['state'])") == CANCELLED ]] && break
+  sleep 0.1
+done
+"${cloudctl[@]}" --json status "$job" | grep -q '"CANCELLED"' || fail "the job was not cancelled"
+for _ in $(seq 100); do pgrep -f "run-task $work/server-shared" >/dev/null || break; sleep 0.1; done
+! pgrep -f "run-task $work/server-shared" >/dev/null || fail "a farm task still runs after the job's cancel"
+kill "$server_pid"
+wait "$server_pid" || fail "the server did not exit cleanly"
 echo "slurm_test: all passed"
