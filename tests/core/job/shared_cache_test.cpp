@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -192,6 +193,45 @@ TEST(SharedCache, ManyProcessesOnOneKeyComputeItOnce) {
     EXPECT_EQ(got, content) << "every process reads the one entry";
   }
   EXPECT_EQ(computed, 1);
+  fs::remove_all(dir);
+}
+
+// Three keys, each first taken by a process killed mid-write, then wanted by two more at once:
+// every key is computed once after the kill, and every process reads its key's whole content.
+TEST(SharedCache, KilledHoldersAndConcurrentReadersNeverSeeACorruptEntry) {
+  const fs::path dir = freshDir("stress");
+  { BakeCache create(dir.string(), fastOptions()); }
+  std::vector<std::unique_ptr<Worker>> killed, normal;
+  std::vector<std::string> keys = {"k0", "k1", "k2"};
+  for (const std::string& k : keys) {
+    killed.push_back(std::make_unique<Worker>(dir, k, 200, "content-of-" + k,
+                                              (dir / ("killed-" + k)).string(), true));
+    ASSERT_TRUE(waitFor(dir / "leases" / (k + ".lease"), milliseconds(10000)));
+  }
+  for (int round = 0; round < 2; ++round) {
+    for (const std::string& k : keys) {
+      normal.push_back(
+          std::make_unique<Worker>(dir, k, 300, "content-of-" + k,
+                                   (dir / ("w" + std::to_string(round) + "-" + k)).string()));
+    }
+  }
+  for (auto& w : killed) w->wait();
+  std::map<std::string, int> computed;
+  for (size_t i = 0; i < normal.size(); ++i) {
+    EXPECT_EQ(normal[i]->wait(), 0);
+    const std::string k = keys[i % keys.size()];
+    const std::string out = readAll(normal[i]->out);
+    EXPECT_EQ(out.substr(out.find(' ') + 1), "content-of-" + k + "\n") << "a corrupt read";
+    computed[k] += out.rfind("computed ", 0) == 0;
+  }
+  for (const std::string& k : keys) EXPECT_EQ(computed[k], 1) << k;
+  BakeCache after(dir.string(), fastOptions());
+  for (const std::string& k : keys) {
+    const auto entry = after.lookup(k);
+    ASSERT_TRUE(entry.has_value()) << k;
+    EXPECT_EQ(readAll(*entry + "/data"), "content-of-" + k);
+  }
+  EXPECT_EQ(after.stats().corrupt, 0u);
   fs::remove_all(dir);
 }
 

@@ -125,6 +125,17 @@ TEST(TaskPlan, ABakeMethodSplitByViewsEqualsTheWholeRun) {
   expectSplitEqualsWhole(sphereShot("single", 2), 2, 4);  // bake, 2 render, gather
 }
 
+TEST(TaskPlan, PhotonAndPointcloudSplitByViewsEqualTheWholeRun) {
+  std::string photon = sphereShot("photon", 2);
+  photon.replace(photon.find("\"light_resolution\": 24"), 22,
+                 "\"light_resolution\": 24, \"photons\": 20000");
+  expectSplitEqualsWhole(photon, 3, 5);  // bake, 3 render, gather
+  std::string points = sphereShot("pointcloud", 2);
+  points.replace(points.find("\"light_resolution\": 24"), 22,
+                 "\"light_resolution\": 24, \"points\": 2048, \"passes\": 2");
+  expectSplitEqualsWhole(points, 2, 4);
+}
+
 TEST(TaskPlan, ThePathTracerSplitByViewsEqualsTheWholeRun) {
   std::string shot = sphereShot("pathtrace", 4);
   shot.replace(shot.find("\"vdb\": true"), 11, "\"vdb\": true, \"vdb_voxel_size\": 0.1");
