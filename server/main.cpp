@@ -104,6 +104,7 @@ struct ServerFlags {
   unsigned max_views = unsigned(jobs.limits.max_views);
   size_t max_streams = 256;
   double keep_jobs_hours = jobs.keep_finished_seconds / 3600.0;
+  double scrub_hours = jobs.scrub_interval_seconds / 3600.0;
 };
 
 // The farm executor's flags (docs/deployment.md, "Farm").
@@ -185,6 +186,12 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
       ->envname("CLOUDBAKE_KEEP_JOBS_HOURS")
       ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
+  app.add_option("--scrub-hours", f->scrub_hours,
+                 "every stored output and asset is hashed again this often: corrupt assets are "
+                 "dropped, corrupt outputs rebuilt from the cache when they can be (0: never)")
+      ->envname("CLOUDBAKE_SCRUB_HOURS")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
   app.add_option("--max-finished-jobs", o.max_finished_jobs,
                  "finished jobs kept at most; the oldest beyond it are pruned (0: no limit)")
       ->envname("CLOUDBAKE_MAX_FINISHED_JOBS")
@@ -264,6 +271,7 @@ void addLogOptions(CLI::App& app, ServerFlags* f) {
 
 void applyLimitFlags(ServerFlags* f) {
   f->jobs.keep_finished_seconds = f->keep_jobs_hours * 3600.0;
+  f->jobs.scrub_interval_seconds = f->scrub_hours * 3600.0;
   f->jobs.limits.max_image_pixels = int64_t(f->max_image_pixels);
   f->jobs.limits.max_samples = int64_t(f->max_samples);
   f->jobs.limits.max_views = int(f->max_views);

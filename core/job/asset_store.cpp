@@ -40,6 +40,20 @@ std::string AssetStore::find(const std::string& sha256) const {
   return {};
 }
 
+std::pair<size_t, size_t> AssetStore::scrub() const {
+  size_t checked = 0;
+  const uint64_t before = corrupt_;
+  std::error_code ec;
+  for (const auto& f : fs::directory_iterator(root_, ec)) {
+    const std::string name = f.path().filename().string();
+    if (!isSha256Hex(name)) continue;
+    verified_.forget(f.path().string());
+    find(name);
+    ++checked;
+  }
+  return {checked, size_t(corrupt_ - before)};
+}
+
 AssetStore::Writer::Writer(const AssetStore& store, std::string sha256, uint64_t declared_size)
     : store_(store),
       sha256_(std::move(sha256)),

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <utility>
 
 #include "core/job/sha256.h"
 #include "core/job/verified_files.h"
@@ -23,6 +24,9 @@ class AssetStore {
   /// use in this process and whenever the file changed), else empty. A corrupt asset is removed
   /// and counted, so the next upload of the right bytes stores it again.
   std::string find(const std::string& sha256) const;
+  /// Hashes every stored asset again, whatever its size and time say (bit rot leaves both),
+  /// dropping and counting the corrupt ones. Returns {assets checked, assets dropped}.
+  std::pair<size_t, size_t> scrub() const;
   /// Assets found corrupt and removed since the store was opened.
   uint64_t corruptDropped() const { return corrupt_; }
 

@@ -131,6 +131,11 @@ SubmitInput readSubmission(const std::string& job_dir) {
 
 }  // namespace
 
+// A damaged output found by a fetch is rebuilt from the cache within this long, else refused; the
+// scrub gives a rebuild longer.
+constexpr double kRebuildSecondsOnFetch = 10;
+constexpr double kRebuildSecondsOnScrub = 600;
+
 // How often a running job's progress is published to the shared folder (and another replica's
 // cancel request looked for).
 constexpr auto kPublishInterval = std::chrono::seconds(1);
@@ -228,6 +233,7 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
   prune();
   const unsigned runners = std::max(1u, options_.max_concurrent_jobs);
   for (unsigned i = 0; i < runners; ++i) runners_.emplace_back([this] { runnerLoop(); });
+  if (options_.scrub_interval_seconds > 0) scrubber_ = std::thread([this] { scrubberLoop(); });
 }
 
 void JobManager::prune() {
@@ -280,6 +286,7 @@ JobManager::~JobManager() {
   }
   cv_.notify_all();
   for (std::thread& t : runners_) t.join();
+  if (scrubber_.joinable()) scrubber_.join();
   ::close(lock_fd_);  // releases the flock
 }
 
@@ -613,11 +620,12 @@ std::vector<JobEvent> JobManager::events(const std::string& id, uint64_t after,
   return out;
 }
 
-OutputFile JobManager::output(const std::string& id, const std::string& name) const {
+OutputFile JobManager::output(const std::string& id, const std::string& name) {
   OutputFile out = recordedOutput(id, name);
   // Served only as recorded: a file changed since it was written (a bad disk, a hand) would
-  // stream under its original checksum.
-  if (!verified_outputs_.check(out.path, out.sha256)) {
+  // stream under its original checksum. Rebuilt from the cache when that is quick.
+  if (!verified_outputs_.check(out.path, out.sha256) &&
+      !rebuildOutput(id, out, kRebuildSecondsOnFetch)) {
     ++outputs_corrupt_;
     spdlog::error("job {}: output '{}' does not match its recorded size and SHA-256", id, name);
     throw FailedPreconditionError("job " + id + ": output '" + name +
@@ -654,6 +662,135 @@ OutputFile JobManager::recordedOutput(const std::string& id, const std::string& 
   for (const OutputFile& f : record.outputs) names += (names.empty() ? "" : ", ") + f.name;
   throw NotFoundError("job " + id + " has no output '" + name.substr(0, 256) +
                       "' (it has: " + names + ")");
+}
+
+namespace {
+
+// The farm scope (core/methods/run_types.h) whose run writes output `name` of `shot`: its view
+// (or, for an animation, its frame) or the shot's own files; nullopt when none writes it alone.
+std::optional<RunScope> scopeWriting(const ShotSpec& shot, const std::string& name) {
+  using Part = RunScope::Part;
+  if (methodOf(shot).info().animates) {
+    if (name == "animation.json") return RunScope{Part::kGather, 0, 0};
+    const size_t dot2 = name.rfind('.');
+    const size_t dot1 =
+        dot2 == std::string::npos || dot2 == 0 ? std::string::npos : name.rfind('.', dot2 - 1);
+    if (dot1 == std::string::npos || dot2 - dot1 < 5 || dot2 - dot1 > 8) return std::nullopt;
+    const std::string digits = name.substr(dot1 + 1, dot2 - dot1 - 1);
+    if (!std::all_of(digits.begin(), digits.end(), ::isdigit)) return std::nullopt;
+    const int frame = std::stoi(digits);
+    return RunScope{Part::kRender, frame, frame + 1};
+  }
+  if (name == "bake.vdb") return RunScope{Part::kGather, 0, 0};
+  for (size_t i = 0; i < shot.views.size(); ++i) {
+    if (shot.views[i].name + ".exr" == name) return RunScope{Part::kRender, int(i), int(i) + 1};
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+// What a rebuild of `scope` reads is in the cache: the precompute, the light bake, or the view
+// (pathtrace; its density VDB for bake.vdb). A rebuild never computes scattering anew.
+bool JobManager::inCache(const ShotSpec& shot, const RunScope& scope) {
+  const ShotCacheKeys keys = computeCacheKeys(shot);
+  const MethodInfo& info = methodOf(shot).info();
+  std::string key = info.animates                           ? keys.precompute
+                    : info.bakes_light                      ? keys.light
+                    : scope.part == RunScope::Part::kGather ? keys.vdb
+                                                            : keys.views.at(size_t(scope.begin));
+  return !key.empty() && cache_->lookup(key).has_value();
+}
+
+bool JobManager::stopping() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return stopping_;
+}
+
+bool JobManager::rebuildOutput(const std::string& id, const OutputFile& f, double budget) {
+  std::shared_ptr<Job> job;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = jobs_.find(id);
+    if (it == jobs_.end()) return false;  // another replica's: it rebuilds its own
+    job = it->second;
+  }
+  const std::optional<RunScope> scope = scopeWriting(job->shot, f.name);
+  if (!scope || isAutoShot(job->shot)) return false;  // auto would choose again
+  if (!inCache(job->shot, *scope)) return false;
+  RunOptions ro = autoRunOptions();
+  ro.cache = cache_.get();
+  ro.directions = directions_.get();
+  ro.sun_tolerance_deg = job->sun_tolerance_deg;
+  ro.scope = *scope;
+  ro.out_dir = (fs::path(options_.state_dir) / "tmp" / ("rebuild-" + uniqueSuffix())).string();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(budget);
+  ro.progress = [&](const RunProgress&) {
+    return std::chrono::steady_clock::now() < deadline && !stopping();
+  };
+  bool rebuilt = false;
+  std::error_code ec;
+  try {
+    tbb::task_arena arena(options_.worker_threads > 0 ? int(options_.worker_threads)
+                                                      : tbb::task_arena::automatic);
+    arena.execute([&] { runShot(job->shot, ro); });
+    const fs::path from = fs::path(ro.out_dir) / f.name,
+                   to = fs::path(store_->outputDir(id)) / f.name;
+    // Only the recorded bytes go back: a file that cannot be made again bit for bit (a VDB
+    // written anew carries a fresh UUID) stays refused.
+    if (fs::exists(from) && sha256File(from.string()) == f.sha256) {
+      fs::rename(from, to);
+      verified_outputs_.remember(to.string());
+      rebuilt = true;
+    }
+  } catch (const std::exception& e) {
+    spdlog::warn("job {}: rebuilding output '{}' failed: {}", id, f.name, printable(e.what()));
+  }
+  fs::remove_all(ro.out_dir, ec);
+  spdlog::warn("job {}: output '{}' was damaged; {}", id, f.name,
+               rebuilt ? "rebuilt from the cache" : "it could not be rebuilt bit for bit");
+  return rebuilt;
+}
+
+ScrubReport JobManager::scrub() {
+  ScrubReport report;
+  std::vector<std::pair<std::string, OutputFile>> outputs;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& [id, job] : jobs_) {
+      if (job->record.state != JobState::kSucceeded) continue;
+      for (OutputFile f : job->record.outputs) {
+        f.path = (fs::path(store_->outputDir(id)) / f.name).string();
+        outputs.push_back({id, f});
+      }
+    }
+  }
+  for (const auto& [id, f] : outputs) {
+    if (stopping()) break;
+    ++report.outputs_checked;
+    verified_outputs_.forget(f.path);  // bit rot changes neither size nor time
+    if (verified_outputs_.check(f.path, f.sha256)) continue;
+    ++report.outputs_damaged;
+    ++outputs_corrupt_;
+    if (rebuildOutput(id, f, kRebuildSecondsOnScrub)) ++report.outputs_rebuilt;
+  }
+  std::tie(report.assets_checked, report.assets_dropped) = assets_->scrub();
+  spdlog::info(
+      "scrub: {} output(s) checked, {} damaged, {} rebuilt; {} asset(s) checked, {} dropped",
+      report.outputs_checked, report.outputs_damaged, report.outputs_rebuilt, report.assets_checked,
+      report.assets_dropped);
+  return report;
+}
+
+void JobManager::scrubberLoop() {
+  const auto interval = std::chrono::duration<double>(options_.scrub_interval_seconds);
+  std::unique_lock<std::mutex> lock(mutex_);
+  for (;;) {
+    if (cv_.wait_for(lock, interval, [&] { return stopping_; })) return;
+    lock.unlock();
+    scrub();
+    lock.lock();
+  }
 }
 
 JobManagerStats JobManager::stats() const {

@@ -96,6 +96,10 @@ struct JobManagerOptions {
   double keep_finished_seconds = 7 * 86400.0;
   size_t max_finished_jobs = 10000;
   double prune_grace_seconds = 600;
+  /// Every stored output of a finished job and every uploaded asset is hashed again this often
+  /// (seconds; 0: never), whatever its size and time say: a corrupt asset is dropped (the next
+  /// upload stores it again), a corrupt output rebuilt from the cache when it can be.
+  double scrub_interval_seconds = 86400;
   JobLimits limits;
   /// Optional: called by the runner once a job's final record is saved (not under the
   /// manager's lock; it must not call back into the manager).
@@ -130,6 +134,15 @@ struct JobPlan {
   std::string bake_key;
   std::vector<std::string> components;  ///< what will be computed, one line each
   bool bake_cached = false;             ///< single/pointcloud: the light is already baked
+};
+
+/// What one scrub found (JobManager::scrub).
+struct ScrubReport {
+  size_t outputs_checked = 0;
+  size_t outputs_damaged = 0;
+  size_t outputs_rebuilt = 0;  ///< of the damaged: rebuilt from the cache, bit for bit
+  size_t assets_checked = 0;
+  size_t assets_dropped = 0;
 };
 
 /// One progress event of a job. `seq` increases by one per job from 1; `eta_s` < 0: unknown.
@@ -194,7 +207,11 @@ class JobManager {
   /// Absolute path and description of output `name` of a SUCCEEDED job, once the file is checked
   /// against its recorded SHA-256 (on first use and whenever it changed). Throws NotFoundError
   /// (job or name), FailedPreconditionError (job not succeeded, or the file is damaged).
-  OutputFile output(const std::string& id, const std::string& name) const;
+  OutputFile output(const std::string& id, const std::string& name);
+
+  /// Hashes every output of this replica's succeeded jobs and every asset again (the scrub the
+  /// options schedule; callable at any time), rebuilding damaged outputs from the cache.
+  ScrubReport scrub();
 
   AssetStore& assets() { return *assets_; }
   JobManagerStats stats() const;
@@ -227,6 +244,12 @@ class JobManager {
   /// The job's shot with its files copied to the shared folder, for the farm's nodes.
   ShotSpec sharedShot(const Job& job) const;
   OutputFile recordedOutput(const std::string& id, const std::string& name) const;
+  /// Runs the part of job `id`'s shot that writes output `f` (a farm task's scope) with the
+  /// cache, within `budget` seconds, and puts the file back when it hashes as recorded.
+  bool rebuildOutput(const std::string& id, const OutputFile& f, double budget);
+  bool stopping() const;
+  bool inCache(const ShotSpec& shot, const RunScope& scope);
+  void scrubberLoop();
   void reportFinished(const Job& job, const RunResult& result, const Outcome& outcome);
   /// Records the outcome durably; a success whose record cannot be saved becomes a failure.
   void finishJob(Job& job, const RunResult& result, Outcome* outcome);
@@ -251,6 +274,7 @@ class JobManager {
   size_t running_ = 0;
   bool stopping_ = false;
   std::vector<std::thread> runners_;
+  std::thread scrubber_;
   int lock_fd_ = -1;
   std::atomic<uint64_t> scatter_computations_{0}, views_from_cache_{0}, bakes_from_cache_{0},
       submitted_{0};

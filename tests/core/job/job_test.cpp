@@ -722,19 +722,37 @@ TEST(AssetStore, CorruptAssetIsDroppedAndTheNextUploadStoresIt) {
   fs::remove_all(dir);
 }
 
-// An output changed on disk after it was written is refused with a clear reason instead of
-// being streamed under its original checksum.
-TEST(JobManager, DamagedOutputIsRefusedNotServed) {
-  const fs::path dir = freshDir("damaged");
+JobManagerOptions localOptions(const fs::path& dir) {
   JobManagerOptions o;
   o.state_dir = dir.string();
   o.worker_threads = 2;
-  JobManager jobs(o);
+  return o;
+}
+
+// A succeeded job of method single (its bake in the cache); "" when it did not succeed.
+std::string bakedJob(JobManager& jobs) {
   SubmitInput in;
   in.shot_json = sphereShot(R"({"method": "single", "light_resolution": 8})");
   const std::string id = jobs.submit(in).id;
-  ASSERT_EQ(waitFinished(jobs, id).state, JobState::kSucceeded);
+  return waitFinished(jobs, id).state == JobState::kSucceeded ? id : "";
+}
+
+// An output changed on disk after it was written is rebuilt from the cache, else refused with a
+// clear reason instead of being streamed under its original checksum.
+TEST(JobManager, DamagedOutputIsRebuiltFromTheCacheElseRefused) {
+  const fs::path dir = freshDir("damaged");
+  JobManager jobs(localOptions(dir));
+  const std::string id = bakedJob(jobs);
+  ASSERT_FALSE(id.empty());
   const OutputFile good = jobs.output(id, "v.exr");
+  const std::string bytes = readWholeFile(good.path);
+  flipBytes(good.path, 16);
+  // The bake is in the cache: the view is rendered from it again, bit for bit, and served.
+  const OutputFile rebuilt = jobs.output(id, "v.exr");
+  EXPECT_EQ(readWholeFile(rebuilt.path), bytes);
+  EXPECT_EQ(jobs.stats().outputs_corrupt, 0u);
+  // Without it, a damaged output is refused, never streamed as if intact.
+  fs::remove_all(dir / "cache" / "entries");
   flipBytes(good.path, 16);
   try {
     jobs.output(id, "v.exr");
@@ -744,6 +762,43 @@ TEST(JobManager, DamagedOutputIsRefusedNotServed) {
     EXPECT_EQ(std::string(e.what()).find(dir.string()), std::string::npos) << e.what();
   }
   EXPECT_EQ(jobs.stats().outputs_corrupt, 1u);
+  fs::remove_all(dir);
+}
+
+// Bit rot keeps a file's size and time, so a fetch (which rehashes only changed files) would
+// not see it: the scrub rehashes everything, rebuilds outputs and drops assets.
+TEST(JobManager, TheScrubFindsBitRotRebuildsOutputsAndDropsAssets) {
+  const fs::path dir = freshDir("scrub");
+  JobManager jobs(localOptions(dir));
+  const std::string id = bakedJob(jobs);
+  ASSERT_FALSE(id.empty());
+  const std::string asset = "asset bytes";
+  {
+    AssetStore::Writer w(jobs.assets(), sha256Hex(asset), asset.size());
+    w.write(asset.data(), asset.size());
+    w.finish();
+  }
+  const std::string asset_path = jobs.assets().find(sha256Hex(asset));
+  ASSERT_FALSE(asset_path.empty());
+  const OutputFile out = jobs.output(id, "v.exr");
+  const std::string bytes = readWholeFile(out.path);
+  auto rot = [](const std::string& path) {
+    const auto t = fs::last_write_time(path);
+    flipBytes(path, 4);
+    fs::last_write_time(path, t);
+  };
+  rot(out.path);
+  rot(asset_path);
+  EXPECT_EQ(readWholeFile(jobs.output(id, "v.exr").path), readWholeFile(out.path))
+      << "unchanged size and time: a fetch does not rehash";
+  const ScrubReport r = jobs.scrub();
+  EXPECT_EQ(r.outputs_damaged, 1u);
+  EXPECT_EQ(r.outputs_rebuilt, 1u);
+  EXPECT_EQ(r.assets_checked, 1u);
+  EXPECT_EQ(r.assets_dropped, 1u);
+  EXPECT_EQ(readWholeFile(out.path), bytes);
+  EXPECT_TRUE(jobs.assets().find(sha256Hex(asset)).empty());
+  EXPECT_EQ(jobs.scrub().outputs_damaged, 0u);
   fs::remove_all(dir);
 }
 
