@@ -103,6 +103,8 @@ void toProto(const JobManagerStats& s, v1::ServerStats* out) {
   out->set_cache_hits(s.cache.hits);
   out->set_cache_misses(s.cache.misses);
   out->set_cache_shared(s.cache.shared);
+  out->set_cache_shared_across_processes(s.cache.shared_across_processes);
+  out->set_cache_leases_taken_over(s.cache.leases_taken_over);
   out->set_cache_corrupt_dropped(s.cache.corrupt);
   out->set_cache_evicted(s.cache.evicted);
   out->set_cache_entries(s.cache.entries);

@@ -145,6 +145,12 @@ std::vector<MetricFamily> ServerMetrics::Snapshot::collectLocked() const {
       single("cloudbake_cache_misses_total", "Cache lookups computed", kC, s.cache.misses));
   out.push_back(single("cloudbake_cache_shared_total",
                        "Requests that waited for an identical computation", kC, s.cache.shared));
+  out.push_back(single("cloudbake_cache_shared_across_processes_total",
+                       "Of them, waits on another process's lease (a replica, a farm task)", kC,
+                       s.cache.shared_across_processes));
+  out.push_back(single("cloudbake_cache_leases_taken_over_total",
+                       "Computations of a key whose lease holder died or stalled", kC,
+                       s.cache.leases_taken_over));
   out.push_back(single("cloudbake_cache_evictions_total", "Entries removed by --cache-size", kC,
                        s.cache.evicted));
   out.push_back(single("cloudbake_cache_corrupt_dropped_total",

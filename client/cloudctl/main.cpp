@@ -806,6 +806,8 @@ void printInfoJson(const Client& c, const v1::ServerInfo& reply) {
                 {"cache_hits", s.cache_hits()},
                 {"cache_misses", s.cache_misses()},
                 {"cache_shared", s.cache_shared()},
+                {"cache_shared_across_processes", s.cache_shared_across_processes()},
+                {"cache_leases_taken_over", s.cache_leases_taken_over()},
                 {"cache_corrupt_dropped", s.cache_corrupt_dropped()},
                 {"cache_evicted", s.cache_evicted()},
                 {"cache_entries", s.cache_entries()},

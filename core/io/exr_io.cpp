@@ -180,13 +180,6 @@ std::pair<int, std::string> channelOrder(const std::string& base) {
   return {5, base};
 }
 
-std::string uniqueTempPath(const std::string& path) {
-  static std::atomic<unsigned> counter{0};
-  std::ostringstream os;
-  os << path << ".tmp." << ::getpid() << "." << counter++;
-  return os.str();
-}
-
 // Before Imf::InputFile sizes anything from an untrusted header (the fuzzing section of
 // docs/api.md).
 void checkExrHeader(const std::string& path) {
@@ -259,7 +252,7 @@ void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
     }
   }
 
-  const std::string tmp = uniqueTempPath(path);
+  const std::string tmp = temporaryNameFor(path);
   try {
     // Our own stream, checked at the end: OpenEXR closes its own file stream unchecked in a
     // destructor, so a full disk could cut the last buffered bytes off a file reported

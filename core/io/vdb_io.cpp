@@ -187,7 +187,7 @@ class CheckedVdbArchive : public openvdb::io::Archive {
 void writeVdbFileAtomically(const std::string& path, const openvdb::GridPtrVec& grids,
                             const openvdb::MetaMap& meta) {
   initOpenVdb();
-  const std::string tmp = path + ".tmp";
+  const std::string tmp = temporaryNameFor(path);
   try {
     std::ofstream os;
     os.exceptions(std::ios::failbit | std::ios::badbit);

@@ -1,7 +1,9 @@
 #include "core/job/bake_cache.h"
 
+#include <fcntl.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -25,9 +27,12 @@ using Json = nlohmann::json;
 namespace {
 constexpr const char* kManifest = "MANIFEST.json";
 
+// Host and pid namespace, with '/' (not allowed in a folder name) spelled '~'.
 std::string thisHost() {
-  const std::string holder = leaseHolderName();
-  return holder.substr(0, holder.rfind(':'));
+  std::string holder = leaseHolderName();
+  holder = holder.substr(0, holder.rfind(':'));
+  std::replace(holder.begin(), holder.end(), '/', '~');
+  return holder;
 }
 
 // Staging folders are named <host>@<pid>-<time>-<n> (uniqueSuffix). Debris: this host's whose
@@ -180,10 +185,14 @@ bool BakeCache::verifyLocked(const std::string& key) {
   return ok;
 }
 
+// The file server's clock sets the time (utimensat with no time given: NFS sends "set to server
+// time"), so uses and their age are judged on one clock whatever the hosts' clocks say; it
+// also needs only write access, not ownership, when several users share the folder.
+static void touchNow(const fs::path& path) { ::utimensat(AT_FDCWD, path.c_str(), nullptr, 0); }
+
 void BakeCache::touch(const std::string& key) {
   index_[key].last_use = ++clock_;
-  std::error_code ec;
-  fs::last_write_time(fs::path(entryDir(key)) / kManifest, fs::file_time_type::clock::now(), ec);
+  touchNow(fs::path(entryDir(key)) / kManifest);
 }
 
 std::optional<std::string> BakeCache::lookup(const std::string& key) {
@@ -218,7 +227,17 @@ void BakeCache::commit(const std::string& key, const std::string& staging) {
   }
   std::error_code ec;
   fs::rename(staging, entryDir(key), ec);
-  if (ec) throw std::runtime_error("cache: cannot commit entry " + key + ": " + ec.message());
+  if (ec) {
+    // Another process committed the key meanwhile (its entry may not have been visible yet: NFS
+    // caches "not found" for a while): keep the one there when it verifies.
+    std::error_code rm;
+    fs::remove_all(staging, rm);
+    if (fs::exists(entryDir(key), rm) && presentLocked(key) && verifyLocked(key)) {
+      touch(key);
+      return;
+    }
+    throw std::runtime_error("cache: cannot commit entry " + key + ": " + ec.message());
+  }
   auto it = index_.find(key);
   if (it != index_.end()) stats_.bytes -= it->second.bytes;
   index_[key] = {bytes, ++clock_};
@@ -228,11 +247,21 @@ void BakeCache::commit(const std::string& key, const std::string& staging) {
   evictLocked();
 }
 
+// Now on the file server's clock: the time a file touched now gets.
+fs::file_time_type BakeCache::serverNow() const {
+  const fs::path clock = fs::path(root_) / "clock";
+  std::error_code ec;
+  if (!fs::exists(clock, ec)) writeFileAtomic(clock.string(), "");
+  touchNow(clock);
+  const auto t = fs::last_write_time(clock, ec);
+  return ec ? fs::file_time_type::clock::now() : t;
+}
+
 // Used within min_evict_age by any process: the manifest's mtime is touched on every use.
-bool BakeCache::recentlyUsed(const std::string& key) const {
+bool BakeCache::recentlyUsed(const std::string& key, fs::file_time_type now) const {
   std::error_code ec;
   const auto t = fs::last_write_time(fs::path(entryDir(key)) / kManifest, ec);
-  return !ec && fs::file_time_type::clock::now() - t < options_.min_evict_age;
+  return !ec && now - t < options_.min_evict_age;
 }
 
 void BakeCache::evictLocked() {
@@ -245,9 +274,10 @@ void BakeCache::evictLocked() {
     if (e.last_use != newest && !in_flight_.count(k)) by_age.emplace_back(e.last_use, k);
   }
   std::sort(by_age.begin(), by_age.end());
+  const fs::file_time_type now = serverNow();
   for (const auto& [use, key] : by_age) {
     if (stats_.bytes <= max_bytes_) break;
-    if (recentlyUsed(key)) continue;
+    if (recentlyUsed(key, now)) continue;
     const uint64_t bytes = index_[key].bytes;
     dropLocked(key);
     spdlog::debug("cache: evicted {} ({} bytes)", key, bytes);

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <map>
 #include <memory>
@@ -95,7 +96,8 @@ class BakeCache {
   void computeInto(const std::string& key, const ComputeFn& compute);
   void commit(const std::string& key, const std::string& staging);
   void evictLocked();
-  bool recentlyUsed(const std::string& key) const;
+  bool recentlyUsed(const std::string& key, std::filesystem::file_time_type now) const;
+  std::filesystem::file_time_type serverNow() const;
   void touch(const std::string& key);
   void removeDebris();
   std::string entryDir(const std::string& key) const;

@@ -265,7 +265,11 @@ void JobManager::prune() {
   }
   for (const std::string& id : doomed) {
     store_->remove(id);
-    if (shared_jobs_) shared_jobs_->remove(id);
+    if (shared_jobs_) {
+      shared_jobs_->remove(id);
+      std::error_code ec;
+      fs::remove_all(fs::path(options_.shared_dir) / "inputs" / id, ec);
+    }
   }
   if (!doomed.empty()) {
     spdlog::info("job store: pruned {} finished job(s) (--keep-jobs-hours, --max-finished-jobs)",
@@ -908,6 +912,15 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
   const std::string& id = job->record.id;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    if (shared_jobs_ && shared_jobs_->cancelRequested(id)) {
+      // Cancelled through another replica while it waited in this one's queue.
+      job->record.state = JobState::kCancelled;
+      job->record.finished = unixNow();
+      job->record.stage = "cancelled";
+      saveLocked(*job);
+      pushEventLocked(*job, "cancelled", 0, "cancelled while queued");
+      return;
+    }
     job->record.state = JobState::kRunning;
     job->record.started = unixNow();
     job->record.stage = "build";
@@ -929,6 +942,7 @@ void JobManager::runJob(const std::shared_ptr<Job>& job) {
     std::error_code ec;
     fs::remove_all(ro.out_dir, ec);
   }
+  publishFinished(*job);
   reportFinished(*job, result, outcome);
   prune();
 }
@@ -1021,7 +1035,13 @@ RunResult JobManager::runInArena(Job& job, const RunOptions& ro, Outcome* outcom
     spdlog::error("job {}: {}", job.record.id, e.detail());
   } catch (const InputError& e) {
     outcome->state = JobState::kFailed;
+    // Files are named as the client named them, whichever copy of the input a run read.
     outcome->error = clientPaths(e.what(), store_->inputDir(job.record.id));
+    if (!options_.shared_dir.empty()) {
+      outcome->error = clientPaths(
+          outcome->error,
+          (fs::path(options_.shared_dir) / "inputs" / job.record.id / "input").string());
+    }
     outcome->error_is_input = true;
   } catch (const FarmTaskFailed& e) {
     outcome->state = JobState::kFailed;
@@ -1097,7 +1117,24 @@ void JobManager::finishJob(Job& job, const RunResult& result, Outcome* outcome) 
   }
   pushEventLocked(job, "done", r.fraction,
                   outcome->state == JobState::kSucceeded ? successMessage(result) : outcome->error);
-  publishLocked(job);
+}
+
+// The final record and the outputs, published outside the lock: linking or copying outputs to
+// another file system must not stall every call.
+void JobManager::publishFinished(const Job& job) {
+  if (!shared_jobs_) return;
+  JobRecord record;
+  std::string message;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    record = job.record;
+    message = job.last_message;
+  }
+  try {
+    shared_jobs_->publish(record, store_->outputDir(record.id), message);
+  } catch (const std::exception& e) {
+    spdlog::error("job {}: cannot publish to the shared folder: {}", record.id, e.what());
+  }
 }
 
 void JobManager::setOutcome(JobRecord* r, const Outcome& outcome) {

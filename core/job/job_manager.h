@@ -231,6 +231,7 @@ class JobManager {
   void saveLocked(const Job& job);
   /// Publishes the job to shared_dir (when set); failures are logged, not fatal.
   void publishLocked(const Job& job);
+  void publishFinished(const Job& job);
   /// A job another replica published (nullopt without shared_dir or when unknown there).
   std::optional<JobRecord> foreign(const std::string& id) const;
   std::vector<JobEvent> foreignEvents(const std::string& id, uint64_t after,

@@ -17,10 +17,13 @@
 namespace cloudbake {
 namespace {
 
+// The host and its process-id namespace: a pid means the same process only within both.
 std::string hostName() {
   char buf[256] = {};
   if (gethostname(buf, sizeof buf - 1) != 0) return "unknown-host";
-  return buf;
+  char ns[64] = {};
+  const ssize_t n = ::readlink("/proc/self/ns/pid", ns, sizeof ns - 1);
+  return std::string(buf) + "/" + (n > 0 ? std::string(ns, size_t(n)) : std::string("?"));
 }
 
 // False when the file does not exist (released or renamed away).
@@ -102,7 +105,9 @@ std::unique_ptr<Lease> Lease::tryAcquire(const std::string& path, const LeaseOpt
     std::string seen;
     if (!readSmallFile(path, &seen)) continue;  // released meanwhile
     const auto now = std::chrono::steady_clock::now();
-    if (seen != observer.content) observer = {seen, now};
+    // Staleness is judged only over this observer's own sightings: a file just created and not
+    // yet written (empty, as NFS may show it) is as live as any other.
+    if (!observer.seen || seen != observer.content) observer = {true, seen, now};
     const bool stale =
         deadOnThisHost(holderOf(seen)) || now - observer.changed >= options.stale_after;
     if (!stale || !moveStaleAside(path, seen)) return nullptr;

@@ -25,11 +25,13 @@ struct LeaseOptions {
 
 /// What one observer saw of a lease it does not hold, to judge staleness by its own clock.
 struct LeaseObserver {
+  bool seen = false;  ///< content and changed are valid
   std::string content;
   std::chrono::steady_clock::time_point changed{};
 };
 
-/// "<hostname>:<pid>" of this process: who a lease file names.
+/// "<hostname>/<pid namespace>:<pid>" of this process: who a lease file names. The namespace
+/// tells apart processes of containers that share a host name but not their process ids.
 std::string leaseHolderName();
 
 /// A lease this process holds: it beats until destroyed, then removes its file if it is still

@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -98,8 +99,22 @@ std::string sbatch(const SlurmOptions& so, const std::string& name, const std::s
   if (!so.partition.empty()) args.insert(args.end(), {"--partition", so.partition});
   args.push_back(script);
   const CommandResult r = runCommand(args);
-  if (r.status != 0) throw std::runtime_error("sbatch failed: " + r.output);
-  return r.output.substr(0, r.output.find_first_of(";\n"));
+  // --parsable prints "<id>[;<cluster>]" on a line of its own; warnings may surround it.
+  std::istringstream lines(r.output);
+  std::string line;
+  while (r.status == 0 && std::getline(lines, line)) {
+    const std::string id = line.substr(0, line.find(';'));
+    if (!id.empty() && std::all_of(id.begin(), id.end(), ::isdigit)) return id;
+  }
+  throw std::runtime_error("sbatch failed: " + r.output);
+}
+
+void cancelJobs(const std::vector<std::string>& jobs) {
+  if (jobs.empty()) return;
+  std::vector<std::string> args = {"scancel"};
+  args.insert(args.end(), jobs.begin(), jobs.end());
+  const CommandResult r = runCommand(args);
+  if (r.status != 0) throw std::runtime_error("scancel failed: " + r.output);
 }
 
 Submitted submitStages(const TaskPlan& plan, const SlurmOptions& so, const fs::path& dir,
@@ -119,8 +134,14 @@ Submitted submitStages(const TaskPlan& plan, const SlurmOptions& so, const fs::p
     }
     const bool array = st.ids.size() > 1;
     const std::string log = (dir / "logs" / (st.kind + (array ? ".%a.log" : ".log"))).string();
-    const std::string job =
-        sbatch(so, "cb-" + plan.id.substr(0, 8) + "-" + st.kind, script, st.ids.size(), after, log);
+    std::string job;
+    try {
+      job = sbatch(so, "cb-" + plan.id.substr(0, 8) + "-" + st.kind, script, st.ids.size(), after,
+                   log);
+    } catch (...) {
+      cancelJobs(s.jobs);  // none of a half-submitted plan is left to run
+      throw;
+    }
     s.jobs.push_back(job);
     for (size_t i = 0; i < st.ids.size(); ++i) {
       job_of[st.ids[i]] = job;
@@ -131,9 +152,15 @@ Submitted submitStages(const TaskPlan& plan, const SlurmOptions& so, const fs::p
   return s;
 }
 
-// Any of `jobs` (or an element of their arrays) still known to squeue.
+// Any of `jobs` (or an element of their arrays) still known to squeue, in any partition. A
+// failing squeue (the controller restarting) is asked again for about a minute.
 bool anyQueued(const std::vector<std::string>& jobs) {
-  const CommandResult r = runCommand({"squeue", "-h", "-o", "%F"});
+  CommandResult r;
+  for (int attempt = 0; attempt < 30; ++attempt) {
+    r = runCommand({"squeue", "-a", "-h", "-o", "%F"});
+    if (r.status == 0) break;
+    std::this_thread::sleep_for(std::chrono::seconds(2));
+  }
   if (r.status != 0) throw std::runtime_error("squeue failed: " + r.output);
   std::istringstream in(r.output);
   std::string id;
@@ -218,9 +245,7 @@ void follow(const TaskPlan& plan, const Submitted& s, const std::string& markers
     p.message = std::to_string(count) + " of " + std::to_string(plan.tasks.size()) +
                 " farm tasks done (Slurm jobs " + s.jobs.front() + ".." + s.jobs.back() + ")";
     if (ro.progress && !ro.progress(p)) {
-      std::vector<std::string> args = {"scancel"};
-      args.insert(args.end(), s.jobs.begin(), s.jobs.end());
-      runCommand(args);
+      cancelJobs(s.jobs);
       throw Cancelled("cancelled: its Slurm jobs were cancelled");
     }
     if (!anyQueued(s.jobs)) return;
@@ -267,7 +292,14 @@ RunResult runShotOnSlurm(const ShotSpec& shot_in, const RunOptions& ro, const Sl
   writeFileAtomic(plan_path, planToJson(plan).dump(1));
   const std::string out = (fs::path(so.shared_dir) / "out" / plan.id).string();
   const Submitted s = submitStages(plan, so, dir, plan_path, out);
-  follow(plan, s, dir.string(), ro, so);
+  try {
+    follow(plan, s, dir.string(), ro, so);
+  } catch (const Cancelled&) {
+    throw;
+  } catch (...) {
+    cancelJobs(s.jobs);  // squeue failed for good: stop what runs rather than leave it
+    throw;
+  }
   if (!done(dir.string(), "gather")) throw FarmTaskFailed(failureReport(plan, s, dir.string(), so));
 
   RunResult result;

@@ -57,7 +57,8 @@ TaskPlan planTasks(const ShotSpec& shot, int width,
 nlohmann::json planToJson(const TaskPlan& plan);
 /// Reads a plan file's text. InputError "<source>: <pointer>: ..." for malformed JSON, unknown
 /// or missing fields, a task graph that is not one (unknown or cyclic `after`, duplicate ids,
-/// ranges outside the shot), and a plan whose id does not match its content (edited by hand).
+/// empty ranges), and a plan whose id does not match its content (edited by hand: that also
+/// covers ranges changed to lie outside the shot).
 TaskPlan planFromJson(const std::string& text, const std::string& source);
 
 /// What running a task did.

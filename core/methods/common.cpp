@@ -263,10 +263,17 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
   }
   if (shot.outputs.vdb && run.scope().writesShotFiles()) {
     run.report("vdb", start.back() / total, "writing bake.vdb (the baked light)");
-    if (!entry.empty()) {
-      run.copyOutput(kBakeFile, (fs::path(entry) / kBakeFile).string());
-    } else {
+    auto write = [&] {
       run.writeOutput(kBakeFile, [&](const std::string& path) { writeBakedLight(path, light); });
+    };
+    if (entry.empty()) {
+      write();
+    } else {
+      try {
+        run.copyOutput(kBakeFile, (fs::path(entry) / kBakeFile).string());
+      } catch (const fs::filesystem_error&) {
+        write();  // the entry was evicted while the views rendered (another process's bound)
+      }
     }
   }
 }

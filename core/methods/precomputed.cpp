@@ -15,6 +15,7 @@
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
 #include "core/format.h"
+#include "core/io/file_sync.h"
 #include "core/methods/common.h"
 #include "core/transport/layers_exr.h"
 
@@ -140,6 +141,9 @@ void obtainBasicVolume(MethodRun& run, PrecomputedDatabase& db, const Precompute
 // basic volume is dropped once committed, so a task's memory is one volume's.
 void runDatabasePart(MethodRun& run, const PrecomputedShotOptions& o) {
   const RunScope& scope = run.scope();
+  // The whole database is cached already (a whole run, or this database under other light):
+  // its parts are not needed.
+  if (run.lookup(run.keys().precompute)) return;
   std::string layout_entry;
   PrecomputedDatabase db = obtainLayout(run, o, &layout_entry);
   if (scope.part != RunScope::Part::kPrecompute) return;
@@ -256,10 +260,7 @@ std::vector<BlendFrame> walkDatabase(MethodRun& run, const PrecomputedDatabase& 
     animation["frames"].push_back({{"a", f.a}, {"b", f.b}, {"w", f.w}});
   }
   run.writeOutput("animation.json", [&](const std::string& path) {
-    std::ofstream out(path);
-    out << animation.dump(1) << "\n";
-    out.close();  // flushed before its size and checksum are recorded
-    if (!out) throw InternalError(path + ": write failed");
+    writeTextAtomically(path, animation.dump(1) + "\n");  // two tasks may write it at once
   });
   return walk;
 }
