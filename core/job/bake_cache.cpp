@@ -109,8 +109,16 @@ void BakeCache::removeDebris() {
   for (const auto& dir : fs::directory_iterator(fs::path(root_) / "trash", ec)) {
     fs::remove_all(dir.path(), ec);
   }
+  // Leases moved aside by a takeover, and a heartbeat's temporary file left by a crash (an hour
+  // old: a live one is renamed within a heartbeat).
   for (const auto& f : fs::directory_iterator(fs::path(root_) / "leases", ec)) {
-    if (f.path().filename().string().find(".stale.") != std::string::npos) fs::remove(f, ec);
+    const std::string name = f.path().filename().string();
+    const auto t = fs::last_write_time(f.path(), ec);
+    const bool old = !ec && fs::file_time_type::clock::now() - t > std::chrono::hours(1);
+    if (name.find(".stale.") != std::string::npos ||
+        (old && name.find(".tmp.") != std::string::npos)) {
+      fs::remove(f, ec);
+    }
   }
 }
 

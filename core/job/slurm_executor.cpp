@@ -152,23 +152,32 @@ Submitted submitStages(const TaskPlan& plan, const SlurmOptions& so, const fs::p
   return s;
 }
 
-// Any of `jobs` (or an element of their arrays) still known to squeue, in any partition. A
-// failing squeue (the controller restarting) is asked again for about a minute.
-bool anyQueued(const std::vector<std::string>& jobs) {
+// What squeue lists of `jobs` (array elements included), in any partition: how many tasks are
+// still listed and how many of them run. A failing squeue (the controller restarting) is asked
+// again for about a minute.
+struct QueueState {
+  size_t listed = 0;
+  size_t running = 0;
+};
+
+QueueState queueState(const std::vector<std::string>& jobs) {
   CommandResult r;
   for (int attempt = 0; attempt < 30; ++attempt) {
-    r = runCommand({"squeue", "-a", "-h", "-o", "%F"});
+    r = runCommand({"squeue", "-a", "-h", "-r", "-o", "%F %t"});
     if (r.status == 0) break;
     std::this_thread::sleep_for(std::chrono::seconds(2));
   }
   if (r.status != 0) throw std::runtime_error("squeue failed: " + r.output);
   std::istringstream in(r.output);
-  std::string id;
+  std::string id, state;
   const std::set<std::string> ours(jobs.begin(), jobs.end());
-  while (in >> id) {
-    if (ours.count(id)) return true;
+  QueueState q;
+  while (in >> id >> state) {
+    if (!ours.count(id)) continue;
+    ++q.listed;
+    q.running += state == "R" || state == "CG";
   }
-  return false;
+  return q;
 }
 
 bool done(const std::string& markers, const std::string& task) {
@@ -239,16 +248,18 @@ void follow(const TaskPlan& plan, const Submitted& s, const std::string& markers
       finished += t.cost_seconds;
       ++count;
     }
+    const QueueState q = queueState(s.jobs);
     RunProgress p;
     p.stage = "render";
     p.fraction = total > 0 ? finished / total : 0;
     p.message = std::to_string(count) + " of " + std::to_string(plan.tasks.size()) +
-                " farm tasks done (Slurm jobs " + s.jobs.front() + ".." + s.jobs.back() + ")";
+                " farm tasks done, " + std::to_string(q.running) + " running (Slurm jobs " +
+                s.jobs.front() + ".." + s.jobs.back() + ")";
     if (ro.progress && !ro.progress(p)) {
       cancelJobs(s.jobs);
       throw Cancelled("cancelled: its Slurm jobs were cancelled");
     }
-    if (!anyQueued(s.jobs)) return;
+    if (q.listed == 0) return;
     std::this_thread::sleep_for(so.poll);
   }
 }
