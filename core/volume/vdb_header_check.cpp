@@ -51,6 +51,17 @@ class Bytes {
   long long size_ = 0, left_ = 0;
 };
 
+// A MetaMap as OpenVDB writes it (count, then name, type and sized value per entry): checked
+// before MetaMap::readMeta allocates each string at its declared length.
+void skipMetadata(Bytes& b) {
+  const uint64_t entries = b.integer(4, "the metadata count");
+  for (uint64_t i = 0; i < entries; ++i) {
+    b.string("a metadata name");
+    b.string("a metadata type");
+    b.skip(static_cast<long long>(b.integer(4, "a metadata value")), "a metadata value");
+  }
+}
+
 }  // namespace
 
 void checkVdbHeader(const std::string& path) {
@@ -64,12 +75,7 @@ void checkVdbHeader(const std::string& path) {
   if (version >= 212) b.skip(1, "the grid-offsets flag");
   if (version >= 220 && version < 222) b.skip(1, "the compression flag");
   b.skip(version >= 218 ? 36 : 16, "the UUID");
-  const uint64_t entries = b.integer(4, "the metadata count");
-  for (uint64_t i = 0; i < entries; ++i) {
-    b.string("a metadata name");
-    b.string("a metadata type");
-    b.skip(static_cast<long long>(b.integer(4, "a metadata value")), "a metadata value");
-  }
+  skipMetadata(b);
   // Each grid's descriptor: name, type, instance parent (file version 216 on), then the
   // offsets of its data and of its end, where the next descriptor starts (files written with
   // offsets, as ours and io::File's are). A file without usable offsets is checked up to its
@@ -79,8 +85,13 @@ void checkVdbHeader(const std::string& path) {
     b.string("a grid name");
     b.string("a grid type");
     if (version >= 216) b.string("a grid's instance parent name");
-    b.skip(16, "a grid's offsets");
+    b.skip(16, "a grid's data and block offsets");
     const auto end = static_cast<long long>(b.integer(8, "a grid's end offset"));
+    // The grid's own metadata follows: OpenVDB's stream reader reads it from here, whatever
+    // the offsets say, before the tree (after the per-grid compression flags from file
+    // version 222 on).
+    if (version >= 222) b.skip(4, "a grid's compression flags");
+    skipMetadata(b);
     if (end <= b.position() || end > b.size()) return;
     b.seek(end);
   }
