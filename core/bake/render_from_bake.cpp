@@ -241,6 +241,27 @@ class LatticeReader {
     }
   }
 
+  /// Channels [first, first + count) of a packed lattice (`stride` floats per voxel, see
+  /// packChannels) into out[first..]: the same arithmetic per channel as read(), so the same
+  /// values, with the eight records read once for every channel.
+  void readPacked(const float* pack, size_t stride, const Cell& c, int first, int count,
+                  float* out) const {
+    if (c.interior) {
+      const float* p = pack + c.base * stride;
+      const size_t sy = stride * stride_y_, sz = stride * stride_z_;
+      for (int k = first; k < first + count; ++k) {
+        out[k] = lerp3(p + k, stride, sy, sz, c.fx, c.fy, c.fz);
+      }
+      return;
+    }
+    for (int k = first; k < first + count; ++k) out[k] = 0;
+    for (int q = 0; q < 8; ++q) {
+      const float wq = c.corners.weight[q];
+      const float* v = pack + c.corners.offset[q] * stride;
+      for (int k = first; k < first + count; ++k) out[k] += wq * v[k];
+    }
+  }
+
   float read(const float* data, const Cell& c) const {
     if (c.interior) return lerp3(data + c.base, 1, stride_y_, stride_z_, c.fx, c.fy, c.fz);
     float v = 0;
@@ -311,6 +332,35 @@ class LatticeReader {
   size_t stride_y_, stride_z_;
 };
 
+/// One channel of a packed lattice: `components` floats per voxel from `data` (voxel-major,
+/// components interleaved) into the record's floats from `slot` on.
+struct PackedChannel {
+  const float* data = nullptr;
+  int components = 1;
+  int slot = 0;
+};
+
+/// The channels interleaved in one record of `stride` floats per voxel (unused floats 0): a
+/// trilinear lookup then reads eight contiguous records instead of eight voxels of every grid,
+/// which is what the march's reads cost (issue 18's profile: scattered loads, not arithmetic).
+std::vector<float> packChannels(const std::vector<PackedChannel>& channels, size_t voxels,
+                                size_t stride) {
+  std::vector<float> pack(voxels * stride, 0.f);
+  constexpr size_t kChunk = 1 << 14;
+  parallelFor(0, int64_t((voxels + kChunk - 1) / kChunk), [&](int64_t chunk) {
+    const size_t v0 = size_t(chunk) * kChunk, v1 = std::min(voxels, v0 + kChunk);
+    for (const PackedChannel& ch : channels) {
+      const size_t n = size_t(ch.components);
+      for (size_t v = v0; v < v1; ++v) {
+        float* out = pack.data() + v * stride + size_t(ch.slot);
+        const float* in = ch.data + v * n;
+        for (size_t k = 0; k < n; ++k) out[k] = in[k];
+      }
+    }
+  });
+  return pack;
+}
+
 /// Per-pixel sums of the layers (radiance per the lights' units).
 struct PixelSum {
   Rgb sun_single, multiple, sky, sky_multiple, background;
@@ -365,6 +415,7 @@ class BakeMarcher {
     scale_ms_ = medium.albedo * sun.irradiance;
     scale_sky_ = medium.albedo * sky_mean;
     buildBlockMax();
+    buildPack();
   }
 
   /// Marches `ray` (unit direction) and adds its layers to `sum`.
@@ -500,6 +551,28 @@ class BakeMarcher {
       msh_.push_back(tally(bake_grids::photonZonal(l)));
     }
     phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order, zonal_order_));
+    buildTallyPack(tally_ ? bake.tally_grid.voxelCount() : grid_.voxelCount());
+  }
+
+  // The photon tallies' coefficients packed per voxel of their lattice: the radiance first, then
+  // the sky's unscattered and scattered light.
+  void buildTallyPack(size_t voxels) {
+    std::vector<PackedChannel> ch;
+    int slot = 0;
+    auto add = [&](const std::vector<const float*>& grids) {
+      const int first = slot;
+      for (const float* g : grids) {
+        ch.push_back({g, 3, slot});
+        slot += 3;
+      }
+      return first;
+    };
+    add(msh_);
+    ssky_slot_ = add(ssky_sh_);
+    msky_slot_ = add(msky_sh_);
+    tally_floats_ = slot;
+    tally_stride_ = size_t((slot + 3) / 4 * 4);
+    tally_pack_ = packChannels(ch, voxels, tally_stride_);
   }
 
   // Where the tallies lie on a lattice of their own: its reader, and the map from the bake
@@ -545,9 +618,7 @@ class BakeMarcher {
     Cell tc;
     tally_->locate(u * tally_scale_ + tally_offset_, &tc);
     slot->k = k;
-    slot->ms = shSource(msh_, tc, rs->shw);
-    slot->ssky = ssky_sh_.empty() ? Rgb(0.0) : shSource(ssky_sh_, tc, rs->shw);
-    slot->csky = msky_sh_.empty() ? Rgb(0.0) : shSource(msky_sh_, tc, rs->shw);
+    shSources(tc, rs->shw, &slot->ms, &slot->ssky, &slot->csky);
     return slot;
   }
 
@@ -568,16 +639,21 @@ class BakeMarcher {
     return zonal;
   }
 
-  // Sum over coefficients of w_i L_i(x) per channel, clamped at 0: a truncated expansion can
-  // dip below zero where the true in-scattered radiance is small.
-  Rgb shSource(const std::vector<const float*>& grids, const Cell& c, const Rgb* w) const {
+  // The tallies' in-scattered light at cell c: sums over coefficients of w_i L_i(x) per
+  // channel, clamped at 0 (a truncated expansion can dip below zero where the true
+  // in-scattered radiance is small).
+  void shSources(const Cell& c, const Rgb* w, Rgb* ms, Rgb* ssky, Rgb* csky) const {
+    float v[kMaxTallyFloats];
+    (tally_ ? *tally_ : lattice_)
+        .readPacked(tally_pack_.data(), tally_stride_, c, 0, tally_floats_, v);
+    *ms = shSum(v, msh_.size(), w);
+    *ssky = ssky_sh_.empty() ? Rgb(0.0) : shSum(v + ssky_slot_, ssky_sh_.size(), w);
+    *csky = msky_sh_.empty() ? Rgb(0.0) : shSum(v + msky_slot_, msky_sh_.size(), w);
+  }
+
+  static Rgb shSum(const float* v, size_t n, const Rgb* w) {
     Rgb sum(0.0);
-    const LatticeReader& lattice = tally_ ? *tally_ : lattice_;
-    for (size_t i = 0; i < grids.size(); ++i) {
-      float v[3];
-      lattice.read3(grids[i], c, v);
-      sum += w[i] * Rgb(v[0], v[1], v[2]);
-    }
+    for (size_t i = 0; i < n; ++i) sum += w[i] * Rgb(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
     return Rgb(std::max(0.0, sum.x), std::max(0.0, sum.y), std::max(0.0, sum.z));
   }
 
@@ -634,8 +710,41 @@ class BakeMarcher {
 
   /// Finds the cell of block-space point w on the bake's lattice.
   void locate(const Vec3& w, Cell* cell) const { lattice_.locate(w - Vec3(1.0), cell); }
-  float read(const float* data, const Cell& c) const { return lattice_.read(data, c); }
-  void read3(const float* data, const Cell& c, float out[3]) const { lattice_.read3(data, c, out); }
+  float density(const Cell& c) const {
+    float v[1];
+    lattice_.readPacked(pack_.data(), stride_, c, 0, 1, v);
+    return v[0];
+  }
+
+  // Slots of the march's packed record (packChannels): every grid a sample reads.
+  enum Slot : int {
+    kDensity = 0,
+    kTsun = 1,
+    kVsky = 2,
+    kMie = 3,
+    kCo = 4,
+    kLdir = 7,
+    kCsky = 10,
+    kSh = 13,
+    kSlotCount = kSh + kShCoefficients
+  };
+
+  void buildPack() {
+    std::vector<PackedChannel> ch{{density_, 1, kDensity}, {tsun_, 1, kTsun}};
+    if (vsky_) ch.push_back({vsky_, 1, kVsky});
+    if (mie_) ch.push_back({mie_, 1, kMie});
+    if (co_) ch.push_back({co_, 3, kCo});
+    if (ldir_) ch.push_back({ldir_, 3, kLdir});
+    if (csky_) ch.push_back({csky_, 3, kCsky});
+    int used = co_ || csky_ ? kSh : kCo;
+    if (sky_sh_) {
+      for (int i = 0; i < kShCoefficients; ++i) ch.push_back({sh_[size_t(i)], 1, kSh + i});
+      used = kSlotCount;
+    }
+    stride_ = size_t((used + 3) / 4 * 4);
+    read_count_ = used - 1;
+    pack_ = packChannels(ch, grid_.voxelCount(), stride_);
+  }
 
   /// Precomputed's scattered sky light has the angular shape of the sky light the medium
   /// removes: radiance f L_sky (1 - T(x, w)) from direction w, with f = (Co_sky / 4 pi) / (1 - V)
@@ -659,34 +768,29 @@ class BakeMarcher {
 
   void source(const Cell& c, RayState* rs, Source* s) const {
     const Vec3& d = rs->d;
-    s->tsun = read(tsun_, c);
+    float v[kSlotCount];
+    lattice_.readPacked(pack_.data(), stride_, c, 1, read_count_, v);
+    s->tsun = v[kTsun];
     if (tally_) {
       tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
     } else if (!msh_.empty()) {
-      s->ms = shSource(msh_, c, rs->shw);
-      if (!ssky_sh_.empty()) s->ssky = shSource(ssky_sh_, c, rs->shw);
-      if (!msky_sh_.empty()) s->csky = shSource(msky_sh_, c, rs->shw);
+      shSources(c, rs->shw, &s->ms, &s->ssky, &s->csky);
     }
     if (sky_sh_) {
-      for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = float(read(sh_[size_t(i)], c));
+      for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = v[kSh + i];
     } else if (vsky_ && ssky_sh_.empty()) {
-      s->vsky = read(vsky_, c);
+      s->vsky = v[kVsky];
     }
     if (csky_) {
-      float v[3];
-      read3(csky_, c, v);
-      s->csky = Rgb(v[0], v[1], v[2]) * kInv4Pi;
-      if (sky_unit_sh_) s->csky = skyMsShape(s->csky, read(vsky_, c));
+      s->csky = Rgb(v[kCsky], v[kCsky + 1], v[kCsky + 2]) * kInv4Pi;
+      if (sky_unit_sh_) s->csky = skyMsShape(s->csky, v[kVsky]);
     }
     if (co_) {
-      float co[3], ld[3];
-      read3(co_, c, co);
-      const double r = mie_ ? read(mie_, c) : 0.0;
+      const float* co = v + kCo;
+      const float* ld = v + kLdir;
+      const double r = mie_ ? v[kMie] : 0.0;
       Vec3 l(0.0);
-      if (ldir_ && r > 0) {
-        read3(ldir_, c, ld);
-        l = Vec3(ld[0], ld[1], ld[2]);
-      }
+      if (ldir_ && r > 0) l = Vec3(ld[0], ld[1], ld[2]);
       const double len = length(l);
       Rgb phase(kInv4Pi);
       if (r > 0 && len > 1e-6) {
@@ -756,7 +860,7 @@ class BakeMarcher {
     Cell* cur = &buf[1];
     locate(s->w0 + s->dw * t0, prev);
     prev->t = t0;
-    double sigma_prev = extinction_ * read(density_, *prev);
+    double sigma_prev = extinction_ * density(*prev);
     Source src_prev, src_cur;
     bool have_prev = false;  // src_prev computed (sources are read only next to density)
     double transmittance = s->transmittance;
@@ -764,7 +868,7 @@ class BakeMarcher {
       const double t = i == n ? t1 : t0 + double(i) * dt;
       locate(s->w0 + s->dw * t, cur);
       cur->t = t;
-      const double sigma = extinction_ * read(density_, *cur);
+      const double sigma = extinction_ * density(*cur);
       const double delta = 0.5 * (sigma_prev + sigma) * dt;
       if (delta > 0) {
         if (!have_prev) source(*prev, s, &src_prev);
@@ -840,6 +944,14 @@ class BakeMarcher {
   Rgb scale_ss_, scale_ms_, scale_sky_;
   int nbx_ = 0, nby_ = 0, nbz_ = 0;
   std::vector<float> block_max_;
+  std::vector<float> pack_;  // the grids a sample reads, per voxel (buildPack)
+  size_t stride_ = 4;
+  int read_count_ = 0;  // floats of the record after the density that a source reads
+  // Photon tallies per voxel of their lattice (buildTallyPack): radiance, then the sky's.
+  static constexpr int kMaxTallyFloats = 3 * (3 * shCount(kMaxShDegree) + kMaxZonalDegree) + 4;
+  std::vector<float> tally_pack_;
+  size_t tally_stride_ = 4;
+  int tally_floats_ = 0, ssky_slot_ = 0, msky_slot_ = 0;
 };
 
 void store(Image& im, int x, int y, const Rgb& v, double scale) {

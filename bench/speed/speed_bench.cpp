@@ -1,0 +1,239 @@
+// Speed of what follows a bake (issue 18), in-process, at any list of thread counts:
+//   view   a new view from a bake, per method of the shot's list (bake once, then time views);
+//   frame  a `precomputed` frame of a sequence shot: lit from the database, then its view;
+//   bake   a light bake of the shot's own method (the bunny `pointcloud` of the issue).
+// Each figure is the best of --repeats runs, with its scaling over the first thread count.
+// Usage (from the repository root, after deploy/build.sh):
+//   build/bench/speed/speed_bench [--threads 1,2] [--repeats 3] [--parts view,frame,bake]
+//       [--view-shot bench/speed/view_mie.json] [--frame-shot bench/speed/frames.json]
+//       [--bake-shot bench/speed/bunny_pointcloud.json] [--methods single,pointcloud,photon]
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/animation/basic_volumes.h"
+#include "core/animation/precomputed.h"
+#include "core/bake/photon_bake.h"
+#include "core/bake/pointcloud_bake.h"
+#include "core/bake/render_from_bake.h"
+#include "core/bake/single_bake.h"
+#include "core/bake/sky_sh_scatter.h"
+#include "core/error.h"
+#include "core/methods/common.h"
+#include "core/methods/photon.h"
+#include "core/methods/pointcloud.h"
+#include "core/methods/precomputed.h"
+#include "core/methods/single.h"
+#include "core/shot/scene_builder.h"
+#include "core/shot/shot_parser.h"
+#include "core/transport/sky.h"
+
+namespace cloudbake {
+namespace {
+
+struct Args {
+  std::vector<int> threads{1, 2};
+  int repeats = 3;
+  std::vector<std::string> parts{"view", "frame", "bake"};
+  std::vector<std::string> methods{"single", "pointcloud", "photon"};
+  std::string view_shot = "bench/speed/view_mie.json";
+  std::string frame_shot = "bench/speed/frames.json";
+  std::string bake_shot = "bench/speed/bunny_pointcloud.json";
+};
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string item; std::getline(in, item, ',');) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+Args parseArgs(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string k = argv[i];
+    if (i + 1 >= argc) throw InputError("option " + k + " needs a value");
+    const std::string v = argv[++i];
+    if (k == "--threads") {
+      a.threads.clear();
+      for (const std::string& t : split(v)) a.threads.push_back(std::stoi(t));
+    } else if (k == "--repeats") {
+      a.repeats = std::max(1, std::stoi(v));
+    } else if (k == "--parts") {
+      a.parts = split(v);
+    } else if (k == "--methods") {
+      a.methods = split(v);
+    } else if (k == "--view-shot") {
+      a.view_shot = v;
+    } else if (k == "--frame-shot") {
+      a.frame_shot = v;
+    } else if (k == "--bake-shot") {
+      a.bake_shot = v;
+    } else {
+      throw InputError("unknown option " + k);
+    }
+  }
+  for (int t : a.threads) {
+    if (t < 1 || t > 4096) throw InputError("--threads: each in 1..4096");
+  }
+  return a;
+}
+
+double seconds(const std::function<void()>& f) {
+  const auto t0 = std::chrono::steady_clock::now();
+  f();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The best of `repeats` timings of `f` at each thread count, printed with its scaling.
+void timeAtThreads(const Args& a, const std::string& label,
+                   const std::function<void(int threads)>& f) {
+  double first = 0;
+  for (size_t i = 0; i < a.threads.size(); ++i) {
+    const int t = a.threads[i];
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(t));
+    double best = 1e300;
+    for (int r = 0; r < a.repeats; ++r) best = std::min(best, seconds([&] { f(t); }));
+    if (i == 0) first = best;
+    std::printf("%-44s threads %3d  %8.4f s  %7.2f per s  scaling %.2fx\n", label.c_str(), t, best,
+                1 / best, first / best);
+    std::fflush(stdout);
+  }
+}
+
+BakedLight bakeFor(const std::string& method, const ShotSpec& shot, const Scene& scene) {
+  const Vec3 sun = sunDirection(shot);
+  if (method == "single") return bakeSingle(scene.medium, sun, singleBakeOptions(shot));
+  if (method == "pointcloud") return bakePointcloud(scene.medium, sun, pointcloudOptions(shot));
+  if (method == "photon") return bakePhoton(scene.medium, sun, photonBakeOptions(shot));
+  throw InputError("--methods: '" + method + "' is not single, pointcloud or photon");
+}
+
+// The shot of file `path` with bake.method `method` (its knobs at their defaults).
+ShotSpec shotWithMethod(const std::string& path, const std::string& method) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot be read");
+  nlohmann::json j = nlohmann::json::parse(in);
+  j["bake"] = {{"method", method}, {"seed", 1}};
+  const size_t slash = path.find_last_of('/');
+  ParseOptions po;
+  po.source_name = path;
+  return parseShot(j.dump(), slash == std::string::npos ? "." : path.substr(0, slash), po);
+}
+
+void viewPart(const Args& a) {
+  const Scene scene = buildScene(parseShotFile(a.view_shot), a.view_shot);
+  for (const std::string& m : a.methods) {
+    const ShotSpec shot = shotWithMethod(a.view_shot, m);
+    BakedLight bake;
+    const double s = seconds([&] { bake = bakeFor(m, shot, scene); });
+    std::printf("view: %s bake for the views took %.2f s (all threads)\n", m.c_str(), s);
+    for (const Camera& camera : scene.cameras) {
+      const std::string label = "view " + m + " '" + camera.name + "' " +
+                                std::to_string(camera.width_px) + "x" +
+                                std::to_string(camera.height_px);
+      timeAtThreads(a, label, [&](int threads) {
+        renderFromBake(bake, scene.medium, scene.sun, scene.sky, camera,
+                       bakeRenderOptions(shot, threads));
+      });
+    }
+  }
+}
+
+void framePart(const Args& a) {
+  const ShotSpec shot = parseShotFile(a.frame_shot);
+  const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
+  if (!seq || seq->frames < 2) throw InputError(a.frame_shot + ": needs a sequence of >= 2 frames");
+  const Scene lights = buildScene(shot, a.frame_shot);  // the stand-in density is not read
+  const PrecomputedShotOptions o = precomputedOptions(shot);
+  VolumeFrames frames;
+  frames.count = seq->frames;
+  frames.build = [&](int i) { return buildSequenceFrame(*seq, i, a.frame_shot); };
+  PrecomputedDatabase db;
+  const double s = seconds([&] {
+    db = precomputeBasicVolumes(buildBasicVolumes(frames, o.light_resolution),
+                                lights.medium.extinction, o.precompute);
+  });
+  std::printf("frame: database of %d basic volumes precomputed in %.2f s (all threads)\n",
+              seq->frames, s);
+  const auto sky_sh = projectSkyRadiance(SkyLight(lights.sky));
+  FrameLightOptions fo = o.frame;
+  fo.mean_cosine = lights.medium.phase->meanCosine();
+  const Camera& camera = lights.cameras.at(0);
+  // A cross-dissolve of the first two basic volumes: each repeat lights a new weight.
+  int frame = 0;
+  BakedLight light;
+  const auto lightFrame = [&] {
+    const BlendFrame bf{0, 1, 0.2 + 0.6 * ((frame++ % 7) / 6.0)};
+    light = lightAnimationFrame(db, bf, sunDirection(shot), lights.medium.albedo, sky_sh, fo);
+  };
+  const auto render = [&](int threads) {
+    renderFromBake(light, lights.medium, lights.sun, lights.sky, camera,
+                   bakeRenderOptions(shot, threads));
+  };
+  timeAtThreads(a, "frame precomputed: light", [&](int) { lightFrame(); });
+  timeAtThreads(a, "frame precomputed: view '" + camera.name + "'", render);
+  timeAtThreads(a, "frame precomputed: light + view", [&](int threads) {
+    lightFrame();
+    render(threads);
+  });
+}
+
+void bakePart(const Args& a) {
+  const ShotSpec shot = parseShotFile(a.bake_shot);
+  const Scene scene = buildScene(shot, a.bake_shot);
+  const std::string m = shot.bake.method;
+  timeAtThreads(a, "bake " + m + " '" + shot.name + "'", [&](int) { bakeFor(m, shot, scene); });
+  if (m == "pointcloud") {
+    PointcloudStats st;
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism,
+                              size_t(a.threads.back()));
+    const double total = seconds([&] {
+      bakePointcloud(scene.medium, sunDirection(shot), pointcloudOptions(shot), {}, &st);
+    });
+    std::printf(
+        "  at %d threads: total %.3f s = lattice, sun and sky %.3f + points %.3f + neighbours "
+        "%.3f + passes %.3f + splat %.3f; %llu pair interactions, %.3g pairs/s in passes\n",
+        a.threads.back(), total,
+        total - st.seconds_points - st.seconds_neighbours - st.seconds_passes - st.seconds_splat,
+        st.seconds_points, st.seconds_neighbours, st.seconds_passes, st.seconds_splat,
+        static_cast<unsigned long long>(st.pair_interactions),
+        double(st.pair_interactions) / st.seconds_passes);
+  }
+}
+
+}  // namespace
+}  // namespace cloudbake
+
+int main(int argc, char** argv) {
+  using namespace cloudbake;
+  try {
+    const Args a = parseArgs(argc, argv);
+    for (const std::string& part : a.parts) {
+      if (part == "view") {
+        viewPart(a);
+      } else if (part == "frame") {
+        framePart(a);
+      } else if (part == "bake") {
+        bakePart(a);
+      } else {
+        throw InputError("--parts: '" + part + "' is not view, frame or bake");
+      }
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "speed_bench: %s\n", e.what());
+    return 2;
+  }
+  return 0;
+}
