@@ -199,9 +199,15 @@ void bakePart(const Args& a) {
     PointcloudStats st;
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism,
                               size_t(a.threads.back()));
+    BakedLight bake;
     const double total = seconds([&] {
-      bakePointcloud(scene.medium, sunDirection(shot), pointcloudOptions(shot), {}, &st);
+      bake = bakePointcloud(scene.medium, sunDirection(shot), pointcloudOptions(shot), {}, &st);
     });
+    for (const auto& [key, value] : bake.metadata) {
+      if (key.find("seconds") != std::string::npos) {
+        std::printf("  %s = %s\n", key.c_str(), value.c_str());
+      }
+    }
     std::printf(
         "  at %d threads: total %.3f s = lattice, sun and sky %.3f + points %.3f + neighbours "
         "%.3f + passes %.3f + splat %.3f; %llu pair interactions, %.3g pairs/s in passes\n",

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "core/math/parallel.h"
 
@@ -56,8 +57,12 @@ std::vector<float> resampleTrilinear(const BakeGrid& from, const float* data, in
   return out;
 }
 
-double marchTransmittance(const BakeGrid& grid, const float* density, double extinction,
-                          const Vec3& p, const Vec3& dir, double step) {
+namespace {
+
+// marchTransmittance's march with the density read by `sample(point)`.
+template <class Sample>
+double marchWith(const BakeGrid& grid, double extinction, const Vec3& p, const Vec3& dir,
+                 double step, Sample&& sample) {
   double t0 = 0, t1 = 0;
   if (!(step > 0) || extinction <= 0) return 1.0;
   if (!intersectBounds(grid.bounds(), Ray{p, dir}, 0.0, 1e300, &t0, &t1)) return 1.0;
@@ -65,12 +70,129 @@ double marchTransmittance(const BakeGrid& grid, const float* density, double ext
   const int n = std::max(1, int(std::ceil(length / step)));
   const double dt = length / n;
   double tau = 0;
-  double prev = sampleTrilinear(grid, density, p + dir * t0);
+  double prev = sample(p + dir * t0);
   for (int s = 1; s <= n; ++s) {
-    const double cur = sampleTrilinear(grid, density, p + dir * (t0 + s * dt));
+    const double cur = sample(p + dir * (t0 + s * dt));
     tau += 0.5 * (prev + cur) * dt * extinction;
     prev = cur;
     if (tau > 16.2) return 0.0;  // exp(-16.2) < 1e-7
+  }
+  return std::exp(-tau);
+}
+
+}  // namespace
+
+double marchTransmittance(const BakeGrid& grid, const float* density, double extinction,
+                          const Vec3& p, const Vec3& dir, double step) {
+  return marchWith(grid, extinction, p, dir, step,
+                   [&](const Vec3& x) { return sampleTrilinear(grid, density, x); });
+}
+
+TransmittanceMarcher::TransmittanceMarcher(const BakeGrid& grid, const float* density,
+                                           double extinction)
+    : grid_(grid), density_(density), extinction_(extinction) {
+  // Block b holds the lookups with floor(index) in [8b - 1, 8b + 6], which read voxels
+  // 8b - 1 .. 8b + 7.
+  nbx_ = (grid.nx + kBlock) / kBlock;
+  nby_ = (grid.ny + kBlock) / kBlock;
+  nbz_ = (grid.nz + kBlock) / kBlock;
+  occupied_.assign(size_t(nbx_) * size_t(nby_) * size_t(nbz_), 0);
+  parallelFor(0, nbz_, [&](int bk) {
+    const int k0 = std::max(0, kBlock * bk - 1), k1 = std::min(grid.nz - 1, kBlock * bk + 7);
+    for (int bj = 0; bj < nby_; ++bj) {
+      const int j0 = std::max(0, kBlock * bj - 1), j1 = std::min(grid.ny - 1, kBlock * bj + 7);
+      for (int bi = 0; bi < nbx_; ++bi) {
+        const int i0 = std::max(0, kBlock * bi - 1), i1 = std::min(grid.nx - 1, kBlock * bi + 7);
+        bool any = false;
+        for (int k = k0; k <= k1 && !any; ++k) {
+          for (int j = j0; j <= j1 && !any; ++j) {
+            const float* row = density + grid.index(0, j, k);
+            for (int i = i0; i <= i1; ++i) any = any || row[i] != 0.f;
+          }
+        }
+        occupied_[(size_t(bk) * size_t(nby_) + size_t(bj)) * size_t(nbx_) + size_t(bi)] = any;
+      }
+    }
+  });
+}
+
+float TransmittanceMarcher::density(const Vec3& p) const {
+  const BakeGrid& g = grid_;
+  const Vec3 u = g.toIndex(p);
+  const double fx = std::floor(u.x), fy = std::floor(u.y), fz = std::floor(u.z);
+  if (!(fx >= -1 && fy >= -1 && fz >= -1 && fx < g.nx && fy < g.ny && fz < g.nz)) return 0.f;
+  const int i0 = int(fx), j0 = int(fy), k0 = int(fz);
+  const size_t block =
+      (size_t((k0 + 1) / kBlock) * size_t(nby_) + size_t((j0 + 1) / kBlock)) * size_t(nbx_) +
+      size_t((i0 + 1) / kBlock);
+  if (!occupied_[block]) return 0.f;
+  if (i0 < 0 || j0 < 0 || k0 < 0 || i0 + 1 >= g.nx || j0 + 1 >= g.ny || k0 + 1 >= g.nz) {
+    return sampleTrilinear(g, density_, p);
+  }
+  // sampleTrilinear's sum, in its order, without its bounds checks.
+  const double t[3] = {u.x - fx, u.y - fy, u.z - fz};
+  const size_t sy = size_t(g.nx), sz = size_t(g.nx) * size_t(g.ny);
+  const float* base = density_ + g.index(i0, j0, k0);
+  float out = 0.f;
+  for (int dk = 0; dk < 2; ++dk) {
+    const double wz = dk ? t[2] : 1 - t[2];
+    for (int dj = 0; dj < 2; ++dj) {
+      const double wyz = wz * (dj ? t[1] : 1 - t[1]);
+      const float* row = base + size_t(dk) * sz + size_t(dj) * sy;
+      for (int di = 0; di < 2; ++di) {
+        const float w = float(wyz * (di ? t[0] : 1 - t[0]));
+        if (w == 0.f) continue;
+        out += w * row[di];
+      }
+    }
+  }
+  return out;
+}
+
+int TransmittanceMarcher::stepsInEmptyBlock(const Vec3& x, const Vec3& dir, double dt) const {
+  const BakeGrid& g = grid_;
+  const Vec3 u = g.toIndex(x);
+  const int n[3] = {g.nx, g.ny, g.nz};
+  double exit = std::numeric_limits<double>::infinity();  // world units along dir
+  size_t block = 0;
+  const size_t nb[3] = {size_t(nbx_), size_t(nby_), size_t(nbz_)};
+  for (int a = 2; a >= 0; --a) {
+    const double f = std::floor(u[a]);
+    if (!(f >= -1 && f < n[a])) return 0;
+    const int b = (int(f) + 1) / kBlock;
+    block = block * nb[a] + size_t(b);
+    // The block holds the lookups with index in [8b - 1, 8b + 7) along each axis.
+    const double v = dir[a] / g.voxel_size;
+    if (v > 0) exit = std::min(exit, (kBlock * b + 7 - u[a]) / v);
+    if (v < 0) exit = std::min(exit, (kBlock * b - 1 - u[a]) / v);
+  }
+  if (occupied_[block]) return 0;
+  // A margin of 1e-6 step keeps every sample counted inside the block despite rounding.
+  const double k = std::floor(exit / dt - 1e-6);
+  return k >= 1 ? int(std::min(k, 1e9)) : 0;
+}
+
+double TransmittanceMarcher::operator()(const Vec3& p, const Vec3& dir, double step) const {
+  // marchTransmittance's march; runs of samples inside an empty block add exactly 0 to tau and
+  // are stepped over.
+  double t0 = 0, t1 = 0;
+  if (!(step > 0) || extinction_ <= 0) return 1.0;
+  if (!intersectBounds(grid_.bounds(), Ray{p, dir}, 0.0, 1e300, &t0, &t1)) return 1.0;
+  const double length = t1 - t0;
+  const int n = std::max(1, int(std::ceil(length / step)));
+  const double dt = length / n;
+  double tau = 0;
+  double prev = density(p + dir * t0);
+  for (int s = 1; s <= n; ++s) {
+    const Vec3 x = p + dir * (t0 + s * dt);
+    const double cur = density(x);
+    if (cur == 0 && prev == 0) {
+      s += std::min(stepsInEmptyBlock(x, dir, dt), n - s);
+      continue;
+    }
+    tau += 0.5 * (prev + cur) * dt * extinction_;
+    prev = cur;
+    if (tau > 16.2) return 0.0;  // as marchTransmittance
   }
   return std::exp(-tau);
 }

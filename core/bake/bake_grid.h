@@ -55,4 +55,30 @@ std::vector<float> resampleTrilinear(const BakeGrid& from, const float* data, in
 double marchTransmittance(const BakeGrid& grid, const float* density, double extinction,
                           const Vec3& p, const Vec3& dir, double step);
 
+/// marchTransmittance for many rays through one lattice (a bake's sun transmittance, a point
+/// cloud's): the same values bit for bit, faster. Samples whose eight voxels lie in an 8^3 block
+/// of zero density read 0 without a lookup (the trilinear sum of zeros), and samples inside the
+/// lattice take a lookup without per-corner bounds checks.
+class TransmittanceMarcher {
+ public:
+  /// `density` must outlive the marcher; densities must be finite and >= 0.
+  TransmittanceMarcher(const BakeGrid& grid, const float* density, double extinction);
+  /// marchTransmittance(grid, density, extinction, p, dir, step).
+  double operator()(const Vec3& p, const Vec3& dir, double step) const;
+  /// sampleTrilinear(grid, density, p).
+  float density(const Vec3& p) const;
+
+ private:
+  /// How many further samples dt apart along `dir` from x lie in x's block when it is empty
+  /// (0 when it is not).
+  int stepsInEmptyBlock(const Vec3& x, const Vec3& dir, double dt) const;
+
+  static constexpr int kBlock = 8;
+  const BakeGrid& grid_;
+  const float* density_;
+  double extinction_;
+  int nbx_ = 0, nby_ = 0, nbz_ = 0;
+  std::vector<uint8_t> occupied_;  // per block of lookups (floor(index) + 1) / 8: any density
+};
+
 }  // namespace cloudbake

@@ -73,10 +73,9 @@ void computePointSunTransmittance(PointCloud& cloud, const BakeGrid& grid,
                                   const std::vector<float>& density, double extinction,
                                   const Vec3& sun_dir, double step) {
   cloud.sun.assign(cloud.size(), 0.f);
-  parallelFor(0, int64_t(cloud.size()), [&](size_t p) {
-    cloud.sun[p] = float(
-        marchTransmittance(grid, density.data(), extinction, cloud.position[p], sun_dir, step));
-  });
+  const TransmittanceMarcher march(grid, density.data(), extinction);
+  parallelFor(0, int64_t(cloud.size()),
+              [&](size_t p) { cloud.sun[p] = float(march(cloud.position[p], sun_dir, step)); });
 }
 
 }  // namespace cloudbake

@@ -17,6 +17,7 @@ void computeSunTransmittance(BakedLight& bake, const Vec3& sun_dir, double extin
   const float* rho = bake.density.data();
   const std::vector<uint8_t> support = densitySupport(g, bake.density);
   const double step = 0.5 * g.voxel_size;
+  const TransmittanceMarcher march(g, rho, extinction);
   ParallelOptions slices;  // one slice per chunk: cancellation within about a second
   if (progress) {
     slices.cancelled = [&](double f) { return !progress(f, "sun transmittance"); };
@@ -28,8 +29,7 @@ void computeSunTransmittance(BakedLight& bake, const Vec3& sun_dir, double extin
         for (int j = 0; j < g.ny; ++j) {
           for (int i = 0; i < g.nx; ++i) {
             if (!support[g.index(i, j, k)]) continue;
-            t.data[g.index(i, j, k)] =
-                float(marchTransmittance(g, rho, extinction, g.center(i, j, k), sun_dir, step));
+            t.data[g.index(i, j, k)] = float(march(g.center(i, j, k), sun_dir, step));
           }
         }
       },

@@ -41,4 +41,29 @@ MajorantGrid MajorantGrid::uniform(const Bounds3& bounds, float majorant) {
   return MajorantGrid(bounds, 1, 1, 1, {majorant});
 }
 
+float MajorantGrid::maxOver(const Bounds3& box) const {
+  if (maxima_.empty()) return 0.f;
+  const int res[3] = {nx_, ny_, nz_};
+  int lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    if (box.max[a] < bounds_.min[a] || box.min[a] > bounds_.max[a]) return 0.f;
+    const double ext = bounds_.max[a] - bounds_.min[a];
+    if (!(ext > 0)) {
+      lo[a] = 0;
+      hi[a] = res[a] - 1;
+      continue;
+    }
+    const double cell = ext / res[a];
+    lo[a] = int(std::clamp(std::floor((box.min[a] - bounds_.min[a]) / cell), 0.0, res[a] - 1.0));
+    hi[a] = int(std::clamp(std::floor((box.max[a] - bounds_.min[a]) / cell), 0.0, res[a] - 1.0));
+  }
+  float m = 0.f;
+  for (int z = lo[2]; z <= hi[2]; ++z) {
+    for (int y = lo[1]; y <= hi[1]; ++y) {
+      for (int x = lo[0]; x <= hi[0]; ++x) m = std::max(m, maxima_[index(x, y, z)]);
+    }
+  }
+  return m;
+}
+
 }  // namespace cloudbake

@@ -35,6 +35,9 @@ class MajorantGrid {
   int nz() const { return nz_; }
   float cell(int x, int y, int z) const { return maxima_[index(x, y, z)]; }
   float maxValue() const { return max_value_; }
+  /// The largest bound of the cells that `box` overlaps (cells on its faces included); 0 where
+  /// it lies outside bounds() (the trackers take no density there either).
+  float maxOver(const Bounds3& box) const;
   bool hasMinorants() const { return !minima_.empty(); }
   float minorant(int x, int y, int z) const {
     return minima_.empty() ? 0.f : minima_[index(x, y, z)];

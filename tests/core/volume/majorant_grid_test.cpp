@@ -64,5 +64,28 @@ TEST(MajorantGrid, MissingRayVisitsNothing) {
   EXPECT_EQ(count, 0);
 }
 
+// maxOver: the largest bound of the cells a box touches, faces included; 0 outside the grid.
+TEST(MajorantGrid, MaxOverABoxTakesEveryCellItTouches) {
+  Bounds3 b;
+  b.min = Vec3(0.0);
+  b.max = Vec3(4.0, 2.0, 2.0);
+  std::vector<float> m(4 * 2 * 2, 0.f);
+  m[(1 * 2 + 1) * 4 + 2] = 5.f;  // cell (2, 1, 1): x in [2, 3]
+  m[0] = 1.f;                    // cell (0, 0, 0)
+  const MajorantGrid grid(b, 4, 2, 2, m);
+  auto box = [](Vec3 lo, Vec3 hi) {
+    Bounds3 r;
+    r.min = lo;
+    r.max = hi;
+    return r;
+  };
+  EXPECT_EQ(grid.maxOver(box(Vec3(2.2, 1.2, 1.2), Vec3(2.8, 1.8, 1.8))), 5.f);
+  EXPECT_EQ(grid.maxOver(box(Vec3(1.5, 1.5, 1.5), Vec3(2.0, 1.9, 1.9))), 5.f);  // on its face
+  EXPECT_EQ(grid.maxOver(box(Vec3(3.1, 0.1, 0.1), Vec3(3.9, 0.9, 0.9))), 0.f);
+  EXPECT_EQ(grid.maxOver(box(Vec3(-1.0, -1.0, -1.0), Vec3(0.5, 0.5, 0.5))), 1.f);
+  EXPECT_EQ(grid.maxOver(box(Vec3(5.0, 0.0, 0.0), Vec3(6.0, 1.0, 1.0))), 0.f);  // outside
+  EXPECT_EQ(grid.maxOver(box(Vec3(-9.0), Vec3(9.0))), 5.f);
+}
+
 }  // namespace
 }  // namespace cloudbake
