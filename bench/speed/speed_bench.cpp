@@ -155,7 +155,9 @@ void framePart(const Args& a) {
   const ShotSpec shot = parseShotFile(a.frame_shot);
   const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
   if (!seq || seq->frames < 2) throw InputError(a.frame_shot + ": needs a sequence of >= 2 frames");
-  const Scene lights = buildScene(shot, a.frame_shot);  // the stand-in density is not read
+  ShotSpec light_shot = shot;  // lights, medium and cameras; a stand-in density, not read
+  light_shot.volume = BoxVolumeSpec{{0, 0, 0}, {1, 1, 1}, 0.0};
+  const Scene lights = buildScene(light_shot, a.frame_shot);
   const PrecomputedShotOptions o = precomputedOptions(shot);
   VolumeFrames frames;
   frames.count = seq->frames;

@@ -197,12 +197,16 @@ struct Corners {
 
 /// Where a lookup reads the lattice: inside (all eight voxels exist; the common case) by the
 /// lower corner's offset and the fractions, otherwise by explicit corners.
+/// Floats of the march's packed record per voxel, at most (BakeMarcher::buildPack).
+constexpr int kMaxRecord = 32;
+
 struct Cell {
   double t = 0;  // distance of the point along the view ray (set by the march)
   bool interior = false;
   size_t base = 0;
   float fx = 0, fy = 0, fz = 0;
   Corners corners;
+  alignas(16) float record[kMaxRecord];  // the packed record read here (BakeMarcher::read)
 };
 
 /// Trilinear interpolation from the lower corner `p` with the x, y and z strides in floats.
@@ -260,6 +264,19 @@ class LatticeReader {
       const float* v = pack + c.corners.offset[q] * stride;
       for (int k = first; k < first + count; ++k) out[k] += wq * v[k];
     }
+  }
+
+  /// Every channel of a packed lattice, as readPacked (the same arithmetic per channel); the
+  /// loop over channels compiles to vector instructions.
+  void readRecord(const float* pack, size_t stride, const Cell& c, float* __restrict out) const {
+    if (!c.interior) {
+      readPacked(pack, stride, c, 0, int(stride), out);
+      return;
+    }
+    const float* __restrict p = pack + c.base * stride;
+    const size_t sy = stride * stride_y_, sz = stride * stride_z_;
+    const float fx = c.fx, fy = c.fy, fz = c.fz;
+    for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
   }
 
   float read(const float* data, const Cell& c) const {
@@ -710,10 +727,10 @@ class BakeMarcher {
 
   /// Finds the cell of block-space point w on the bake's lattice.
   void locate(const Vec3& w, Cell* cell) const { lattice_.locate(w - Vec3(1.0), cell); }
-  float density(const Cell& c) const {
-    float v[1];
-    lattice_.readPacked(pack_.data(), stride_, c, 0, 1, v);
-    return v[0];
+  /// Reads the cell's whole record (density first) into c->record; returns the density.
+  float density(Cell* c) const {
+    lattice_.readRecord(pack_.data(), stride_, *c, c->record);
+    return c->record[kDensity];
   }
 
   // Slots of the march's packed record (packChannels): every grid a sample reads.
@@ -742,7 +759,6 @@ class BakeMarcher {
       used = kSlotCount;
     }
     stride_ = size_t((used + 3) / 4 * 4);
-    read_count_ = used - 1;
     pack_ = packChannels(ch, grid_.voxelCount(), stride_);
   }
 
@@ -768,8 +784,7 @@ class BakeMarcher {
 
   void source(const Cell& c, RayState* rs, Source* s) const {
     const Vec3& d = rs->d;
-    float v[kSlotCount];
-    lattice_.readPacked(pack_.data(), stride_, c, 1, read_count_, v);
+    const float* v = c.record;  // read with the density
     s->tsun = v[kTsun];
     if (tally_) {
       tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
@@ -860,43 +875,58 @@ class BakeMarcher {
     Cell* cur = &buf[1];
     locate(s->w0 + s->dw * t0, prev);
     prev->t = t0;
-    double sigma_prev = extinction_ * density(*prev);
-    Source src_prev, src_cur;
+    double sigma_prev = extinction_ * density(prev);
+    Source sources[2];
+    Source* src_prev = &sources[0];
+    Source* src_cur = &sources[1];
     bool have_prev = false;  // src_prev computed (sources are read only next to density)
-    double transmittance = s->transmittance;
+    // The ray's sums in locals (kept in registers; stored back on every exit).
+    double transmittance = s->transmittance, ss = s->ss, sky = s->sky;
+    Rgb ms = s->ms, sky_ms = s->sky_ms, sky_ss = s->sky_ss;
+    const bool has_ms = co_ || !msh_.empty(), has_sky_ms = csky_ || !msky_sh_.empty(),
+               has_sky_ss = !ssky_sh_.empty();
+    auto store = [&] {
+      s->transmittance = transmittance;
+      s->ss = ss;
+      s->sky = sky;
+      s->ms = ms;
+      s->sky_ms = sky_ms;
+      s->sky_ss = sky_ss;
+    };
     for (int64_t i = 1; i <= n; ++i) {
       const double t = i == n ? t1 : t0 + double(i) * dt;
       locate(s->w0 + s->dw * t, cur);
       cur->t = t;
-      const double sigma = extinction_ * density(*cur);
+      const double sigma = extinction_ * density(cur);
       const double delta = 0.5 * (sigma_prev + sigma) * dt;
       if (delta > 0) {
-        if (!have_prev) source(*prev, s, &src_prev);
-        source(*cur, s, &src_cur);
+        if (!have_prev) source(*prev, s, src_prev);
+        source(*cur, s, src_cur);
         double e, w0, w1;
         stepWeights(delta, &e, &w0, &w1);
         const double a0 = transmittance * w0, a1 = transmittance * w1;
-        s->ss += a0 * src_prev.tsun + a1 * src_cur.tsun;
-        s->sky += a0 * src_prev.vsky + a1 * src_cur.vsky;
-        if (co_ || !msh_.empty()) s->ms += (src_prev.ms * a0 + src_cur.ms * a1) * scale_ms_;
-        if (csky_ || !msky_sh_.empty()) s->sky_ms += src_prev.csky * a0 + src_cur.csky * a1;
-        if (!ssky_sh_.empty()) s->sky_ss += src_prev.ssky * a0 + src_cur.ssky * a1;
+        const Source& p0 = *src_prev;
+        const Source& p1 = *src_cur;
+        ss += a0 * p0.tsun + a1 * p1.tsun;
+        sky += a0 * p0.vsky + a1 * p1.vsky;
+        if (has_ms) ms += (p0.ms * a0 + p1.ms * a1) * scale_ms_;
+        if (has_sky_ms) sky_ms += p0.csky * a0 + p1.csky * a1;
+        if (has_sky_ss) sky_ss += p0.ssky * a0 + p1.ssky * a1;
         if (sky_sh_) {
           for (int q = 0; q < kShCoefficients; ++q) {
-            s->sky_sh[q] += a0 * src_prev.tsh[q] + a1 * src_cur.tsh[q];
+            s->sky_sh[q] += a0 * p0.tsh[q] + a1 * p1.tsh[q];
           }
         }
         if (sky_unit_sh_) {
           for (int q = 0; q < kShCoefficients; ++q) {
-            s->sky_ms_sh[q] +=
-                src_prev.csky * (a0 * src_prev.tsh[q]) + src_cur.csky * (a1 * src_cur.tsh[q]);
+            s->sky_ms_sh[q] += p0.csky * (a0 * p0.tsh[q]) + p1.csky * (a1 * p1.tsh[q]);
           }
         }
         transmittance *= e;
-        src_prev = src_cur;
+        std::swap(src_prev, src_cur);
         have_prev = true;
         if (transmittance < min_transmittance_ || !(transmittance > 0)) {
-          s->transmittance = transmittance;
+          store();
           s->done = true;
           return;
         }
@@ -906,7 +936,7 @@ class BakeMarcher {
       sigma_prev = sigma;
       std::swap(prev, cur);
     }
-    s->transmittance = transmittance;
+    store();
   }
 
   const BakeGrid& grid_;
@@ -946,7 +976,6 @@ class BakeMarcher {
   std::vector<float> block_max_;
   std::vector<float> pack_;  // the grids a sample reads, per voxel (buildPack)
   size_t stride_ = 4;
-  int read_count_ = 0;  // floats of the record after the density that a source reads
   // Photon tallies per voxel of their lattice (buildTallyPack): radiance, then the sky's.
   static constexpr int kMaxTallyFloats = 3 * (3 * shCount(kMaxShDegree) + kMaxZonalDegree) + 4;
   std::vector<float> tally_pack_;
