@@ -6,17 +6,21 @@
 #include <spdlog/pattern_formatter.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
 #include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <string_view>
 #include <thread>
 
 #include "common/exit_codes.h"
+#include "core/error.h"
 #include "core/job/file_util.h"
 #include "core/job/job_record.h"
+#include "core/volume/vdb_transcode.h"
 #include "server/auth.h"
 #include "server/bake_service.h"
 #include "server/metrics.h"
@@ -105,6 +109,7 @@ struct ServerFlags {
   size_t max_streams = 256;
   double keep_jobs_hours = jobs.keep_finished_seconds / 3600.0;
   double scrub_hours = jobs.scrub_interval_seconds / 3600.0;
+  bool vdb_in_process = false;
 };
 
 // The farm executor's flags (docs/deployment.md, "Farm").
@@ -213,6 +218,10 @@ void addLimitOptions(CLI::App& app, ServerFlags* f) {
       ->envname("CLOUDBAKE_MAX_VIEWS")
       ->check(CLI::Range(1u, 256u))
       ->capture_default_str();
+  app.add_flag("--vdb-in-process", f->vdb_in_process,
+               "read users' VDB files in the server process (default: each is rewritten first "
+               "by a child process, so a file that crashes OpenVDB fails its job only)")
+      ->envname("CLOUDBAKE_VDB_IN_PROCESS");
   app.add_option("--max-samples", f->max_samples, "most samples per pixel")
       ->envname("CLOUDBAKE_MAX_SAMPLES")
       ->check(CLI::Range(uint64_t(1), uint64_t(1000000)))
@@ -329,11 +338,35 @@ std::unique_ptr<grpc::Server> startServer(const ServerFlags& f, grpc::Service* s
   return builder.BuildAndStart();
 }
 
+constexpr const char* kTranscodeVdbFlag = "--transcode-vdb";
+
+// The child's work: read IN with OpenVDB and write OUT (exit 0), or say why not (exit 2). A crash
+// inside OpenVDB ends this process, which the parent reports as the file's fault.
+int transcodeVdbChild(const char* in, const char* out) {
+  const rlimit no_core{0, 0};
+  setrlimit(RLIMIT_CORE, &no_core);
+  try {
+    cloudbake::transcodeVdb(in, out);
+    return cloudbake::kOk;
+  } catch (const cloudbake::InputError& e) {
+    std::fprintf(stderr, "cloudbake-server: error: %s\n", e.what());
+    return cloudbake::kBadInput;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cloudbake-server: failed: %s\n", e.what());
+    return cloudbake::kFailure;
+  }
+}
+
 /// Opens the state folder, serves until SIGINT/SIGTERM; returns the exit code.
 int serve(const ServerFlags& f) {
   cloudbake::JobManagerOptions o = f.jobs;
   cloudbake::server::ServerMetrics metrics;
   o.on_job_finished = [&metrics](const cloudbake::JobFinished& job) { metrics.observe(job); };
+  if (!f.vdb_in_process) {
+    std::error_code ec;
+    o.vdb_reader.command = {std::filesystem::read_symlink("/proc/self/exe", ec).string(),
+                            kTranscodeVdbFlag};
+  }
   if (o.slurm.cloudbake.empty()) {
     // Installed together (bin/cloudbake beside bin/cloudbake-server), as the nodes run it.
     std::error_code ec;
@@ -409,6 +442,11 @@ int serve(const ServerFlags& f) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // The child that rewrites a user's VDB file for a job (core/job/vdb_gate.h): not a flag a
+  // person types, so it stays out of --help.
+  if (argc == 4 && std::string(argv[1]) == kTranscodeVdbFlag) {
+    return transcodeVdbChild(argv[2], argv[3]);
+  }
   CLI::App app{"cloudbake-server: cloud-lighting bake service (gRPC)"};
   ServerFlags flags;
   addServiceOptions(app, &flags);

@@ -968,6 +968,7 @@ RunOptions JobManager::autoRunOptions() {
   ro.phases = &phases_;
   ro.max_voxels = options_.limits.max_voxels;
   ro.max_samples = int(std::min<int64_t>(options_.limits.max_samples, 1000000));
+  ro.vdb_reader = options_.vdb_reader;
   return ro;
 }
 

@@ -27,6 +27,7 @@
 #include "core/job/run_shot.h"
 #include "core/job/shared_jobs.h"
 #include "core/job/slurm_executor.h"
+#include "core/job/vdb_gate.h"
 #include "core/job/verified_files.h"
 #include "core/job/volume_cache.h"
 #include "core/shot/shot.h"
@@ -77,6 +78,9 @@ struct JobManagerOptions {
   /// inputs copied to shared_dir/inputs/<job id> so the nodes can read them.
   std::string executor = "local";
   SlurmOptions slurm;
+  /// How jobs read users' VDB files: by default (the server) rewritten first in a child
+  /// process, so that a file that crashes OpenVDB fails its job only (core/job/vdb_gate.h).
+  VdbReaderOptions vdb_reader;
   unsigned worker_threads = 0;       ///< threads of each job's task_arena; 0: all hardware
   unsigned max_concurrent_jobs = 1;  ///< runners
   /// Queued (not running) jobs plus submits and dry runs being prepared (staging assets,

@@ -100,7 +100,15 @@ class ShotRun final : public MethodRun {
   DensityFieldPtr sequenceFrame(int frame) override {
     const auto* sequence = std::get_if<SequenceVolumeSpec>(&shot_.volume);
     if (!sequence) throw InternalError("sequenceFrame: the shot's volume is not a sequence");
-    return buildSequenceFrame(*sequence, frame, opt_.source);
+    if (sequence->paths.empty() || opt_.vdb_reader.command.empty()) {
+      return buildSequenceFrame(*sequence, frame, opt_.source);
+    }
+    SequenceVolumeSpec readable = *sequence;
+    const std::string& path = sequence->paths.at(size_t(frame));
+    readable.paths[size_t(frame)] =
+        readableVdb(path, "/volume/sequence/paths/" + std::to_string(frame));
+    return fromRewrite(path, readable.paths[size_t(frame)],
+                       [&] { return buildSequenceFrame(readable, frame, opt_.source); });
   }
 
   void report(const std::string& stage, double fraction, const std::string& message,
@@ -197,7 +205,53 @@ class ShotRun final : public MethodRun {
   std::mutex keep_going_mutex_;
   std::chrono::steady_clock::time_point last_keep_going_{};
   bool keep_going_ = true;
-  std::string scratch_;  // without a cache: where cached() computes, removed with the run
+  // The shot's volume, its VDB file read from a child's rewrite with a VDB reader command.
+  DensityFieldPtr buildReadableVolume() {
+    const auto* vdb = std::get_if<VdbVolumeSpec>(&shot_.volume);
+    if (!vdb || opt_.vdb_reader.command.empty()) return buildVolume(shot_.volume, opt_.source);
+    VdbVolumeSpec readable = *vdb;
+    readable.path = readableVdb(vdb->path, "/volume/vdb");
+    return fromRewrite(vdb->path, readable.path,
+                       [&] { return buildVolume(VolumeSpec(readable), opt_.source); });
+  }
+  // The rewrite of user VDB file `path` (vdb_gate.h), made once per run in the scratch folder;
+  // errors name the shot's field `pointer`.
+  std::string readableVdb(const std::string& path, const std::string& pointer) {
+    auto it = rewritten_.find(path);
+    if (it != rewritten_.end()) return it->second;
+    const std::string out =
+        (fs::path(scratchDir()) / ("vdb-" + std::to_string(rewritten_.size()) + ".vdb")).string();
+    try {
+      rewriteVdbInChild(opt_.vdb_reader, path, out, [this] { return keepGoing(); });
+    } catch (const InputError& e) {
+      throw InputError(opt_.source + ": " + pointer + ": " + e.what());
+    }
+    return rewritten_[path] = out;
+  }
+  // Errors about the rewrite name the user's file instead.
+  template <class Build>
+  DensityFieldPtr fromRewrite(const std::string& path, const std::string& rewrite, Build&& build) {
+    try {
+      return build();
+    } catch (const InputError& e) {
+      std::string message = e.what();
+      for (size_t at; (at = message.find(rewrite)) != std::string::npos;) {
+        message.replace(at, rewrite.size(), path);
+      }
+      throw InputError(message);
+    }
+  }
+  std::string scratchDir() {
+    if (scratch_.empty()) {
+      scratch_ = (fs::temp_directory_path() / ("cloudbake-run-" + uniqueSuffix())).string();
+    }
+    fs::create_directories(scratch_);
+    return scratch_;
+  }
+
+  std::map<std::string, std::string> rewritten_;  // user VDB path -> its rewrite
+  // Removed with the run: where cached() computes without a cache, and the VDB rewrites.
+  std::string scratch_;
   int scratch_count_ = 0;
 };
 
@@ -215,7 +269,7 @@ const Scene& ShotRun::scene() {
   // enters the memory cache.
   auto build = [&] {
     checkMeshVoxels(shot_, opt_.max_voxels, opt_.source);
-    DensityFieldPtr field = buildVolume(shot_.volume, opt_.source);
+    DensityFieldPtr field = buildReadableVolume();
     checkLoadedVoxels(shot_, *field, opt_.max_voxels, opt_.source);
     return field;
   };
@@ -240,10 +294,7 @@ std::string ShotRun::cached(const std::string& key,
                             bool* computed) {
   *computed = false;
   if (!opt_.cache) {
-    if (scratch_.empty()) {
-      scratch_ = (fs::temp_directory_path() / ("cloudbake-run-" + uniqueSuffix())).string();
-    }
-    const std::string dir = (fs::path(scratch_) / std::to_string(scratch_count_++)).string();
+    const std::string dir = (fs::path(scratchDir()) / std::to_string(scratch_count_++)).string();
     fs::create_directories(dir);
     compute(dir);
     *computed = true;

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/job/vdb_gate.h"
 #include "core/methods/auto.h"
 #include "core/methods/run_types.h"
 #include "core/shot/shot.h"
@@ -58,6 +59,9 @@ struct RunOptions {
     nlohmann::json record;
   };
   std::optional<AutoPreset> auto_preset;
+  /// How user VDB files are read: with a command, each is first rewritten by it in a child
+  /// process and the run reads the rewrite (core/job/vdb_gate.h; the server's default).
+  VdbReaderOptions vdb_reader;
 };
 
 /// InputError naming `field` unless `samples` is -1 (unset) or in [1, 1e6]: the one check of

@@ -708,6 +708,14 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
        2,
        "cut.vdb",
        {{"cut.vdb", vdb_bytes.substr(0, vdb_bytes.size() / 3)}}},
+      // A fuzzing find that aborts a process reading it with OpenVDB 10 (tests/data/fuzz): the
+      // server's child reader dies instead of the server.
+      {"VDB that crashes OpenVDB",
+       withVolume(R"({"vdb": {"path": "crash.vdb"}})"),
+       2,
+       "/volume/vdb: crash.vdb: not a readable OpenVDB file",
+       {{"crash.vdb",
+         slurp(std::string(CLOUDBAKE_SOURCE_DIR) + "/tests/data/fuzz/vdb_blosc_abort.vdb")}}},
   };
   ASSERT_GE(cases.size(), 20u);
   ws_.write("outside.vdb", vdb_bytes);

@@ -23,6 +23,8 @@ void addMethodsCommand(CLI::App& app, int* exit_code);
 void addPreviewCommand(CLI::App& app, int* exit_code);
 /// `cloudbake plan` and `cloudbake run-task`: a shot as farm tasks (cmd_farm.cpp).
 void addFarmCommands(CLI::App& app, int* exit_code);
+/// `cloudbake transcode-vdb`: a VDB file read and written again (cmd_transcode.cpp).
+void addTranscodeCommand(CLI::App& app, int* exit_code);
 /// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
 void addRenderCommand(CLI::App& app, int* exit_code);
 

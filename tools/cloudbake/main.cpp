@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
   addPreviewCommand(app, &exit_code);
   addBakeSliceCommand(app, &exit_code);
   addMethodsCommand(app, &exit_code);
+  addTranscodeCommand(app, &exit_code);
 
   try {
     app.parse(argc, argv);

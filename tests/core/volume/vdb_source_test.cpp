@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/sources.h"
+#include "core/volume/vdb_transcode.h"
 #include "tests/core/volume/volume_test_util.h"
 
 namespace cloudbake {
@@ -103,6 +104,37 @@ TEST_F(VdbSourceTest, TruncatedFilesFailCleanly) {
     const std::string msg = expectInputError({cut, "density"});
     EXPECT_NE(msg.find("cut.vdb"), std::string::npos) << len << ": " << msg;
   }
+}
+
+// transcodeVdb (what the server's child reader runs) keeps every grid, value and metadata, and
+// refuses what loadVdbVolume refuses, naming the file.
+TEST_F(VdbSourceTest, TranscodedFileHoldsTheSameGrids) {
+  const std::string path = dir_ + "/ball.vdb", out = dir_ + "/ball.rewritten.vdb";
+  writeGrids(path, {ballGrid("density", 0.75f), ballGrid("other", 2.f)});
+  transcodeVdb(path, out);
+  EXPECT_FALSE(std::filesystem::exists(out + ".tmp"));
+  for (const char* name : {"density", "other"}) {
+    const auto a = loadVdbVolume({path, name});
+    const auto b = loadVdbVolume({out, name});
+    EXPECT_EQ(a->maxDensity(), b->maxDensity()) << name;
+    for (double x = -0.6; x <= 0.6; x += 0.037) {
+      EXPECT_EQ(a->lookup()->density(Vec3(x, 0.01, -0.02)),
+                b->lookup()->density(Vec3(x, 0.01, -0.02)))
+          << name << " at " << x;
+    }
+  }
+  const std::string cut = dir_ + "/cut.vdb";
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  testing::writeText(cut, bytes.substr(0, bytes.size() / 2));
+  try {
+    transcodeVdb(cut, out);
+    ADD_FAILURE() << "a truncated file was rewritten";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("cut.vdb"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(transcodeVdb(dir_ + "/nope.vdb", out), InputError);
+  EXPECT_THROW(transcodeVdb(path, dir_ + "/no/such/folder/x.vdb"), InputError);
 }
 
 TEST_F(VdbSourceTest, GridSelectionAndTypeErrors) {
