@@ -1,9 +1,11 @@
 #include "core/bake/photon_bake.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "core/bake/bake_lattice.h"
 #include "core/bake/sky_visibility.h"
@@ -64,25 +66,30 @@ void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions
   }
 }
 
-/// Per-voxel SH moments of a radiance field, summed as fixed-point integers.
+/// Per-voxel SH moments of a radiance field, summed as fixed-point integers (TallyWriter adds
+/// to it). One colour channel stands for all three where every photon's throughput is grey.
 class PhotonTally {
  public:
   /// Degrees 0..order in full and, when zonal_order > order, the zonal degrees order + 1 ..
-  /// zonal_order about `axis` (unit).
-  PhotonTally(const BakeGrid& grid, int order, double photon_weight, int zonal_order = 0,
-              const Vec3& axis = Vec3(0, 0, 1))
+  /// zonal_order about `axis` (unit); `channels` 1 (grey) or 3.
+  PhotonTally(const BakeGrid& grid, int order, double photon_weight, int channels,
+              int zonal_order = 0, const Vec3& axis = Vec3(0, 0, 1))
       : grid_(grid),
         ncoef_(shCount(order) + std::max(0, zonal_order - order)),
         order_(order),
         top_(std::max(order, zonal_order)),
+        channels_(channels),
         axis_(axis),
         photon_weight_(photon_weight),
-        counts_(grid.voxelCount() * size_t(ncoef_) * 3, 0) {}
+        counts_(grid.voxelCount() * size_t(ncoef_) * size_t(channels), 0) {}
 
+  const BakeGrid& grid() const { return grid_; }
   int order() const { return order_; }
   /// The highest degree kept: zonal_order when it is above order.
   int topDegree() const { return top_; }
   int coefficients() const { return ncoef_; }
+  int channels() const { return channels_; }
+  double photonWeight() const { return photon_weight_; }
   /// The coefficients of degree l: [first, last) of the index range.
   void degreeRange(int l, int* first, int* last) const {
     *first = l <= order_ ? l * l : shCount(order_) + (l - order_ - 1);
@@ -95,27 +102,21 @@ class PhotonTally {
     shBasisUpTo(order_, d, y);
     if (top_ > order_) shZonal(order_ + 1, top_, dot(d, axis_), y + shCount(order_));
   }
-  /// The raw fixed-point sum of coefficient i, channel c, at voxel v (a common scale).
+  /// The raw fixed-point sum of coefficient i, channel c (0..2), at voxel v (a common scale).
   double count(size_t v, int i, int c) const {
-    return double(counts_[(v * size_t(ncoef_) + size_t(i)) * 3 + size_t(c)]);
+    const size_t ch = channels_ == 1 ? 0 : size_t(c);
+    return double(counts_[(v * size_t(ncoef_) + size_t(i)) * size_t(channels_) + ch]);
   }
 
-  /// Adds the segment p + t d, t in [0, len], carrying weight `beta`, to the voxels it crosses.
-  void addSegment(const Vec3& p, const Vec3& d, double len, const Rgb& beta) {
-    double y[shCount(kMaxShDegree) + kMaxZonalDegree];
-    basis(d, y);
-    const double h = grid_.voxel_size;
-    Rgb b = beta / photon_weight_ * (kFixedScale / h);
-    walkVoxels(p, d, len, [&](size_t voxel, double l) {
-      int64_t* out = &counts_[voxel * size_t(ncoef_) * 3];
-      for (int i = 0; i < ncoef_; ++i) {
-        for (int c = 0; c < 3; ++c) {
-          const double v = std::clamp(b[c] * l * y[i], -4e18, 4e18);
-          const int64_t q = std::llround(v);
-          if (q != 0) __atomic_fetch_add(&out[i * 3 + c], q, __ATOMIC_RELAXED);
-        }
-      }
-    });
+  /// Adds sums[k] (k = coefficient x channels + channel; units of photon weight x voxel sizes
+  /// of length x Y_i) to voxel v, rounded to the fixed point: integer sums are exact, so their
+  /// order (the thread schedule) is moot.
+  void add(size_t v, const double* sums) {
+    int64_t* out = &counts_[v * size_t(ncoef_) * size_t(channels_)];
+    for (int k = 0; k < ncoef_ * channels_; ++k) {
+      const int64_t q = std::llround(std::clamp(sums[k] * kFixedScale, -4e18, 4e18));
+      if (q != 0) __atomic_fetch_add(&out[k], q, __ATOMIC_RELAXED);
+    }
   }
 
   /// Writes the radiance coefficients (sum of weight x length x Y_i / voxel volume / photons'
@@ -129,14 +130,11 @@ class PhotonTally {
       BakeChannel& ch = bake->addOnTallyGrid(
           i < first_zonal ? name(i) : bake_grids::photonZonal(order_ + 1 + i - first_zonal), 3);
       for (size_t v = 0; v < grid_.voxelCount(); ++v) {
-        for (int c = 0; c < 3; ++c) {
-          ch.data[v * 3 + c] = float(double(counts_[(v * size_t(ncoef_) + i) * 3 + c]) * unit);
-        }
+        for (int c = 0; c < 3; ++c) ch.data[v * 3 + c] = float(count(v, i, c) * unit);
       }
     }
   }
 
- private:
   // Calls fn(voxel index, length) for every lattice voxel the segment crosses (3D DDA).
   template <typename Fn>
   void walkVoxels(const Vec3& p, const Vec3& d, double len, Fn&& fn) const {
@@ -177,13 +175,76 @@ class PhotonTally {
     }
   }
 
+ private:
   const BakeGrid& grid_;
   int ncoef_;
   int order_;
   int top_;
+  int channels_;
   Vec3 axis_;
   double photon_weight_;
   std::vector<int64_t> counts_;
+};
+
+/// One photon's segments added to a PhotonTally: summed in doubles per voxel, a few voxels at a
+/// time, and rounded into the tally once per voxel and photon rather than once per segment. A
+/// photon in a thick cloud scatters many times within one tally voxel, and the per-segment
+/// rounding and atomic adds were most of the bake's time. The sums hold one photon only and are
+/// flushed at its end, so the tally does not depend on which thread traced which photon.
+class TallyWriter {
+ public:
+  explicit TallyWriter(PhotonTally* tally)
+      : tally_(tally),
+        width_(tally->coefficients() * tally->channels()),
+        sums_(size_t(kSlots) * size_t(width_), 0.0) {
+    voxel_.fill(kEmpty);
+  }
+
+  /// Adds the segment p + t d, t in [0, len], carrying weight `beta`, to the voxels it crosses
+  /// (track length: length x weight x Y_i(d) / voxel size, as the photon's share).
+  void addSegment(const Vec3& p, const Vec3& d, double len, const Rgb& beta) {
+    double y[shCount(kMaxShDegree) + kMaxZonalDegree];
+    tally_->basis(d, y);
+    const int nc = tally_->coefficients(), channels = tally_->channels();
+    const Rgb b = beta / (tally_->photonWeight() * tally_->grid().voxel_size);
+    tally_->walkVoxels(p, d, len, [&](size_t voxel, double l) {
+      double* s = slot(voxel);
+      for (int c = 0; c < channels; ++c) {
+        const double bl = b[c] * l;
+        for (int i = 0; i < nc; ++i) s[i * channels + c] += bl * y[i];
+      }
+    });
+  }
+
+  /// Rounds every held sum into the tally: at the end of each photon.
+  void flush() {
+    for (int k = 0; k < kSlots; ++k) {
+      if (voxel_[size_t(k)] == kEmpty) continue;
+      tally_->add(voxel_[size_t(k)], &sums_[size_t(k) * size_t(width_)]);
+      voxel_[size_t(k)] = kEmpty;
+    }
+  }
+
+ private:
+  static constexpr int kSlots = 32;  // voxels held at once, chosen by a hash of the index
+  static constexpr size_t kEmpty = ~size_t(0);
+
+  // The sums of `voxel`, after flushing the voxel that held its slot.
+  double* slot(size_t voxel) {
+    const size_t k = size_t((uint64_t(voxel) * 0x9E3779B97F4A7C15ull) >> 59);
+    double* s = &sums_[k * size_t(width_)];
+    if (voxel_[k] != voxel) {
+      if (voxel_[k] != kEmpty) tally_->add(voxel_[k], s);
+      std::fill(s, s + width_, 0.0);
+      voxel_[k] = voxel;
+    }
+    return s;
+  }
+
+  PhotonTally* tally_;
+  int width_;
+  std::vector<double> sums_;
+  std::array<size_t, kSlots> voxel_;
 };
 
 /// Where photons come from: a start ray and its weight (flux per photon).
@@ -257,8 +318,8 @@ class PhotonTracer {
 
   /// `direct` (optional) takes the segments before the first scattering, `half` (optional)
   /// the scattered ones again.
-  void trace(const Emission& e, Rng& rng, PhotonTally* tally, PhotonTally* direct,
-             PhotonTally* half) {
+  void trace(const Emission& e, Rng& rng, TallyWriter* tally, TallyWriter* direct,
+             TallyWriter* half) {
     Ray ray = e.ray;
     Rgb beta(e.weight);
     for (int order = 0; order <= kMaxScatterings; ++order) {
@@ -268,7 +329,7 @@ class PhotonTracer {
           medium_.density->supportInterval(ray, 0, kInf, &t0, &t1)
               ? decompositionTrack(grid_, *lookup_, medium_.extinction, ray, t0, t1, rng)
               : Collision{};
-      PhotonTally* to = order > 0 ? tally : direct;
+      TallyWriter* to = order > 0 ? tally : direct;
       if (to) to->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
       if (order > 0 && half) half->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
       if (!c.hit) return;
@@ -309,10 +370,19 @@ void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter&
       0, batches,
       [&](int64_t b) {
         PhotonTracer tracer(medium, grid);
+        std::optional<TallyWriter> to_tally, to_direct, to_half;
+        if (tally) to_tally.emplace(tally);
+        if (direct) to_direct.emplace(direct);
+        if (half) to_half.emplace(half);
+        auto writer = [](std::optional<TallyWriter>& w) { return w ? &*w : nullptr; };
         Rng rng;
         for (int64_t i = b * kBatch; i < std::min(count, (b + 1) * kBatch); ++i) {
           rng.setSeed(mixBits(seed, uint64_t(i)), stream);
-          tracer.trace(emitter.emit(rng), rng, tally, direct, (i & 1) ? half : nullptr);
+          tracer.trace(emitter.emit(rng), rng, writer(to_tally), writer(to_direct),
+                       (i & 1) ? writer(to_half) : nullptr);
+          for (auto* w : {&to_tally, &to_direct, &to_half}) {
+            if (*w) (*w)->flush();
+          }
         }
       },
       po);
@@ -416,10 +486,15 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   const auto grid = medium.density->trackingGrid({medium.extinction, 0});
   const Bounds3 box = bake.grid.bounds();
   const double sky_share = options.sky ? 0.35 : 0.0;
+  // Grey albedo and phase keep every photon's throughput grey: one channel holds all three.
+  const bool grey = !medium.phase->chromatic() && medium.albedo.x == medium.albedo.y &&
+                    medium.albedo.y == medium.albedo.z;
+  const int channels = grey ? 1 : 3;
   {
     const SunEmitter sun(box, sun_dir, options.photons);
-    PhotonTally tally(bake.tally_grid, options.order, sun.weight(), options.zonal_order, -sun_dir);
-    PhotonTally odd(bake.tally_grid, 0, sun.weight());
+    PhotonTally tally(bake.tally_grid, options.order, sun.weight(), channels, options.zonal_order,
+                      -sun_dir);
+    PhotonTally odd(bake.tally_grid, 0, sun.weight(), channels);
     tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally, nullptr, &odd,
                  stage(0.25, 0.75 - sky_share, "sun photons"));
     tally.store(&bake, bake_grids::photonSh);
@@ -431,8 +506,8 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   }
   if (options.sky) {
     const SkyEmitter sky(box, options.photons);
-    PhotonTally tally(bake.tally_grid, options.order, sky.weight());
-    PhotonTally direct(bake.tally_grid, options.order, sky.weight());
+    PhotonTally tally(bake.tally_grid, options.order, sky.weight(), channels);
+    PhotonTally direct(bake.tally_grid, options.order, sky.weight(), channels);
     tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally, &direct, nullptr,
                  stage(1.0 - sky_share, sky_share, "sky photons"));
     tally.store(&bake, bake_grids::photonSkySh);

@@ -88,6 +88,35 @@ TEST(PhotonBake, SameBakeOnOneAndTwoThreads) {
   EXPECT_EQ(b.find(bake_grids::kSkyVisibility), nullptr);
 }
 
+// A grey medium's tallies keep one channel for all three. A medium that differs from it in
+// blue only traces the same photons (the roulette follows the largest channel), so its red and
+// green tallies must equal the grey bake's bit for bit.
+TEST(PhotonBake, GreyTallyIsEveryChannelOfTheColourTally) {
+  const auto phase = std::make_shared<HenyeyGreensteinPhase>(0.7);
+  const Vec3 sun = normalize(Vec3(0.3, -0.2, 1));
+  const BakedLight grey = bakePhoton(sphere(4, Rgb(0.9), phase), sun, small(20000));
+  const BakedLight colour = bakePhoton(sphere(4, Rgb(0.9, 0.9, 0.5), phase), sun, small(20000));
+  int compared = 0;
+  for (const auto& [name, ch] : grey.channels) {
+    if (name.rfind("ms_", 0) != 0 && name.rfind("ss_", 0) != 0) continue;
+    const std::vector<float>& c = colour.channels.at(name).data;
+    ASSERT_EQ(ch.data.size(), c.size()) << name;
+    bool nonzero = false;
+    for (size_t v = 0; v < c.size(); v += 3) {
+      EXPECT_EQ(ch.data[v], c[v]) << name << " voxel " << v / 3;
+      EXPECT_EQ(ch.data[v + 1], c[v + 1]) << name << " voxel " << v / 3;
+      EXPECT_EQ(ch.data[v], ch.data[v + 2]) << name << " voxel " << v / 3;
+      nonzero = nonzero || ch.data[v] != 0;
+      if (name == bake_grids::photonSh(0) && ch.data[v] > 0) {
+        EXPECT_LT(c[v + 2], c[v]) << "blue scatters less: " << v / 3;
+      }
+    }
+    EXPECT_TRUE(nonzero) << name;
+    ++compared;
+  }
+  EXPECT_GT(compared, 20);
+}
+
 TEST(PhotonBake, LegendreCoefficientsOfHgArePowersOfG) {
   for (double g : {0.0, 0.5, 0.85, -0.6}) {
     const std::vector<Rgb> p = phaseLegendreCoefficients(HenyeyGreensteinPhase(g), 8);
