@@ -23,7 +23,7 @@ cumulus (a dense Perlin cumulus lit from behind, seen against the sun and from i
 
 Usage: bench/photon_bench.py [--build build] [--threads 2] [--res 160] [--ref-spp 1024]
                              [--samples 16] [--scenes perlin,bunny,disney,thin,cumulus]
-                             [--sweep default|order|zonal|lattice|quick] [--work DIR]
+                             [--sweep default|order|zonal|lattice|quick|far] [--work DIR]
 """
 import argparse
 import json
@@ -51,6 +51,9 @@ SWEEPS = {
     "lattice": [(1 << 20, 4, 96, 96, 24), (1 << 20, 4, 192, 96, 24), (1 << 20, 4, 192, 64, 24),
                 (1 << 20, 4, 192, 48, 24), (1 << 20, 4, 192, 32, 24)],
     "quick": [(1 << 15, 2, 32, 32, 16), (1 << 17, 4, 64, 32, 24)],
+    # Further along the curve, for the dense scenes (Disney, cumulus): a finer transmittance
+    # lattice and tallies, then 4x the photons on them.
+    "far": [(1 << 22, 4, 320, 96, 24), (1 << 24, 4, 320, 96, 24)],
 }
 
 
