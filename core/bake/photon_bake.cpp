@@ -8,6 +8,7 @@
 #include <optional>
 
 #include "core/bake/bake_lattice.h"
+#include "core/bake/render_from_bake.h"
 #include "core/bake/sky_visibility.h"
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
@@ -17,6 +18,7 @@
 #include "core/math/sampling.h"
 #include "core/math/sh_basis.h"
 #include "core/math/spherical_harmonics.h"
+#include "core/transport/sky.h"
 #include "core/transport/tracking.h"
 
 namespace cloudbake {
@@ -250,7 +252,7 @@ class TallyWriter {
 /// Where photons come from: a start ray and its weight (flux per photon).
 struct Emission {
   Ray ray;
-  double weight = 0;
+  Rgb weight{0.0};
 };
 
 /// Photons of unit sun irradiance: uniform over the rectangle, perpendicular to the sun, that
@@ -280,7 +282,7 @@ class SunEmitter {
   Emission emit(Rng& rng) const {
     const double u = rng.uniform(), v = rng.uniform();
     const Vec3 p = frame_.toWorld(Vec3(lo_[0] + u * size_[0], lo_[1] + v * size_[1], start_z_));
-    return {{p, -frame_.n}, weight_};
+    return {{p, -frame_.n}, Rgb(weight_)};
   }
 
  private:
@@ -289,25 +291,34 @@ class SunEmitter {
   double start_z_ = 0, weight_ = 0;
 };
 
-/// Photons of a uniform sky of unit radiance: from the box's bounding sphere of radius R,
-/// cosine-distributed inwards; the flux entering a sphere is pi L 4 pi R^2.
+/// Photons of a sky of unit mean radiance: from the box's bounding sphere of radius R,
+/// cosine-distributed inwards; the flux entering a sphere from a uniform sky is pi L 4 pi R^2.
+/// With a `shape`, each photon also carries the radiance of the direction it comes from over the
+/// sky's mean (per channel), so the tallies hold that sky's light per unit of its mean radiance
+/// and views scale them by the mean as for a uniform sky.
 class SkyEmitter {
  public:
-  SkyEmitter(const Bounds3& b, int64_t count)
-      : centre_((b.min + b.max) * 0.5), radius_(0.5 * length(b.extent()) * (1 + 1e-6) + 1e-9) {
+  SkyEmitter(const Bounds3& b, int64_t count, const SkyLight* shape, const Rgb& mean)
+      : centre_((b.min + b.max) * 0.5),
+        radius_(0.5 * length(b.extent()) * (1 + 1e-6) + 1e-9),
+        shape_(shape) {
     weight_ = kPi * 4 * kPi * radius_ * radius_ / double(count);
+    for (int c = 0; c < 3; ++c) inv_mean_[c] = mean[c] > 0 ? 1 / mean[c] : 0.0;
   }
   double weight() const { return weight_; }
   Emission emit(Rng& rng) const {
     const Vec3 n = sampleUniformSphere(rng.uniform(), rng.uniform());
     const Vec3 local = sampleCosineHemisphere(rng.uniform(), rng.uniform());
     const Vec3 d = Frame::fromZ(-n).toWorld(local);
-    return {{centre_ + n * radius_, d}, weight_};
+    const Rgb w = shape_ ? shape_->radiance(-d) * inv_mean_ * weight_ : Rgb(weight_);
+    return {{centre_ + n * radius_, d}, w};
   }
 
  private:
   Vec3 centre_;
   double radius_, weight_ = 0;
+  const SkyLight* shape_;
+  Rgb inv_mean_{0.0};
 };
 
 /// Follows one photon; every segment after its first scattering goes to `tally`.
@@ -321,7 +332,9 @@ class PhotonTracer {
   void trace(const Emission& e, Rng& rng, TallyWriter* tally, TallyWriter* direct,
              TallyWriter* half) {
     Ray ray = e.ray;
-    Rgb beta(e.weight);
+    Rgb beta = e.weight;
+    const double start = maxComponent(e.weight);
+    if (!(start > 0)) return;  // a black part of the sky brings nothing
     for (int order = 0; order <= kMaxScatterings; ++order) {
       // Only over the ray's part inside the density's support (as the path tracer).
       double t0 = 0, t1 = 0;
@@ -339,7 +352,7 @@ class PhotonTracer {
       beta *= ps.value / ps.pdf;
       if (!(maxComponent(beta) > 0)) return;
       if (order + 1 >= kRouletteOrder) {
-        const double q = std::min(1.0, maxComponent(beta) / e.weight);
+        const double q = std::min(1.0, maxComponent(beta) / start);
         if (q < 1) {
           if (!(rng.uniform() < q)) return;
           beta /= q;
@@ -505,9 +518,14 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
     bake.metadata["cloudbake:truncation"] = str(e.truncation);
   }
   if (options.sky) {
-    const SkyEmitter sky(box, options.photons);
-    PhotonTally tally(bake.tally_grid, options.order, sky.weight(), channels);
-    PhotonTally direct(bake.tally_grid, options.order, sky.weight(), channels);
+    std::optional<SkyLight> shape;
+    if (options.sky_shape) shape.emplace(*options.sky_shape);
+    const Rgb mean = shape ? meanSkyRadiance(*options.sky_shape, *shape) : Rgb(1.0);
+    const SkyEmitter sky(box, options.photons, shape ? &*shape : nullptr, mean);
+    // A sky whose shape differs per channel makes sky photons' weights chromatic.
+    const int sky_channels = shape ? 3 : channels;
+    PhotonTally tally(bake.tally_grid, options.order, sky.weight(), sky_channels);
+    PhotonTally direct(bake.tally_grid, options.order, sky.weight(), sky_channels);
     tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally, &direct, nullptr,
                  stage(1.0 - sky_share, sky_share, "sky photons"));
     tally.store(&bake, bake_grids::photonSkySh);

@@ -19,7 +19,8 @@ namespace bake_grids {
 /// that has scattered at least once, per unit sun irradiance (W m^-2 sr^-1 per W m^-2, times
 /// the basis' sr^1/2 normalisation: integral of L Y_i over directions of travel).
 std::string photonSh(int i);
-/// Vec3 (RGB): the same for sky light, per unit radiance of a uniform sky.
+/// Vec3 (RGB): the same for sky light, per unit mean radiance of the baked sky (a uniform sky of
+/// unit radiance unless PhotonBakeOptions::sky_shape).
 std::string photonSkySh(int i);
 /// Vec3 (RGB): the same for sky light not yet scattered (the sky seen through the cloud): its
 /// convolution with the phase is the sky's single scattering, view-dependent for any phase.
@@ -51,6 +52,11 @@ struct PhotonBakeOptions {
   /// Ray-march step of the view renders, world units; 0: half a lattice voxel.
   double step = 0;
   bool sky = true;  ///< trace sky photons and bake sky_visibility (false for a black sky)
+  /// The sky whose light sky photons carry, per unit of its mean radiance (meanSkyRadiance):
+  /// each photon is weighted by the radiance of the direction it comes from over that mean, per
+  /// channel. Null: a uniform sky, whose bake serves every sky colour. A gradient or map sky's
+  /// bake is of its shape (the light key holds it).
+  const Sky* sky_shape = nullptr;
 };
 
 /// A bake's own estimates of its error in the multiply scattered sunlight (relative, over the
@@ -78,15 +84,15 @@ std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degre
 /// options.sky, the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
 /// scattered at least once, photonZonal(l) of the sunlight's zonal degrees above the order, and
 /// photonSkyDirectSh(i) of the sky light that has not. Photons are
-/// emitted per unit sun irradiance over the lattice's shadow (and per unit radiance of a uniform
-/// sky from its bounding sphere), tracked by decomposition tracking through the medium's own
-/// density (core/transport/tracking.h), scatter with the albedo and the exact phase function
-/// (throughput value / pdf per channel), are rouletted on their throughput after three scatterings,
-/// and add every segment after their first scattering (for the sky: every segment, the ones before
-/// it to the direct tally) to the voxels it crosses (track-length estimator: segment length x
-/// weight x Y_i(direction of travel) / voxel volume). Tallies are fixed-point integers added
-/// atomically, so the bake is the same at any thread count. InputError for bad options or medium,
-/// Cancelled on request.
+/// emitted per unit sun irradiance over the lattice's shadow (and per unit mean radiance of the
+/// sky, options.sky_shape or uniform, from its bounding sphere), tracked by decomposition tracking
+/// through the medium's own density (core/transport/tracking.h), scatter with the albedo and the
+/// exact phase function (throughput value / pdf per channel), are rouletted on their throughput
+/// after three scatterings, and add every segment after their first scattering (for the sky: every
+/// segment, the ones before it to the direct tally) to the voxels it crosses (track-length
+/// estimator: segment length x weight x Y_i(direction of travel) / voxel volume). Tallies are
+/// fixed-point integers added atomically, so the bake is the same at any thread count. InputError
+/// for bad options or medium, Cancelled on request.
 BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions& options,
                       const BakeProgressFn& progress = {});
 

@@ -149,28 +149,6 @@ const float* channel(const BakedLight& bake, const char* name, int components, b
   return ch.data.data();
 }
 
-/// Mean sky radiance over the sphere. A constant sky is exact; otherwise a midpoint rule on
-/// directions uniform in z = cos(theta) and azimuth (equal-area cells, equal weights). The
-/// horizon z = 0 is a cell boundary, so a gradient sky (linear in z above, constant below) is
-/// integrated exactly.
-Rgb meanSkyRadiance(const Sky& sky, const SkyLight& light) {
-  if (light.black()) return Rgb(0.0);
-  if (sky.type == Sky::Type::kConstant) return sky.radiance;
-  constexpr int kNz = 256, kNphi = 512;
-  Rgb sum(0.0);
-  for (int i = 0; i < kNz; ++i) {
-    const double z = 1 - 2 * (i + 0.5) / kNz;
-    const double r = std::sqrt(std::max(0.0, 1 - z * z));
-    Rgb row(0.0);
-    for (int j = 0; j < kNphi; ++j) {
-      const double phi = 2 * kPi * (j + 0.5) / kNphi;
-      row += light.radiance(Vec3(r * std::cos(phi), r * std::sin(phi), z));
-    }
-    sum += row;
-  }
-  return sum / (double(kNz) * kNphi);
-}
-
 /// Weights of one step of the optical-depth trapezoid (see the file comment): transmittance
 /// factor e = exp(-delta) and w0, w1 with integral = T(i) (w0 J_i + w1 J_{i+1}).
 inline void stepWeights(double delta, double* e, double* w0, double* w1) {
@@ -1025,6 +1003,27 @@ void validateBake(const BakedLight& bake) {
 }
 
 }  // namespace
+
+// A midpoint rule on directions uniform in z = cos(theta) and azimuth (equal-area cells, equal
+// weights). The horizon z = 0 is a cell boundary, so a gradient sky (linear in z above, constant
+// below) is integrated exactly.
+Rgb meanSkyRadiance(const Sky& sky, const SkyLight& light) {
+  if (light.black()) return Rgb(0.0);
+  if (sky.type == Sky::Type::kConstant) return sky.radiance;
+  constexpr int kNz = 256, kNphi = 512;
+  Rgb sum(0.0);
+  for (int i = 0; i < kNz; ++i) {
+    const double z = 1 - 2 * (i + 0.5) / kNz;
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    Rgb row(0.0);
+    for (int j = 0; j < kNphi; ++j) {
+      const double phi = 2 * kPi * (j + 0.5) / kNphi;
+      row += light.radiance(Vec3(r * std::cos(phi), r * std::sin(phi), z));
+    }
+    sum += row;
+  }
+  return sum / (double(kNz) * kNphi);
+}
 
 RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const Sun& sun,
                             const Sky& sky, const Camera& camera, const BakeRenderOptions& options,

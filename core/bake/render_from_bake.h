@@ -10,6 +10,8 @@
 
 namespace cloudbake {
 
+class SkyLight;
+
 /// Options of renderFromBake.
 struct BakeRenderOptions {
   double step = 0;            ///< march step, world units; 0: half a lattice voxel
@@ -20,6 +22,11 @@ struct BakeRenderOptions {
   double min_transmittance = 1e-4;
   int threads = 0;  ///< 0: the caller's TBB arena
 };
+
+/// The sky's radiance averaged over the sphere (exact for a constant sky, else an equal-area
+/// 256 x 512 quadrature, exact for the gradient sky): the scale of every per-unit-radiance sky
+/// term of a bake.
+Rgb meanSkyRadiance(const Sky& sky, const SkyLight& light);
 
 /// Renders `camera` from `bake` lit by `sun` (its irradiance scales the baked light; its
 /// direction is not read: a bake holds one light direction, bake.sun_direction) and `sky`, with

@@ -69,8 +69,13 @@ class PhotonMethod final : public BakeMethod {
   }
 
   nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {
-    // The photons scatter with the albedo and the phase: the whole medium is baked.
-    return wholeMediumLightKey(*this, shot, canonical);
+    // The photons scatter with the albedo and the phase: the whole medium is baked. A sky that
+    // is not uniform is baked by its shape (SkyEmitter), so the sky is part of the key then.
+    nlohmann::json key = wholeMediumLightKey(*this, shot, canonical);
+    if (photonBakeOptions(shot).sky && shot.lighting.sky.type != Sky::Type::kConstant) {
+      key["light"]["sky_shape"] = canonical["lighting"]["sky"];
+    }
+    return key;
   }
 
   MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,
@@ -113,7 +118,9 @@ class PhotonMethod final : public BakeMethod {
   }
 
   void run(MethodRun& run) const override {
-    const PhotonBakeOptions o = photonBakeOptions(run.shot());
+    PhotonBakeOptions o = photonBakeOptions(run.shot());
+    const Sky& sky = run.lights().sky;
+    if (o.sky && sky.type != Sky::Type::kConstant) o.sky_shape = &sky;
     // Measured on the Perlin example: 3.7 us per photon (its tallies included; 5.7 before
     // version 4 summed each photon's segments per voxel), views 3x the cost of a Co lookup per
     // ray for the SH convolution at order 3.

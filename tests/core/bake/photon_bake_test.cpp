@@ -44,17 +44,22 @@ PhotonBakeOptions small(int64_t photons = 20000, int order = 2) {
   return o;
 }
 
-// Mean over the pixels of `layer` channel 0 where the beauty's alpha exceeds 0.5.
-double cloudMean(const RenderLayers& l, const Image& layer) {
+// Mean of `layer` channel 0 over the pixels of rows [y0, y1) (row 0 at the top) where the
+// beauty's alpha exceeds 0.5.
+double rowsMean(const RenderLayers& l, const Image& layer, int y0, int y1) {
   double sum = 0;
   int n = 0;
-  for (int y = 0; y < layer.height; ++y)
+  for (int y = y0; y < y1; ++y)
     for (int x = 0; x < layer.width; ++x) {
       if (l.beauty.at(x, y)[3] < 0.5) continue;
       sum += layer.at(x, y)[0];
       ++n;
     }
   return n ? sum / n : 0;
+}
+
+double cloudMean(const RenderLayers& l, const Image& layer) {
+  return rowsMean(l, layer, 0, layer.height);
 }
 
 TEST(PhotonBake, SameBakeOnOneAndTwoThreads) {
@@ -149,6 +154,38 @@ TEST(PhotonBake, WhiteFurnaceSeesTheSky) {
     for (int y = 0; y < 16; ++y)
       for (int x = 0; x < 16; ++x) EXPECT_LE(l.beauty.at(x, y)[0], 0.2 * 1.15);
   }
+}
+
+// A sky lit from above only (a gradient sky with a black horizon and ground) lights the top of
+// a sphere more than its bottom. Sky photons carry the sky's shape, so the bake's top and bottom
+// halves match the path tracer's; photons of a uniform sky of the same mean (no shape) cannot.
+TEST(PhotonBake, SkyPhotonsCarryTheSkysShape) {
+  const Medium m = sphere(4, Rgb(0.95), std::make_shared<IsotropicPhase>());
+  Sun sun;
+  sun.irradiance = Rgb(0.0);
+  Sky sky;
+  sky.type = Sky::Type::kGradient;
+  sky.zenith = Rgb(1.0);
+  const Camera cam = perspectiveCamera(16);
+  PathTracerOptions pt;
+  pt.samples_per_pixel = 1024;
+  const RenderLayers ref = renderPathTraced(m, sun, sky, cam, pt);
+  auto bake = [&](const Sky* shape) {
+    PhotonBakeOptions o = small(200000, 2);
+    o.light_resolution = 32;
+    o.sky_shape = shape;
+    return renderFromBake(bakePhoton(m, Vec3(0, 0, 1), o), m, sun, sky, cam, {});
+  };
+  const RenderLayers shaped = bake(&sky), uniform = bake(nullptr);
+  const double ref_top = rowsMean(ref, ref.sky, 0, 8), ref_bottom = rowsMean(ref, ref.sky, 8, 16);
+  ASSERT_GT(ref_top, 1.5 * ref_bottom) << "the test needs a sky brighter above";
+  const double whole = cloudMean(ref, ref.sky);
+  EXPECT_NEAR(cloudMean(shaped, shaped.sky), whole, 0.06 * whole);
+  EXPECT_NEAR(rowsMean(shaped, shaped.sky, 0, 8), ref_top, 0.08 * ref_top);
+  EXPECT_NEAR(rowsMean(shaped, shaped.sky, 8, 16), ref_bottom, 0.1 * ref_bottom);
+  const double uniform_ratio =
+      rowsMean(uniform, uniform.sky, 0, 8) / rowsMean(uniform, uniform.sky, 8, 16);
+  EXPECT_LT(uniform_ratio, 0.8 * ref_top / ref_bottom) << "a uniform sky's photons";
 }
 
 // The photons' multiply scattered sunlight against the path tracer's, same scene.

@@ -146,6 +146,23 @@ TEST(MethodRegistry, ADefaultKnobGivesTheSameKeysAsSettingItToItsDefault) {
   EXPECT_EQ(a.light, d.light);
 }
 
+// Photon bakes a uniform sky per unit radiance, so any colour of it reuses the bake; a
+// gradient or map sky is baked by its shape, so another shape is another bake.
+TEST(MethodRegistry, PhotonsLightKeyHoldsTheSkysShapeOnlyWhenItHasOne) {
+  auto keyWith = [](const std::string& sky) {
+    std::string text = shotOf("photon");
+    const std::string sun = R"("irradiance": [1, 1, 1]})";
+    text.replace(text.find(sun), sun.size(), sun + ", \"sky\": " + sky);
+    return computeCacheKeys(parseShot(text, "")).light;
+  };
+  EXPECT_EQ(keyWith(R"({"radiance": [0.1, 0.2, 0.3]})"), keyWith(R"({"radiance": [1, 1, 1]})"));
+  const std::string g1 = R"({"zenith": [0.1, 0.2, 0.4], "horizon": [0.3, 0.3, 0.3]})";
+  const std::string g2 = R"({"zenith": [0.4, 0.2, 0.1], "horizon": [0.3, 0.3, 0.3]})";
+  EXPECT_EQ(keyWith(g1), keyWith(g1));
+  EXPECT_NE(keyWith(g1), keyWith(g2));
+  EXPECT_NE(keyWith(g1), keyWith(R"({"radiance": [1, 1, 1]})"));
+}
+
 TEST(MethodDocs, ShotFormatDocHasTheRegistrysKnobTables) {
   const std::string doc = readText(fs::path(CLOUDBAKE_SOURCE_DIR) / "docs/shot-format.md");
   ASSERT_FALSE(doc.empty());
