@@ -25,6 +25,7 @@
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -416,7 +417,16 @@ TEST_P(ExtremesMatrix, RendersWithinEnergyBounds) {
     const bool monte_carlo = c.method == "pathtrace" || c.method == "photon" || c.method == "auto";
     checkImages(layers, boundsOf(spec), monte_carlo);
   } catch (const InputError& e) {
-    ADD_FAILURE() << "a valid shot was refused: " << e.what();
+    // Method photon refuses phases whose peak its expansion cannot hold (its views would ring;
+    // photon_bake.cpp, checkPhaseFitsTheExpansion): these variants, and only these.
+    static const std::set<std::string> kSpiky = {"g_0.999",        "g_-0.99",      "g_-0.999",
+                                                 "g_-0.999_white", "mie_approx_5", "mie_approx_50",
+                                                 "mie_large"};
+    const bool spiky_refused =
+        c.method == "photon" && kSpiky.count(c.variant.name) &&
+        std::string(e.what()).find("/medium/phase: this phase's Legendre coefficient") !=
+            std::string::npos;
+    if (!spiky_refused) ADD_FAILURE() << "a valid shot was refused: " << e.what();
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

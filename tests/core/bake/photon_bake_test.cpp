@@ -323,6 +323,22 @@ TEST(PhotonBake, ErrorEstimatesFallAsPhotonsAndOrderGrow) {
   EXPECT_LT(z24, t6) << "order 2 with zonal terms to 24: " << z24 << ", order 6: " << t6;
 }
 
+// A forward peak narrower than the expansion can hold is refused, naming the phase, rather than
+// baked into views that ring (HG 0.95: p_24 = 0.29, p_48 = 0.085); zonal terms that reach
+// far enough take it.
+TEST(PhotonBake, RefusesAPeakTheExpansionCannotHold) {
+  const Medium m = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.95));
+  PhotonBakeOptions o = small(2000);
+  o.zonal_order = 24;
+  expectErrorNaming([&] { bakePhoton(m, Vec3(0, 0, 1), o); }, "/medium/phase");
+  o.zonal_order = 48;
+  EXPECT_NO_THROW(bakePhoton(m, Vec3(0, 0, 1), o));
+  const Medium back = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(-0.99));
+  expectErrorNaming([&] { bakePhoton(back, Vec3(0, 0, 1), small(2000)); }, "/medium/phase");
+  const Medium hg = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.9));
+  EXPECT_NO_THROW(bakePhoton(hg, Vec3(0, 0, 1), small(2000)));
+}
+
 TEST(PhotonBake, CancelsAndNamesBadInput) {
   const Medium m = sphere(4, Rgb(0.9), std::make_shared<IsotropicPhase>());
   const Vec3 up(0, 0, 1);
