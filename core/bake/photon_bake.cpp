@@ -69,12 +69,12 @@ void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions
 }
 
 // Views convolve the tallies with the phase degree by degree, up to the highest degree kept. A
-// phase whose Legendre coefficients are still large beyond degree kSpikeDegree has a forward peak
-// narrower than about 7 degrees (a droplet's), and the scattered light carries that peak too: the
-// truncated sums ring. The real Mie table (10 um, p_24 = 0.43) measured 40-140 % off the
-// reference in every view; HG 0.85 (p_24 = 0.02) converges. Such a phase is refused unless the
-// zonal terms reach a degree where p_l is under kMaxTopLegendre (a bound between the two), rather
-// than baked wrong.
+// phase whose Legendre coefficients are still large beyond degree kSpikeDegree has a peak narrower
+// than about 7 degrees (a droplet's forward peak, or HG -0.99's backward one), and the scattered
+// light carries that peak too: the truncated sums ring. The real Mie table (10 um, p_24 = 0.43)
+// measured 40-140 % off the reference in every view; HG 0.85 (p_24 = 0.02) converges. Such a phase
+// is refused unless the zonal terms reach a degree where p_l is under kMaxTopLegendre (a bound
+// between the two), rather than baked wrong.
 constexpr int kSpikeDegree = 24;
 constexpr double kMaxTopLegendre = 0.1;
 
@@ -84,7 +84,7 @@ void checkPhaseFitsTheExpansion(const std::vector<Rgb>& p_l, const PhotonBakeOpt
   if (!(std::abs(p_top) > kMaxTopLegendre)) return;
   throw InputError("/medium/phase: this phase's Legendre coefficient p_" + str(top) + " is still " +
                    str(p_top) + " (above " + str(kMaxTopLegendre) +
-                   "), a forward peak narrower than method photon's expansion to degree " +
+                   "), a peak narrower than method photon's expansion to degree " +
                    str(std::max(o.order, o.zonal_order)) + " (order " + str(o.order) +
                    ", zonal_order " + str(o.zonal_order) +
                    ") can hold: its views would ring. Use method pathtrace, a larger zonal_order "

@@ -32,6 +32,12 @@ std::vector<Knob> photonKnobs() {
   };
 }
 
+// A sky that is not uniform is baked by its shape (PhotonBakeOptions::sky_shape), so the light
+// key must hold it: one test for both.
+bool bakesSkyShape(const ShotSpec& shot) {
+  return needsSky(shot) && shot.lighting.sky.type != Sky::Type::kConstant;
+}
+
 class PhotonMethod final : public BakeMethod {
  public:
   PhotonMethod() {
@@ -69,12 +75,9 @@ class PhotonMethod final : public BakeMethod {
   }
 
   nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {
-    // The photons scatter with the albedo and the phase: the whole medium is baked. A sky that
-    // is not uniform is baked by its shape (SkyEmitter), so the sky is part of the key then.
+    // The photons scatter with the albedo and the phase: the whole medium is baked.
     nlohmann::json key = wholeMediumLightKey(*this, shot, canonical);
-    if (photonBakeOptions(shot).sky && shot.lighting.sky.type != Sky::Type::kConstant) {
-      key["light"]["sky_shape"] = canonical["lighting"]["sky"];
-    }
+    if (bakesSkyShape(shot)) key["light"]["sky_shape"] = canonical["lighting"]["sky"];
     return key;
   }
 
@@ -119,8 +122,7 @@ class PhotonMethod final : public BakeMethod {
 
   void run(MethodRun& run) const override {
     PhotonBakeOptions o = photonBakeOptions(run.shot());
-    const Sky& sky = run.lights().sky;
-    if (o.sky && sky.type != Sky::Type::kConstant) o.sky_shape = &sky;
+    if (bakesSkyShape(run.shot())) o.sky_shape = &run.lights().sky;
     // Measured on the Perlin example: 3.7 us per photon (its tallies included; 5.7 before
     // version 4 summed each photon's segments per voxel), views 3x the cost of a Co lookup per
     // ray for the SH convolution at order 3.
