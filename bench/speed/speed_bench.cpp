@@ -33,7 +33,6 @@
 #include "core/methods/pointcloud.h"
 #include "core/methods/precomputed.h"
 #include "core/methods/single.h"
-#include "core/phase/henyey_greenstein.h"
 #include "core/shot/scene_builder.h"
 #include "core/shot/shot_parser.h"
 #include "core/transport/sky.h"
@@ -137,14 +136,7 @@ void viewPart(const Args& a) {
   const Scene shot_scene = buildScene(parseShotFile(a.view_shot), a.view_shot);
   for (const std::string& m : a.methods) {
     const ShotSpec shot = shotWithMethod(a.view_shot, m);
-    Scene scene = shot_scene;
-    if (m == "photon") {
-      // Photon refuses a droplet's peak (its expansion would ring); a view's cost does not
-      // depend on the phase, so its views are timed with HG of the same mean cosine.
-      const double g = scene.medium.phase->meanCosine().y;
-      scene.medium.phase = std::make_shared<HenyeyGreensteinPhase>(g);
-      std::printf("view: photon with HG g = %.3f in place of the shot's phase\n", g);
-    }
+    const Scene& scene = shot_scene;
     BakedLight bake;
     const double s = seconds([&] { bake = bakeFor(m, shot, scene); });
     std::printf("view: %s bake for the views took %.2f s (all threads)\n", m.c_str(), s);

@@ -11,6 +11,12 @@ PhaseLut::PhaseLut(const PhaseFunction& phase, int bins)
   for (int i = 0; i < nodes(); ++i) table_[size_t(i)] = phase.eval(nodeCosine(i));
 }
 
+PhaseLut::PhaseLut(const std::function<Rgb(double)>& p, int bins)
+    : bins_(std::max(bins, 8)), scale_(bins_ * std::sqrt(2.0)) {
+  table_.resize(size_t(nodes()));
+  for (int i = 0; i < nodes(); ++i) table_[size_t(i)] = p(nodeCosine(i));
+}
+
 double PhaseLut::nodeCosine(int i) const {
   if (i <= bins_) {
     const double u = i / scale_;

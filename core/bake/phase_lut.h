@@ -1,6 +1,7 @@
 // A fast tabulated form of any phase function, for the inner loops of bakes and bake renders.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "core/math/vec3.h"
@@ -21,6 +22,8 @@ namespace cloudbake {
 class PhaseLut {
  public:
   explicit PhaseLut(const PhaseFunction& phase, int bins = 4096);
+  /// The same table of any function of cos theta (such as PeakBlurredPhase::eval).
+  PhaseLut(const std::function<Rgb(double)>& p, int bins);
   Rgb eval(double cos_theta) const {
     const double c = cos_theta > 1 ? 1 : (cos_theta < -1 ? -1 : cos_theta);
     const double x =

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <optional>
 
 #include "core/bake/bake_lattice.h"
@@ -18,6 +19,7 @@
 #include "core/math/sampling.h"
 #include "core/math/sh_basis.h"
 #include "core/math/spherical_harmonics.h"
+#include "core/phase/forward_peak.h"
 #include "core/transport/sky.h"
 #include "core/transport/tracking.h"
 
@@ -70,27 +72,33 @@ void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions
 
 // Views convolve the tallies with the phase degree by degree, up to the highest degree kept. A
 // phase whose Legendre coefficients are still large beyond degree kSpikeDegree has a peak narrower
-// than about 7 degrees (a droplet's forward peak, or HG -0.99's backward one), and the scattered
-// light carries that peak too: the truncated sums ring. The real Mie table (10 um, p_24 = 0.43)
-// measured 40-140 % off the reference in every view; HG 0.85 (p_24 = 0.02) converges. Such a phase
-// is refused unless the zonal terms reach a degree where p_l is under kMaxTopLegendre (a bound
-// between the two), rather than baked wrong.
+// than about 7 degrees (a droplet's forward peak, or HG -0.99's backward one), and light scattered
+// through it carries that peak too: the truncated sums ring. The real Mie table (10 um, p_24 =
+// 0.43) measured 40-140 % off the reference in every view when its peak was tallied; HG 0.85
+// (p_24 = 0.02) converges. So a forward peak is split off (ForwardPeak) at the narrowest cut that
+// leaves the rest's coefficient at the top degree under kMaxTopLegendre (a bound between the two;
+// phases under it are not split), and views add the light scattered only through the peak as a
+// beam about the sun's direction (PhotonPeakLight). A peak the cut cannot remove within
+// kMaxCutDegrees (a backward one) is refused.
 constexpr int kSpikeDegree = 24;
 constexpr double kMaxTopLegendre = 0.1;
+constexpr double kMaxCutDegrees = 30;
 
-void checkPhaseFitsTheExpansion(const std::vector<Rgb>& p_l, const PhotonBakeOptions& o) {
+ForwardPeak splitPeakOrRefuse(const PhaseFunction& phase, const PhotonBakeOptions& o) {
   const int top = std::max({o.order, o.zonal_order, kSpikeDegree});
-  const double p_top = maxComponent(p_l[size_t(top)]);
-  if (!(std::abs(p_top) > kMaxTopLegendre)) return;
-  throw InputError("/medium/phase: this phase's Legendre coefficient p_" + str(top) + " is still " +
-                   str(p_top) + " (above " + str(kMaxTopLegendre) +
-                   "), a peak narrower than method photon's expansion to degree " +
+  bool found = false;
+  const ForwardPeak split = splitForwardPeak(phase, top, kMaxTopLegendre, kMaxCutDegrees, &found);
+  if (found) return split;
+  throw InputError("/medium/phase: this phase's Legendre coefficient p_" + str(top) +
+                   " stays above " + str(kMaxTopLegendre) + " with its forward " +
+                   str(kMaxCutDegrees) +
+                   " degrees cut off: a peak (a backward one?) narrower than method photon's "
+                   "expansion to degree " +
                    str(std::max(o.order, o.zonal_order)) + " (order " + str(o.order) +
                    ", zonal_order " + str(o.zonal_order) +
-                   ") can hold: its views would ring. Use method pathtrace, a larger zonal_order "
-                   "(at most " +
-                   str(kMaxZonalDegree) + ") where p_l falls under " + str(kMaxTopLegendre) +
-                   ", or a smaller phase.mie_ratio");
+                   ") can hold, and its views would ring. Use method pathtrace, a larger "
+                   "zonal_order (at most " +
+                   str(kMaxZonalDegree) + "), or a smaller phase.mie_ratio");
 }
 
 /// Per-voxel SH moments of a radiance field, summed as fixed-point integers (TallyWriter adds
@@ -346,18 +354,31 @@ class SkyEmitter {
   Rgb inv_mean_{0.0};
 };
 
-/// Follows one photon; every segment after its first scattering goes to `tally`.
+/// Where a photon's segments go: the tallies of one kind of photon (null: not tallied).
+struct PhotonWriters {
+  TallyWriter* scattered = nullptr;  ///< after its first scattering (through the peak's rest)
+  TallyWriter* direct = nullptr;     ///< before its first scattering
+  TallyWriter* half = nullptr;       ///< the scattered segments again (odd photons)
+};
+
+/// Follows one photon; every segment goes to one of `PhotonWriters` by what it has been through.
 class PhotonTracer {
  public:
-  PhotonTracer(const Medium& medium, const MajorantGrid& grid)
-      : medium_(medium), grid_(grid), lookup_(medium.density->lookup()) {}
+  /// With an active `split`, a scattering of a photon not yet scattered through the peak's rest
+  /// is through the peak with probability peak(mu) / p(mu) (averaged over channels, the weights
+  /// corrected per channel): such photons are not tallied (PhotonPeakLight), travelling within its
+  /// cone of their first direction.
+  PhotonTracer(const Medium& medium, const MajorantGrid& grid, const ForwardPeak* split)
+      : medium_(medium),
+        grid_(grid),
+        lookup_(medium.density->lookup()),
+        split_(split && split->active() ? split : nullptr) {}
 
-  /// `direct` (optional) takes the segments before the first scattering, `half` (optional)
-  /// the scattered ones again.
-  void trace(const Emission& e, Rng& rng, TallyWriter* tally, TallyWriter* direct,
-             TallyWriter* half) {
+  void trace(const Emission& e, Rng& rng, const PhotonWriters& to) {
+    enum class State { kDirect, kPeak, kScattered };
     Ray ray = e.ray;
     Rgb beta = e.weight;
+    State state = State::kDirect;
     const double start = maxComponent(e.weight);
     if (!(start > 0)) return;  // a black part of the sky brings nothing
     for (int order = 0; order <= kMaxScatterings; ++order) {
@@ -367,14 +388,22 @@ class PhotonTracer {
           medium_.density->supportInterval(ray, 0, kInf, &t0, &t1)
               ? decompositionTrack(grid_, *lookup_, medium_.extinction, ray, t0, t1, rng)
               : Collision{};
-      TallyWriter* to = order > 0 ? tally : direct;
-      if (to) to->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
-      if (order > 0 && half) half->addSegment(ray.o, ray.d, c.hit ? c.t : kInf, beta);
+      const double len = c.hit ? c.t : kInf;
+      TallyWriter* w = state == State::kDirect ? to.direct
+                       : state == State::kPeak ? nullptr
+                                               : to.scattered;
+      if (w) w->addSegment(ray.o, ray.d, len, beta);
+      if (state == State::kScattered && to.half) to.half->addSegment(ray.o, ray.d, len, beta);
       if (!c.hit) return;
       beta *= medium_.albedo;
       const PhaseSample ps = medium_.phase->sample(ray.d, rng.uniform(), rng.uniform());
       if (!(ps.pdf > 0)) return;
       beta *= ps.value / ps.pdf;
+      if (state != State::kScattered) {
+        state = (split_ && throughPeak(dot(ray.d, ps.direction), ps.value, rng, &beta))
+                    ? State::kPeak
+                    : State::kScattered;
+      }
       if (!(maxComponent(beta) > 0)) return;
       if (order + 1 >= kRouletteOrder) {
         const double q = std::min(1.0, maxComponent(beta) / start);
@@ -388,18 +417,43 @@ class PhotonTracer {
   }
 
  private:
+  // Chooses the peak or the rest for a scattering by cos theta `mu` with value p_mu, and weights
+  // beta by the chosen part over p per channel, over the probability of choosing it.
+  bool throughPeak(double mu, const Rgb& p_mu, Rng& rng, Rgb* beta) const {
+    const Rgb peak = split_->peak(mu, p_mu);
+    const double all = p_mu.x + p_mu.y + p_mu.z;
+    const double share = all > 0 ? (peak.x + peak.y + peak.z) / all : 0.0;
+    if (!(share > 0)) return false;
+    const bool in_peak = share >= 1 || rng.uniform() < share;
+    const Rgb part = in_peak ? peak : p_mu - peak;
+    const double chosen = in_peak ? share : 1 - share;
+    for (int c = 0; c < 3; ++c) {
+      (*beta)[c] *= p_mu[c] > 0 ? part[c] / p_mu[c] / chosen : 0.0;
+    }
+    return in_peak;
+  }
+
+ private:
   const Medium& medium_;
   const MajorantGrid& grid_;
   std::unique_ptr<DensityField::Lookup> lookup_;
+  const ForwardPeak* split_;
 };
 
-// Traces `count` photons from `emit` into `tally` in parallel batches, one random stream per
-// photon; progress(fraction) false cancels.
+/// The tallies one kind of photon goes to (PhotonWriters; null: none).
+struct PhotonTallies {
+  PhotonTally* scattered = nullptr;
+  PhotonTally* direct = nullptr;
+  PhotonTally* half = nullptr;  // odd photons only
+};
+
+// Traces `count` photons from `emit` into `tallies` in parallel batches, one random stream per
+// photon, splitting the phase's forward peak off by `split` (null: never); progress(fraction)
+// false cancels.
 template <typename Emitter>
 void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter& emitter,
-                  int64_t count, uint64_t seed, uint64_t stream, PhotonTally* tally,
-                  PhotonTally* direct, PhotonTally* half,
-                  const std::function<bool(double)>& progress) {
+                  int64_t count, uint64_t seed, uint64_t stream, const PhotonTallies& tallies,
+                  const ForwardPeak* split, const std::function<bool(double)>& progress) {
   ParallelOptions po;
   po.cancelled = [&](double f) { return progress && !progress(f); };
   po.cancelled_message = "bake cancelled";
@@ -407,19 +461,20 @@ void tracePhotons(const Medium& medium, const MajorantGrid& grid, const Emitter&
   parallelFor(
       0, batches,
       [&](int64_t b) {
-        PhotonTracer tracer(medium, grid);
-        std::optional<TallyWriter> to_tally, to_direct, to_half;
-        if (tally) to_tally.emplace(tally);
-        if (direct) to_direct.emplace(direct);
-        if (half) to_half.emplace(half);
-        auto writer = [](std::optional<TallyWriter>& w) { return w ? &*w : nullptr; };
+        PhotonTracer tracer(medium, grid, split);
+        std::optional<TallyWriter> w[3];
+        PhotonTally* const t[3] = {tallies.scattered, tallies.direct, tallies.half};
+        for (int k = 0; k < 3; ++k) {
+          if (t[k]) w[k].emplace(t[k]);
+        }
+        auto writer = [&](int k) { return w[k] ? &*w[k] : nullptr; };
         Rng rng;
         for (int64_t i = b * kBatch; i < std::min(count, (b + 1) * kBatch); ++i) {
           rng.setSeed(mixBits(seed, uint64_t(i)), stream);
-          tracer.trace(emitter.emit(rng), rng, writer(to_tally), writer(to_direct),
-                       (i & 1) ? writer(to_half) : nullptr);
-          for (auto* w : {&to_tally, &to_direct, &to_half}) {
-            if (*w) (*w)->flush();
+          PhotonWriters to{writer(0), writer(1), (i & 1) ? writer(2) : nullptr};
+          tracer.trace(emitter.emit(rng), rng, to);
+          for (auto& one : w) {
+            if (one) one->flush();
           }
         }
       },
@@ -457,9 +512,10 @@ PhotonErrorEstimate estimateErrors(const PhotonTally& full, const PhotonTally& o
 }
 
 // Cd = (sun_transmittance + fluence of the scattered sunlight) / (4 pi), the fluence being
-// sqrt(4 pi) times coefficient 0 (Y_00 = 1 / sqrt(4 pi)): the isotropic DCC preview.
-// The tally lies on the tally lattice: read at each voxel centre of the bake's lattice.
-void addPhotonMeanRadiance(BakedLight* bake) {
+// sqrt(4 pi) times coefficient 0 (Y_00 = 1 / sqrt(4 pi)), plus that of the light scattered through
+// the peak only (PhotonPeakLight::fluence, exponent e; 1: none): the isotropic DCC preview. The
+// tally lies on the tally lattice: read at each voxel centre of the bake's lattice.
+void addPhotonMeanRadiance(BakedLight* bake, const Rgb& e) {
   const BakeChannel* t = bake->find(bake_grids::kSunTransmittance);
   const BakeChannel* l0 = bake->find(bake_grids::photonSh(0));
   BakeChannel& cd = bake->add(bake_grids::kCd, 3);
@@ -469,9 +525,11 @@ void addPhotonMeanRadiance(BakedLight* bake) {
       l0 ? resampleTrilinear(bake->gridOf(*l0), l0->data.data(), 3, bake->grid)
          : std::vector<float>(voxels * 3, 0.f);
   for (size_t v = 0; v < voxels; ++v) {
+    const double tsun = t ? t->data[v] : 0.0;
     for (int c = 0; c < 3; ++c) {
-      const double fluence = std::max(0.0, kSqrt4Pi * l[v * 3 + c]);
-      cd.data[v * 3 + c] = float(((t ? t->data[v] : 0.0) + fluence) * inv4pi);
+      const double peak = tsun > 0 ? std::pow(tsun, e[c]) - tsun : 0.0;
+      const double fluence = std::max(0.0, kSqrt4Pi * l[v * 3 + c]) + peak;
+      cd.data[v * 3 + c] = float((tsun + fluence) * inv4pi);
     }
   }
 }
@@ -494,12 +552,78 @@ std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degre
   return out;
 }
 
+namespace {
+
+// p convolved with the kernel once per scattering through the peak, weighted by the share of
+// the peak's fluence that scattered through it that many times (PhotonPeakLight).
+PhaseLut peakScatteredPhase(const PhaseLut& phase, const PeakKernel& kernel, const Rgb& r) {
+  // 1024 bins (0.08 degrees at either end) keep the four convolutions a few milliseconds each.
+  constexpr int kBins = 1024;
+  constexpr int kTimes = 4;
+  std::vector<PhaseLut> times;  // p convolved k = 1 .. kTimes times
+  times.emplace_back(
+      [&](double mu) { return kernel.convolve([&](double m) { return phase.eval(m); }, mu); },
+      kBins);
+  while (int(times.size()) < kTimes) {
+    const PhaseLut& last = times.back();
+    PhaseLut next(
+        [&](double mu) { return kernel.convolve([&](double m) { return last.eval(m); }, mu); },
+        kBins);
+    times.push_back(std::move(next));
+  }
+  return PhaseLut(
+      [&](double mu) {
+        Rgb sum(0.0), share(1.0);  // r^(k - 1)
+        for (int k = 0; k < kTimes; ++k) {
+          const Rgb w = k + 1 < kTimes ? share * (Rgb(1.0) - r) : share;
+          sum += w * times[size_t(k)].eval(mu);
+          share *= r;
+        }
+        return sum;
+      },
+      kBins);
+}
+
+ForwardPeak cutAt(double cut_deg) {
+  ForwardPeak split;
+  split.cos_cut = std::cos(cut_deg * kPi / 180);
+  return split;
+}
+
+// The bake's knobs and its peak's cut in its metadata (docs/outputs.md); the cut to full
+// precision, since views rebuild the peak's light from it.
+void recordKnobs(const PhotonBakeOptions& options, const ForwardPeak& split, int tally_resolution,
+                 double extinction, std::map<std::string, std::string>* m) {
+  (*m)["cloudbake:angular_model"] = "sh";
+  (*m)["cloudbake:photon_order"] = str(options.order);
+  (*m)["cloudbake:photon_zonal_order"] =
+      str(options.zonal_order > options.order ? options.zonal_order : 0);
+  (*m)["cloudbake:photons"] = str(options.photons);
+  (*m)["cloudbake:peak_cut_deg"] =
+      split.active() ? str(std::acos(split.cos_cut) * 180 / kPi, 15) : "0";
+  (*m)["cloudbake:peak_fraction"] = str(split.fraction);
+  (*m)["cloudbake:tally_resolution"] = str(tally_resolution);
+  (*m)["cloudbake:step"] = str(options.step);
+  (*m)["cloudbake:extinction"] = str(extinction);
+  (*m)["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";
+}
+
+}  // namespace
+
+PhotonPeakLight::PhotonPeakLight(const PhaseLut& phase, double cut_deg, const Rgb& albedo)
+    : PhotonPeakLight(phase, PeakKernel(cutAt(cut_deg), [&](double mu) { return phase.eval(mu); }),
+                      albedo) {}
+
+PhotonPeakLight::PhotonPeakLight(const PhaseLut& phase, const PeakKernel& kernel, const Rgb& albedo)
+    : exponent(Rgb(1.0) - albedo * kernel.fraction()),
+      scattered(peakScatteredPhase(phase, kernel, albedo * kernel.fraction())) {}
+
 BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions& options,
                       const BakeProgressFn& progress) {
   validate(medium, sun_dir, options);
   const std::vector<Rgb> p_l = phaseLegendreCoefficients(
       *medium.phase, std::max({options.order, options.zonal_order, kSpikeDegree}));
-  checkPhaseFitsTheExpansion(p_l, options);
+  const ForwardPeak split = splitPeakOrRefuse(*medium.phase, options);
   auto stage = [&](double lo, double span, const char* name) {
     return [&progress, lo, span, name](double f) {
       return !progress || progress(lo + span * f, name);
@@ -536,7 +660,10 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
     PhotonTally tally(bake.tally_grid, options.order, sun.weight(), channels, options.zonal_order,
                       -sun_dir);
     PhotonTally odd(bake.tally_grid, 0, sun.weight(), channels);
-    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, &tally, nullptr, &odd,
+    PhotonTallies to;  // the light scattered through the peak only: PhotonPeakLight
+    to.scattered = &tally;
+    to.half = &odd;
+    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, to, &split,
                  stage(0.25, 0.75 - sky_share, "sun photons"));
     tally.store(&bake, bake_grids::photonSh);
     const PhotonErrorEstimate e = estimateErrors(
@@ -553,22 +680,17 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
     const int sky_channels = shape ? 3 : channels;
     PhotonTally tally(bake.tally_grid, options.order, sky.weight(), sky_channels);
     PhotonTally direct(bake.tally_grid, options.order, sky.weight(), sky_channels);
-    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, &tally, &direct, nullptr,
+    PhotonTallies to;
+    to.scattered = &tally;
+    to.direct = &direct;
+    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, to, nullptr,
                  stage(1.0 - sky_share, sky_share, "sky photons"));
     tally.store(&bake, bake_grids::photonSkySh);
     direct.store(&bake, bake_grids::photonSkyDirectSh);
   }
   bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
-  bake.metadata["cloudbake:angular_model"] = "sh";
-  bake.metadata["cloudbake:photon_order"] = str(options.order);
-  bake.metadata["cloudbake:photon_zonal_order"] =
-      str(options.zonal_order > options.order ? options.zonal_order : 0);
-  bake.metadata["cloudbake:photons"] = str(options.photons);
-  bake.metadata["cloudbake:tally_resolution"] = str(tally_resolution);
-  bake.metadata["cloudbake:step"] = str(options.step);
-  bake.metadata["cloudbake:extinction"] = str(medium.extinction);
-  bake.metadata["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";
-  addPhotonMeanRadiance(&bake);
+  recordKnobs(options, split, tally_resolution, medium.extinction, &bake.metadata);
+  addPhotonMeanRadiance(&bake, Rgb(1.0) - medium.albedo * split.fraction);
   bake.trimToSupport();
   if (progress && !progress(1, "done")) throw Cancelled("bake cancelled");
   return bake;

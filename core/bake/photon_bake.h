@@ -2,13 +2,16 @@
 // tallied per lattice voxel in spherical harmonics; single scattering exact at render time.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "core/bake/bake_progress.h"
 #include "core/bake/baked_light.h"
+#include "core/bake/phase_lut.h"
 #include "core/math/sh_basis.h"
+#include "core/phase/forward_peak.h"
 #include "core/phase/phase_function.h"
 #include "core/transport/scene.h"
 
@@ -79,6 +82,32 @@ struct PhotonErrorEstimate {
 /// so droplet peaks are resolved.
 std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degree);
 
+/// Sunlight scattered through the phase's forward peak only, where a bake split it off
+/// (cloudbake:peak_cut_deg > 0): it travels within the cut of the sun's direction, attenuated by
+/// every scattering but those through the peak, so its fluence per unit sun irradiance is
+/// Tsun^e - Tsun with e = 1 - albedo x the peak's fraction per channel (the scaled direct beam of
+/// delta-M less the direct beam). Views scatter it with `phase` convolved with the peak once per
+/// scattering through it (PeakKernel): the light scattered k times through it holds a share
+/// (1 - r) r^(k - 1) of that fluence, r = albedo x fraction, summed to k = 4 (the rest with the
+/// fourth). Tabulated as `phase` is.
+struct PhotonPeakLight {
+  PhotonPeakLight(const PhaseLut& phase, double cut_deg, const Rgb& albedo);
+  Rgb exponent;        ///< e per channel
+  PhaseLut scattered;  ///< the convolved phase, sr^-1
+
+  Rgb fluence(double tsun) const {
+    if (!(tsun > 0)) return Rgb(0.0);
+    // Single precision: views evaluate this at every sample of the march.
+    const float l = std::log(float(tsun));
+    return Rgb(std::exp(l * float(exponent.x)), std::exp(l * float(exponent.y)),
+               std::exp(l * float(exponent.z))) -
+           Rgb(tsun);
+  }
+
+ private:
+  PhotonPeakLight(const PhaseLut& phase, const PeakKernel& kernel, const Rgb& albedo);
+};
+
 /// Bakes `medium` for a sun in direction `sun_dir` (unit, towards the sun): the lattice, the
 /// sun_transmittance grid (exact single scattering at render time), sky_visibility when
 /// options.sky, the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
@@ -87,7 +116,12 @@ std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degre
 /// emitted per unit sun irradiance over the lattice's shadow (and per unit mean radiance of the
 /// sky, options.sky_shape or uniform, from its bounding sphere), tracked by decomposition tracking
 /// through the medium's own density (core/transport/tracking.h), scatter with the albedo and the
-/// exact phase function (throughput value / pdf per channel), are rouletted on their throughput
+/// exact phase function (throughput value / pdf per channel; where the phase's Legendre
+/// coefficient at degree max(order, zonal_order, 24) is above 0.1, a sun photon's scatterings
+/// through its forward peak, split off at the narrowest cut that brings it under (ForwardPeak,
+/// at most 30 degrees, else InputError) are not tallied until it scatters through the rest: see
+/// PhotonPeakLight),
+/// are rouletted on their throughput
 /// after three scatterings, and add every segment after their first scattering (for the sky: every
 /// segment, the ones before it to the direct tally) to the voxels it crosses (track-length
 /// estimator: segment length x weight x Y_i(direction of travel) / voxel volume). Tallies are

@@ -31,6 +31,11 @@
 //                       P_l(d . sun), clamped at 0; the sky's tallies
 //                       ms_sky_sh_* (scattered) and ss_sky_sh_* (unscattered: the sky's single
 //                       scattering, replacing the ambient term) likewise, per unit sky radiance;
+//                       where the bake split the phase's forward peak off
+//                       (cloudbake:peak_cut_deg > 0), plus the sunlight scattered through that
+//                       peak only, E p_peak(cos_s) (Tsun^e - Tsun) per channel
+//                       (PhotonPeakLight: e = 1 - albedo x the peak's fraction, p_peak the phase
+//                       convolved with the peak);
 //   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere;
 //                       or, when the bake holds sky_transmittance_sh_0..15 (method
 //                       precomputed), seed 002's Eq. 5: J_sky = integral Lsky(w) T(x, w)
@@ -425,6 +430,8 @@ class BakeMarcher {
       for (int l = 0; l <= sh_order_; ++l) {
         for (int i = l * l; i < (l + 1) * (l + 1); ++i) s.shw[i] = phase_l_[size_t(l)] * y[i];
       }
+      // Sunlight scattered through the phase's forward peak only, about -sun.
+      if (peak_) s.peak_phase = peak_->scattered.eval(dot(sun_dir_, ray.d));
       if (zonal_order_ > sh_order_) {
         // The zonal terms about the axis of travel of sunlight, -sun: Y_l0 there at -d is
         // sqrt((2l + 1) / (4 pi)) P_l(d . sun).
@@ -504,6 +511,7 @@ class BakeMarcher {
     Rgb sky_ms_sh[kShCoefficients];       // precomputed: integrals of T_v sigma_t f T_sky,i
     // Photon tallies: p_l Y_lm(-d) per coefficient, then the zonal terms'.
     Rgb shw[shCount(kMaxShDegree) + kMaxZonalDegree];
+    Rgb peak_phase;         // photon: PhotonPeakLight::scattered towards the camera
     TallyAnchor anchor[2];  // the last two tally anchors along the ray (tallySources)
     bool done = false;
   };
@@ -545,6 +553,8 @@ class BakeMarcher {
     for (int l = order + 1; l <= zonal_order_; ++l) {
       msh_.push_back(tally(bake_grids::photonZonal(l)));
     }
+    const double cut_deg = peakCutDegrees(bake);
+    if (cut_deg > 0) peak_.emplace(lut_, cut_deg, medium.albedo);
     phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order, zonal_order_));
     buildTallyPack(tally_ ? bake.tally_grid.voxelCount() : grid_.voxelCount());
   }
@@ -615,6 +625,22 @@ class BakeMarcher {
     slot->k = k;
     shSources(tc, rs->shw, &slot->ms, &slot->ssky, &slot->csky);
     return slot;
+  }
+
+  // The bake's cut of the phase's forward peak: cloudbake:peak_cut_deg, 0 (absent: none) or in
+  // (0, 90].
+  static double peakCutDegrees(const BakedLight& bake) {
+    const auto it = bake.metadata.find("cloudbake:peak_cut_deg");
+    double deg = 0;
+    try {
+      deg = it == bake.metadata.end() ? 0.0 : std::stod(it->second);
+    } catch (const std::exception&) {
+      deg = -1;
+    }
+    if (!(deg >= 0 && deg <= 90)) {
+      throw InputError("bake: metadata cloudbake:peak_cut_deg must be 0 or in (0, 90]");
+    }
+    return deg;
   }
 
   // cloudbake:photon_zonal_order: 0 (absent: none) or in (order, kMaxZonalDegree].
@@ -781,6 +807,7 @@ class BakeMarcher {
     } else if (!msh_.empty()) {
       shSources(c, rs->shw, &s->ms, &s->ssky, &s->csky);
     }
+    if (peak_) s->ms += rs->peak_phase * peak_->fluence(s->tsun);
     if (sky_sh_) {
       for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = v[kSh + i];
     } else if (vsky_ && ssky_sh_.empty()) {
@@ -952,7 +979,8 @@ class BakeMarcher {
   Rgb albedo_;
   const SkyLight& sky_;
   PhaseLut lut_;
-  Rgb g_;    // mean cosine per channel, for the P1 model
+  std::optional<PhotonPeakLight> peak_;  // photon: the light scattered through the peak only
+  Rgb g_;                                // mean cosine per channel, for the P1 model
   bool p1_;  // the multiple term's angular model (see the header comment)
   Vec3 sun_dir_;
   double extinction_;

@@ -51,8 +51,11 @@ class PhotonMethod final : public BakeMethod {
         "Jensen and Christensen 1998, \"Efficient simulation of light transport in scenes with "
         "participating media using photon maps\" (SIGGRAPH); Evans 1998, \"The spherical "
         "harmonics discrete ordinate method for three-dimensional atmospheric radiative "
-        "transfer\" (J. Atmos. Sci. 55), for radiance fields in spherical harmonics";
-    info_.version = 4;
+        "transfer\" (J. Atmos. Sci. 55), for radiance fields in spherical harmonics; Wiscombe "
+        "1977, "
+        "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
+        "approximation (JQSRT), for a droplet's forward peak split off";
+    info_.version = 5;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = photonKnobs();

@@ -13,9 +13,12 @@
 
 #include "core/bake/render_from_bake.h"
 #include "core/error.h"
+#include "core/format.h"
 #include "core/math/sh_basis.h"
+#include "core/phase/forward_peak.h"
 #include "core/phase/henyey_greenstein.h"
 #include "core/phase/isotropic.h"
+#include "core/phase/mie_table.h"
 #include "core/transport/path_tracer.h"
 #include "core/volume/analytic.h"
 #include "tests/core/bake/bake_test_util.h"
@@ -91,6 +94,18 @@ TEST(PhotonBake, SameBakeOnOneAndTwoThreads) {
   const BakedLight b = bakePhoton(m, Vec3(0, 0, 1), no_sky);
   EXPECT_EQ(b.find(bake_grids::photonSkySh(0)), nullptr);
   EXPECT_EQ(b.find(bake_grids::kSkyVisibility), nullptr);
+  // With a forward peak split off (HG 0.95, PhotonTracer::throughPeak draws per photon too).
+  const Medium peaked =
+      sphere(4, Rgb(0.9, 0.95, 1.0), std::make_shared<HenyeyGreensteinPhase>(0.95));
+  auto bake_peaked = [&](int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+    return bakePhoton(peaked, normalize(Vec3(0.3, -0.2, 1)), small(30000));
+  };
+  const BakedLight p1 = bake_peaked(1), p2 = bake_peaked(2);
+  ASSERT_GT(std::stod(p1.metadata.at("cloudbake:peak_cut_deg")), 0);
+  for (const auto& [name, ch] : p1.channels) {
+    EXPECT_TRUE(ch.data == p2.channels.at(name).data) << name;
+  }
 }
 
 // A grey medium's tallies keep one channel for all three. A medium that differs from it in
@@ -326,17 +341,91 @@ TEST(PhotonBake, ErrorEstimatesFallAsPhotonsAndOrderGrow) {
 // A forward peak narrower than the expansion can hold is refused, naming the phase, rather than
 // baked into views that ring (HG 0.95: p_24 = 0.29, p_48 = 0.085); zonal terms that reach
 // far enough take it.
-TEST(PhotonBake, RefusesAPeakTheExpansionCannotHold) {
+// A forward peak the expansion cannot hold is split off (ms_peak), a phase it can hold is not,
+// and a backward peak, which no forward cut removes, is refused naming the phase.
+TEST(PhotonBake, SplitsAForwardPeakTheExpansionCannotHold) {
   const Medium m = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.95));
   PhotonBakeOptions o = small(2000);
   o.zonal_order = 24;
-  expectErrorNaming([&] { bakePhoton(m, Vec3(0, 0, 1), o); }, "/medium/phase");
-  o.zonal_order = 48;
-  EXPECT_NO_THROW(bakePhoton(m, Vec3(0, 0, 1), o));
+  const BakedLight split = bakePhoton(m, Vec3(0, 0, 1), o);
+  EXPECT_GT(std::stod(split.metadata.at("cloudbake:peak_cut_deg")), 0);
+  o.zonal_order = 48;  // p_48 of HG 0.95 is under the bound: no split
+  const BakedLight whole = bakePhoton(m, Vec3(0, 0, 1), o);
+  EXPECT_EQ(whole.metadata.at("cloudbake:peak_cut_deg"), "0");
+  const Medium hg = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.9));
+  EXPECT_EQ(bakePhoton(hg, Vec3(0, 0, 1), small(2000)).metadata.at("cloudbake:peak_cut_deg"), "0");
   const Medium back = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(-0.99));
   expectErrorNaming([&] { bakePhoton(back, Vec3(0, 0, 1), small(2000)); }, "/medium/phase");
-  const Medium hg = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.9));
-  EXPECT_NO_THROW(bakePhoton(hg, Vec3(0, 0, 1), small(2000)));
+}
+
+// Droplets (the Mie table, 10 um): with the forward peak split off, the multiply scattered
+// sunlight seen towards the sun (through the silver lining) and with the sun behind the camera
+// (the glory side) agrees with the path tracer's, and so does all the sun's light on the glory
+// side. Before version 5 such a bake was refused (and, unsplit, measured 40-140 % off). Measured:
+// multiple -0.5 % and -0.1 %, the sun's light +0.04 % on the glory side; the path tracer's own
+// noise at 1024 paths is 3 % and 2 % in the multiple term (its single scattering towards the sun
+// is 15 % noisy, so the sun's light is judged on the glory side only).
+TEST(PhotonBake, DropletPhaseMatchesThePathTracer) {
+  const Medium m = sphere(4, Rgb(0.99), std::make_shared<MieTablePhase>());
+  Sun sun;
+  sun.irradiance = Rgb(1.0);
+  PathTracerOptions pt;
+  pt.samples_per_pixel = 1024;
+  PhotonBakeOptions o = small(400000, 3);
+  o.sky = false;
+  o.light_resolution = 64;
+  o.zonal_order = 24;
+  BakeRenderOptions view;
+  view.samples_per_pixel = 64;  // the droplet's peak is narrower than a pixel
+  const Vec3 towards_sun = normalize(Vec3(0.15, 1, 0.1)), behind = normalize(Vec3(0, -1, 0.2));
+  for (const Vec3& to_sun : {towards_sun, behind}) {
+    sun.direction = to_sun;
+    const Camera cam = perspectiveCamera(16);
+    const RenderLayers ref = renderPathTraced(m, sun, Sky{}, cam, pt);
+    const BakedLight bake = bakePhoton(m, to_sun, o);
+    ASSERT_GT(std::stod(bake.metadata.at("cloudbake:peak_cut_deg")), 0);
+    const RenderLayers l = renderFromBake(bake, m, sun, Sky{}, cam, view);
+    const double r_ms = cloudMean(ref, ref.multiple), r_sun = cloudMean(ref, ref.sun);
+    ASSERT_GT(r_ms, 0.005) << "the test must see multiple scattering";
+    EXPECT_NEAR(cloudMean(l, l.multiple) / r_ms, 1, 0.05) << str(to_sun);
+    if (to_sun == behind) {
+      EXPECT_NEAR(cloudMean(l, l.sun) / r_sun, 1, 0.03);
+    }
+  }
+}
+
+// The phase of the light scattered through a droplet's peak: normalised, p where p is smooth, the
+// forward peak and the glory smoothed; its fluence the scaled direct beam less the direct beam.
+TEST(PhotonBake, PeakLightsPhaseIsNormalisedAndSmoothsOnlyThePeaks) {
+  const MieTablePhase mie;
+  bool found = false;
+  const ForwardPeak split = splitForwardPeak(mie, 24, 0.1, 30, &found);
+  ASSERT_TRUE(found && split.active());
+  const PhaseLut lut(mie);
+  const double cut_deg = std::acos(split.cos_cut) * 180 / kPi;
+  const PhotonPeakLight light(lut, cut_deg, Rgb(0.99));
+  Rgb total(0.0);
+  constexpr int kSteps = 200000;
+  for (int k = 0; k < kSteps; ++k) {
+    const double theta = (k + 0.5) * kPi / kSteps;
+    total += light.scattered.eval(std::cos(theta)) * (2 * kPi * std::sin(theta) * kPi / kSteps);
+  }
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(total[c], 1, 0.01) << c;
+    EXPECT_NEAR(light.exponent[c], 1 - 0.99 * split.fraction[c], 0.01) << c;
+  }
+  auto at = [](const PhaseLut& p, double deg) { return p.eval(std::cos(deg * kPi / 180)).y; };
+  for (double deg : {20.0, 60.0, 120.0}) {
+    EXPECT_NEAR(at(light.scattered, deg), at(lut, deg), 0.01 * at(lut, deg)) << deg;
+  }
+  EXPECT_LT(at(light.scattered, 0), 0.6 * at(lut, 0));
+  EXPECT_LT(at(light.scattered, 180), at(lut, 180));
+  const double t = 0.2;
+  const Rgb f = light.fluence(t);
+  EXPECT_NEAR(f.y, std::pow(t, light.exponent.y) - t, 1e-6);
+  EXPECT_GT(f.y, 0);
+  EXPECT_EQ(light.fluence(0).y, 0);
+  EXPECT_NEAR(light.fluence(1).y, 0, 1e-7);
 }
 
 TEST(PhotonBake, CancelsAndNamesBadInput) {

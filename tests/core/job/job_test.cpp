@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -665,7 +666,12 @@ TEST(JobManager, FinishedJobsArePrunedByCountAndAge) {
       ids.push_back(jobs.submit(in).id);
       ASSERT_EQ(waitFinished(jobs, ids.back()).state, JobState::kSucceeded);
     }
-    // The third job's end pruned the first: the oldest beyond two.
+    // The third job's end pruned the first: the oldest beyond two. The runner prunes just after
+    // it publishes the end that waitFinished saw, so allow it a moment.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (jobs.list(std::nullopt, 0).size() > 2u && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
     EXPECT_THROW(jobs.get(ids[0]), NotFoundError);
     EXPECT_FALSE(fs::exists(dir / "jobs" / ids[0]));
     EXPECT_EQ(jobs.list(std::nullopt, 0).size(), 2u);

@@ -61,9 +61,10 @@ const std::vector<Golden>& goldens() {
       {"pointcloud", R"(, "light_resolution": 16, "points": 1024, "passes": 4)", 2, {{"", 0.0599056742}, {"sun", 0.0236484939}, {"sky", 0.0362571802}, {"single", 0.0183782794}, {"multiple", 0.0415273947}}, 0.1026292},
       {"precomputed", R"(, "light_resolution": 12, "sample_points": 128, "transfer_resolution": 6)", 2, {{"", 0.0534448848}, {"sun", 0.0186288485}, {"sky", 0.0348160363}, {"single", 0.0148305696}, {"multiple", 0.0386143152}}, 0.0847593546},
       // Without the zonal terms, tallies on the bake's lattice: the version 2 bake (version 4 rounds
-      // each photon's sums per voxel, not each segment's).
-      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "zonal_order": 0, "tally_resolution": 0)", 4, {{"", 0.0565848836}, {"sun", 0.0211094108}, {"sky", 0.0354754729}, {"single", 0.0146377128}, {"multiple", 0.0419471709}}, 0.0953304842},
-      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "tally_resolution": 8)", 4, {{"", 0.0566685522}, {"sun", 0.0211242044}, {"sky", 0.0355443478}, {"single", 0.0157532496}, {"multiple", 0.0409153025}}, 0.0960005224},
+      // each photon's sums per voxel, not each segment's; version 5 splits off a forward peak
+      // its expansion cannot hold, which this HG phase does not have: the same values).
+      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "zonal_order": 0, "tally_resolution": 0)", 5, {{"", 0.0565848836}, {"sun", 0.0211094108}, {"sky", 0.0354754729}, {"single", 0.0146377128}, {"multiple", 0.0419471709}}, 0.0953304842},
+      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "tally_resolution": 8)", 5, {{"", 0.0566685522}, {"sun", 0.0211242044}, {"sky", 0.0355443478}, {"single", 0.0157532496}, {"multiple", 0.0409153025}}, 0.0960005224},
       // clang-format on
   };
   return kGoldens;
