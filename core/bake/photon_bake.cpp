@@ -84,23 +84,6 @@ constexpr int kSpikeDegree = 24;
 constexpr double kMaxTopLegendre = 0.1;
 constexpr double kMaxCutDegrees = 30;
 
-ForwardPeak splitPeakOrRefuse(const PhaseFunction& phase, const PhotonBakeOptions& o) {
-  const int top = std::max({o.order, o.zonal_order, kSpikeDegree});
-  bool found = false;
-  const ForwardPeak split = splitForwardPeak(phase, top, kMaxTopLegendre, kMaxCutDegrees, &found);
-  if (found) return split;
-  throw InputError("/medium/phase: this phase's Legendre coefficient p_" + str(top) +
-                   " stays above " + str(kMaxTopLegendre) + " with its forward " +
-                   str(kMaxCutDegrees) +
-                   " degrees cut off: a peak (a backward one?) narrower than method photon's "
-                   "expansion to degree " +
-                   str(std::max(o.order, o.zonal_order)) + " (order " + str(o.order) +
-                   ", zonal_order " + str(o.zonal_order) +
-                   ") can hold, and its views would ring. Use method pathtrace, a larger "
-                   "zonal_order (at most " +
-                   str(kMaxZonalDegree) + "), or a smaller phase.mie_ratio");
-}
-
 /// Per-voxel SH moments of a radiance field, summed as fixed-point integers (TallyWriter adds
 /// to it). One colour channel stands for all three where every photon's throughput is grey.
 class PhotonTally {
@@ -610,6 +593,23 @@ void recordKnobs(const PhotonBakeOptions& options, const ForwardPeak& split, int
 
 }  // namespace
 
+ForwardPeak photonPeakSplit(const PhaseFunction& phase, const PhotonBakeOptions& o) {
+  const int top = std::max({o.order, o.zonal_order, kSpikeDegree});
+  bool found = false;
+  const ForwardPeak split = splitForwardPeak(phase, top, kMaxTopLegendre, kMaxCutDegrees, &found);
+  if (found) return split;
+  throw InputError("/medium/phase: this phase's Legendre coefficient p_" + str(top) +
+                   " stays above " + str(kMaxTopLegendre) + " with its forward " +
+                   str(kMaxCutDegrees) +
+                   " degrees cut off: a peak (a backward one?) narrower than method photon's "
+                   "expansion to degree " +
+                   str(std::max(o.order, o.zonal_order)) + " (order " + str(o.order) +
+                   ", zonal_order " + str(o.zonal_order) +
+                   ") can hold, and its views would ring. Use method pathtrace, a larger "
+                   "zonal_order (at most " +
+                   str(kMaxZonalDegree) + "), or a smaller phase.mie_ratio");
+}
+
 PhotonPeakLight::PhotonPeakLight(const PhaseLut& phase, double cut_deg, const Rgb& albedo)
     : PhotonPeakLight(phase, PeakKernel(cutAt(cut_deg), [&](double mu) { return phase.eval(mu); }),
                       albedo) {}
@@ -623,7 +623,7 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   validate(medium, sun_dir, options);
   const std::vector<Rgb> p_l = phaseLegendreCoefficients(
       *medium.phase, std::max({options.order, options.zonal_order, kSpikeDegree}));
-  const ForwardPeak split = splitPeakOrRefuse(*medium.phase, options);
+  const ForwardPeak split = photonPeakSplit(*medium.phase, options);
   auto stage = [&](double lo, double span, const char* name) {
     return [&progress, lo, span, name](double f) {
       return !progress || progress(lo + span * f, name);

@@ -82,6 +82,13 @@ struct PhotonErrorEstimate {
 /// so droplet peaks are resolved.
 std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degree);
 
+/// Where a photon bake with options `o` splits `phase`'s forward peak off: no cut (inactive)
+/// where its Legendre coefficient at degree max(order, zonal_order, 24) is at most 0.1, else
+/// the narrowest cut (at most 30 degrees) that brings the rest's under it. InputError naming
+/// /medium/phase where none does (a backward peak), before any work: methods check it at submit
+/// where the phase is cheap to build.
+ForwardPeak photonPeakSplit(const PhaseFunction& phase, const PhotonBakeOptions& o);
+
 /// Sunlight scattered through the phase's forward peak only, where a bake split it off
 /// (cloudbake:peak_cut_deg > 0): it travels within the cut of the sun's direction, attenuated by
 /// every scattering but those through the peak, so its fluence per unit sun irradiance is

@@ -6,6 +6,7 @@
 #include "core/format.h"
 #include "core/math/sh_basis.h"
 #include "core/methods/common.h"
+#include "core/phase/phase_factory.h"
 
 namespace cloudbake {
 namespace {
@@ -74,6 +75,16 @@ class PhotonMethod final : public BakeMethod {
       throw InputError(source + ": /bake/zonal_order: must be 0 (none) or above order " +
                        std::to_string(o.order) + " (the zonal terms add degrees order + 1 .. " +
                        "zonal_order), got " + std::to_string(o.zonal_order));
+    }
+    // A peak no forward cut removes is refused here, before the job is queued, where the phase
+    // is cheap to build (every type but the Lorenz-Mie table, whose peak is forward and is
+    // split; the bake checks again).
+    if (shot.medium.phase.type != PhaseSpec::Type::kMie) {
+      try {
+        photonPeakSplit(*makePhaseFunction(shot.medium.phase), o);
+      } catch (const InputError& e) {
+        throw InputError(source + ": " + e.what());
+      }
     }
   }
 

@@ -61,6 +61,27 @@ TEST(PhotonKnobs, ParsedAndValidated) {
   expectRejected(R"({"method": "photon", "light_resolution": 4})", "/bake/light_resolution");
 }
 
+// A backward peak, which photon cannot split off, is refused when the shot is parsed (at submit
+// and in the dry run), naming the phase; a forward peak it splits off is accepted.
+TEST(PhotonKnobs, ABackwardPeakIsRefusedAtParse) {
+  std::string s = shot(R"({"method": "photon"})");
+  const std::string hg = R"("g": 0.6)";
+  auto with_g = [&](const std::string& g) {
+    std::string t = s;
+    t.replace(t.find(hg), hg.size(), "\"g\": " + g);
+    return t;
+  };
+  try {
+    parseShot(with_g("-0.99"), "shot.json");
+    ADD_FAILURE() << "HG -0.99 accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("shot.json: /medium/phase: "), std::string::npos)
+        << e.what();
+  }
+  EXPECT_NO_THROW(parseShot(with_g("0.99"), "shot.json"));
+  EXPECT_NO_THROW(parseShot(with_g("-0.5"), "shot.json"));
+}
+
 TEST(PhotonKnobs, LimitsNameTheLatticeAndTheOrder) {
   MethodLimits limits;
   limits.max_voxels = 20000000;  // the bake's lattice at 128 fits, order 8's tallies do not
