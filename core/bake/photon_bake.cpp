@@ -573,6 +573,67 @@ ForwardPeak cutAt(double cut_deg) {
   return split;
 }
 
+/// What every kind of photon of one bake shares.
+struct PhotonRun {
+  const Medium& medium;
+  const MajorantGrid& grid;
+  const PhotonBakeOptions& options;
+  Bounds3 box;                  // the bake's lattice bounds
+  int channels;                 // 1 where every throughput stays grey, else 3
+  const std::vector<Rgb>& p_l;  // the phase's Legendre coefficients
+  BakedLight* bake;
+};
+
+// The error estimates of `tally` (whose odd photons are in `odd`) into the bake's metadata.
+void recordErrors(const PhotonRun& r, const PhotonTally& tally, const PhotonTally& odd) {
+  const PhotonErrorEstimate e = estimateErrors(
+      tally, odd, r.p_l,
+      resampleTrilinear(r.bake->grid, r.bake->density.data(), 1, r.bake->tally_grid));
+  r.bake->metadata["cloudbake:tally_noise"] = str(e.tally_noise);
+  r.bake->metadata["cloudbake:truncation"] = str(e.truncation);
+}
+
+// The sun's tallies, photonSh and photonZonal: all zero, with no photon traced, for a black sun
+// (its light key says so).
+void bakeSunPhotons(const PhotonRun& r, const Vec3& sun_dir, const ForwardPeak& split,
+                    const std::function<bool(double)>& progress) {
+  const PhotonBakeOptions& o = r.options;
+  const SunEmitter sun(r.box, sun_dir, o.photons);
+  PhotonTally tally(r.bake->tally_grid, o.order, sun.weight(), r.channels, o.zonal_order, -sun_dir);
+  if (o.sun) {
+    PhotonTally odd(r.bake->tally_grid, 0, sun.weight(), r.channels);
+    PhotonTallies to;  // the light scattered through the peak only: PhotonPeakLight
+    to.scattered = &tally;
+    to.half = &odd;
+    tracePhotons(r.medium, r.grid, sun, o.photons, o.seed, 1, to, &split, progress);
+    recordErrors(r, tally, odd);
+  }
+  tally.store(r.bake, bake_grids::photonSh);
+}
+
+// The sky's tallies, photonSkySh and photonSkyDirectSh; under a black sun, the error estimates
+// are the sky's.
+void bakeSkyPhotons(const PhotonRun& r, const std::function<bool(double)>& progress) {
+  const PhotonBakeOptions& o = r.options;
+  std::optional<SkyLight> shape;
+  if (o.sky_shape) shape.emplace(*o.sky_shape);
+  const Rgb mean = shape ? meanSkyRadiance(*o.sky_shape, *shape) : Rgb(1.0);
+  const SkyEmitter sky(r.box, o.photons, shape ? &*shape : nullptr, mean);
+  // A sky whose shape differs per channel makes sky photons' weights chromatic.
+  const int sky_channels = shape ? 3 : r.channels;
+  PhotonTally tally(r.bake->tally_grid, o.order, sky.weight(), sky_channels);
+  PhotonTally direct(r.bake->tally_grid, o.order, sky.weight(), sky_channels);
+  PhotonTally odd(r.bake->tally_grid, 0, sky.weight(), sky_channels);
+  PhotonTallies to;
+  to.scattered = &tally;
+  to.direct = &direct;
+  if (!o.sun) to.half = &odd;
+  tracePhotons(r.medium, r.grid, sky, o.photons, o.seed, 2, to, nullptr, progress);
+  if (!o.sun) recordErrors(r, tally, odd);
+  tally.store(r.bake, bake_grids::photonSkySh);
+  direct.store(r.bake, bake_grids::photonSkyDirectSh);
+}
+
 // The bake's knobs and its peak's cut in its metadata (docs/outputs.md); the cut to full
 // precision, since views rebuild the peak's light from it.
 void recordKnobs(const PhotonBakeOptions& options, const ForwardPeak& split, int tally_resolution,
@@ -589,6 +650,7 @@ void recordKnobs(const PhotonBakeOptions& options, const ForwardPeak& split, int
   (*m)["cloudbake:step"] = str(options.step);
   (*m)["cloudbake:extinction"] = str(extinction);
   (*m)["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";
+  (*m)["cloudbake:sun"] = options.sun ? "baked" : "skipped (black sun)";
 }
 
 }  // namespace
@@ -649,45 +711,14 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   bake.tally_grid = bakeLatticeGeometry(medium.density->bounds(), tally_resolution,
                                         medium.density->describe(), "tally_resolution");
   const auto grid = medium.density->trackingGrid({medium.extinction, 0});
-  const Bounds3 box = bake.grid.bounds();
-  const double sky_share = options.sky ? 0.35 : 0.0;
   // Grey albedo and phase keep every photon's throughput grey: one channel holds all three.
   const bool grey = !medium.phase->chromatic() && medium.albedo.x == medium.albedo.y &&
                     medium.albedo.y == medium.albedo.z;
   const int channels = grey ? 1 : 3;
-  {
-    const SunEmitter sun(box, sun_dir, options.photons);
-    PhotonTally tally(bake.tally_grid, options.order, sun.weight(), channels, options.zonal_order,
-                      -sun_dir);
-    PhotonTally odd(bake.tally_grid, 0, sun.weight(), channels);
-    PhotonTallies to;  // the light scattered through the peak only: PhotonPeakLight
-    to.scattered = &tally;
-    to.half = &odd;
-    tracePhotons(medium, *grid, sun, options.photons, options.seed, 1, to, &split,
-                 stage(0.25, 0.75 - sky_share, "sun photons"));
-    tally.store(&bake, bake_grids::photonSh);
-    const PhotonErrorEstimate e = estimateErrors(
-        tally, odd, p_l, resampleTrilinear(bake.grid, bake.density.data(), 1, bake.tally_grid));
-    bake.metadata["cloudbake:tally_noise"] = str(e.tally_noise);
-    bake.metadata["cloudbake:truncation"] = str(e.truncation);
-  }
-  if (options.sky) {
-    std::optional<SkyLight> shape;
-    if (options.sky_shape) shape.emplace(*options.sky_shape);
-    const Rgb mean = shape ? meanSkyRadiance(*options.sky_shape, *shape) : Rgb(1.0);
-    const SkyEmitter sky(box, options.photons, shape ? &*shape : nullptr, mean);
-    // A sky whose shape differs per channel makes sky photons' weights chromatic.
-    const int sky_channels = shape ? 3 : channels;
-    PhotonTally tally(bake.tally_grid, options.order, sky.weight(), sky_channels);
-    PhotonTally direct(bake.tally_grid, options.order, sky.weight(), sky_channels);
-    PhotonTallies to;
-    to.scattered = &tally;
-    to.direct = &direct;
-    tracePhotons(medium, *grid, sky, options.photons, options.seed, 2, to, nullptr,
-                 stage(1.0 - sky_share, sky_share, "sky photons"));
-    tally.store(&bake, bake_grids::photonSkySh);
-    direct.store(&bake, bake_grids::photonSkyDirectSh);
-  }
+  const PhotonRun run{medium, *grid, options, bake.grid.bounds(), channels, p_l, &bake};
+  const double sky_share = !options.sky ? 0.0 : options.sun ? 0.35 : 0.75;
+  bakeSunPhotons(run, sun_dir, split, stage(0.25, 0.75 - sky_share, "sun photons"));
+  if (options.sky) bakeSkyPhotons(run, stage(1.0 - sky_share, sky_share, "sky photons"));
   bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
   recordKnobs(options, split, tally_resolution, medium.extinction, &bake.metadata);
   addPhotonMeanRadiance(&bake, Rgb(1.0) - medium.albedo * split.fraction);

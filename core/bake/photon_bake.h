@@ -55,6 +55,9 @@ struct PhotonBakeOptions {
   /// Ray-march step of the view renders, world units; 0: half a lattice voxel.
   double step = 0;
   bool sky = true;  ///< trace sky photons and bake sky_visibility (false for a black sky)
+  /// Trace sun photons (false for a black sun: its tallies are zero, the error estimates the
+  /// sky's).
+  bool sun = true;
   /// The sky whose light sky photons carry, per unit of its mean radiance (meanSkyRadiance):
   /// each photon is weighted by the radiance of the direction it comes from over that mean, per
   /// channel. Null: a uniform sky, whose bake serves every sky colour. A gradient or map sky's
@@ -62,9 +65,9 @@ struct PhotonBakeOptions {
   const Sky* sky_shape = nullptr;
 };
 
-/// A bake's own estimates of its error in the multiply scattered sunlight (relative, over the
-/// voxels weighted by density), written to its metadata as cloudbake:tally_noise and
-/// cloudbake:truncation.
+/// A bake's own estimates of its error in the multiply scattered sunlight (the sky's light under
+/// a black sun; relative, over the voxels weighted by density), written to its metadata as
+/// cloudbake:tally_noise and cloudbake:truncation.
 struct PhotonErrorEstimate {
   /// The tally's noise: the fluence of the even and the odd photons compared, RMS of their
   /// difference over RMS of the fluence (the difference of two independent halves has the

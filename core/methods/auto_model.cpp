@@ -74,7 +74,8 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   const double path_seconds = pilot.seconds_per_sample / std::max(pilot.cloud_fraction, 0.02);
   const double photon_seconds = kPhotonPerPath * path_seconds;
   c.seconds = latticeSeconds(rung.light_resolution) * (traits.sky ? 2.0 : 1.0) +
-              photon_seconds * double(rung.photons) * (traits.sky ? 2.0 : 1.0) +
+              photon_seconds * double(rung.photons) *
+                  ((traits.sky ? 1.0 : 0.0) + (traits.sun ? 1.0 : 0.0)) +
               traits.pixels * c.samples * kViewSecondsPerCoefficient *
                   double(shCount(rung.order) + kZonalOrder - rung.order);
   c.why = "photon's error at these knobs was " + fixed(100 * rung.bunny_error, 1) +

@@ -124,6 +124,10 @@ Knob lightResolutionKnob(int64_t default_resolution) {
                        "bake lattice voxels along the longest side of the volume");
 }
 
+bool needsSun(const ShotSpec& shot) {
+  return shot.lighting.has_sun && maxComponent(shot.lighting.sun.irradiance) > 0;
+}
+
 nlohmann::json wholeMediumLightKey(const BakeMethod& method, const ShotSpec& shot,
                                    const nlohmann::json& canonical) {
   return {{"light",

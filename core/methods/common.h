@@ -21,6 +21,9 @@ Vec3 sunDirection(const ShotSpec& shot);
 /// True when the shot's sky is not black (a bake then needs its sky terms).
 bool needsSky(const ShotSpec& shot);
 
+/// True when the shot has a sun that is not black (method photon then traces sun photons).
+bool needsSun(const ShotSpec& shot);
+
 /// The knobs of every method that renders views from a lattice.
 Knob stepKnob();
 Knob lightResolutionKnob(int64_t default_resolution);

@@ -92,6 +92,8 @@ class PhotonMethod final : public BakeMethod {
     // The photons scatter with the albedo and the phase: the whole medium is baked.
     nlohmann::json key = wholeMediumLightKey(*this, shot, canonical);
     if (bakesSkyShape(shot)) key["light"]["sky_shape"] = canonical["lighting"]["sky"];
+    // A black sun's bake traces no sun photons: it cannot serve a shot whose sun shines.
+    if (!needsSun(shot)) key["light"]["sun"] = "black";
     return key;
   }
 
@@ -100,9 +102,10 @@ class PhotonMethod final : public BakeMethod {
     const PhotonBakeOptions o = photonBakeOptions(shot);
     std::vector<std::string> lines = lightBakePlanLines(shot, o.light_resolution);
     lines.push_back(
-        "multiple scattering: " + std::to_string(o.photons) + " sun photons" +
-        (o.sky ? " and as many sky photons (their unscattered light too: the sky's "
-                 "single scattering)"
+        "multiple scattering: " +
+        (o.sun ? std::to_string(o.photons) + " sun photons" : "no sun photons (a black sun)") +
+        (o.sky ? (o.sun ? " and as many" : ", " + std::to_string(o.photons)) +
+                     " sky photons (their unscattered light too: the sky's single scattering)"
                : "") +
         ", tallied on a lattice of " +
         std::to_string(o.tally_resolution > 0 ? o.tally_resolution : o.light_resolution) +
@@ -141,8 +144,8 @@ class PhotonMethod final : public BakeMethod {
     // version 4 summed each photon's segments per voxel), views 3x the cost of a Co lookup per
     // ray for the SH convolution at order 3.
     LightBakeWork work;
-    work.bake_seconds =
-        latticeSeconds(o.light_resolution) + 3.7e-6 * double(o.photons) * (o.sky ? 2 : 1);
+    work.bake_seconds = latticeSeconds(o.light_resolution) +
+                        3.7e-6 * double(o.photons) * ((o.sky ? 1 : 0) + (o.sun ? 1 : 0));
     work.view_seconds_per_ray =
         4.8e-6 * double(shCount(o.order) + std::max(0, o.zonal_order - o.order)) / 16.0;
     runLightBake(
@@ -174,6 +177,7 @@ PhotonBakeOptions photonBakeOptions(const ShotSpec& shot) {
   o.tally_resolution = int(k.integer("tally_resolution"));
   o.step = k.optionalNumber("step").value_or(0.0);
   o.sky = needsSky(shot);
+  o.sun = needsSun(shot);
   o.seed = shot.bake.seed;
   return o;
 }

@@ -108,6 +108,30 @@ TEST(PhotonBake, SameBakeOnOneAndTwoThreads) {
   }
 }
 
+// A black sun traces no sun photons: its tallies are zero, the sky's are the lit bake's bit for
+// bit (their own random streams), and the error estimates are the sky's.
+TEST(PhotonBake, ABlackSunTracesOnlySkyPhotons) {
+  const Medium m = sphere(4, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.7));
+  PhotonBakeOptions o = small(20000);
+  const BakedLight lit = bakePhoton(m, Vec3(0, 0, 1), o);
+  o.sun = false;
+  const BakedLight dark = bakePhoton(m, Vec3(0, 0, 1), o);
+  for (int i = 0; i < shCount(o.order); ++i) {
+    const BakeChannel* sun = dark.find(bake_grids::photonSh(i));
+    ASSERT_NE(sun, nullptr) << i;
+    for (float v : sun->data) ASSERT_EQ(v, 0.f) << i;
+    EXPECT_TRUE(dark.find(bake_grids::photonSkySh(i))->data ==
+                lit.find(bake_grids::photonSkySh(i))->data)
+        << i;
+    EXPECT_TRUE(dark.find(bake_grids::photonSkyDirectSh(i))->data ==
+                lit.find(bake_grids::photonSkyDirectSh(i))->data)
+        << i;
+  }
+  EXPECT_EQ(dark.metadata.at("cloudbake:sun"), "skipped (black sun)");
+  EXPECT_GT(std::stod(dark.metadata.at("cloudbake:tally_noise")), 0);
+  EXPECT_NE(dark.metadata.at("cloudbake:tally_noise"), lit.metadata.at("cloudbake:tally_noise"));
+}
+
 // A grey medium's tallies keep one channel for all three. A medium that differs from it in
 // blue only traces the same photons (the roulette follows the largest channel), so its red and
 // green tallies must equal the grey bake's bit for bit.

@@ -163,6 +163,20 @@ TEST(MethodRegistry, PhotonsLightKeyHoldsTheSkysShapeOnlyWhenItHasOne) {
   EXPECT_NE(keyWith(g1), keyWith(R"({"radiance": [1, 1, 1]})"));
 }
 
+// A black sun's photon bake traces no sun photons, so its key differs from a lit one's; every
+// lit sun's colour still shares one bake.
+TEST(MethodRegistry, PhotonsLightKeySaysWhenTheSunIsBlack) {
+  auto keyWith = [](const std::string& irradiance) {
+    std::string text = shotOf("photon");
+    const std::string sun = R"("irradiance": [1, 1, 1])";
+    text.replace(text.find(sun), sun.size(), "\"irradiance\": " + irradiance);
+    return computeCacheKeys(parseShot(text, "")).light;
+  };
+  EXPECT_EQ(keyWith("[1, 1, 1]"), keyWith("[3, 2, 1]"));
+  EXPECT_EQ(keyWith("[0, 0, 0]"), keyWith("[0, 0, 0]"));
+  EXPECT_NE(keyWith("[0, 0, 0]"), keyWith("[1, 1, 1]"));
+}
+
 TEST(MethodDocs, ShotFormatDocHasTheRegistrysKnobTables) {
   const std::string doc = readText(fs::path(CLOUDBAKE_SOURCE_DIR) / "docs/shot-format.md");
   ASSERT_FALSE(doc.empty());
