@@ -436,10 +436,11 @@ class BakeMarcher {
         // The zonal terms about the axis of travel of sunlight, -sun: Y_l0 there at -d is
         // sqrt((2l + 1) / (4 pi)) P_l(d . sun).
         double z[kMaxZonalDegree];
-        shZonal(sh_order_ + 1, zonal_order_, dot(ray.d, sun_dir_), z);
+        const double mu = dot(ray.d, sun_dir_);
+        shZonal(sh_order_ + 1, zonal_order_, mu, z);
         for (int l = sh_order_ + 1; l <= zonal_order_; ++l) {
           const int i = l - sh_order_ - 1;
-          s.shw[shCount(sh_order_) + i] = phase_l_[size_t(l)] * z[i];
+          s.shw[shCount(sh_order_) + i] = phase_l_[size_t(l)] * z[i] * zonalTaper(l, mu);
         }
       }
     }
@@ -625,6 +626,22 @@ class BakeMarcher {
     slot->k = k;
     shSources(tc, rs->shw, &slot->ms, &slot->ssky, &slot->csky);
     return slot;
+  }
+
+  // Where the bake split a droplet's peak off, its phase's p_l are still 0.3-0.5 at the top
+  // zonal degree, so the truncated sum rings where its true value is small, away from the
+  // forward axis, while towards it the high degrees carry the peak of the scattered sunlight. So
+  // degree l is weighted by 1 - w (1 - sinc(pi l / (top + 1))) (half a Lanczos factor), w = 1/2
+  // for mu = d . sun <= 0, 0 at mu = 1, linear between. Measured (Perlin cloud, real Mie table,
+  // 1M photons, relative RMSE; a Mie sphere's mean multiple scattering with the sun behind the
+  // camera): no taper 0.110 on the glory side, -0.1 % on the sphere; this 0.092, -2.1 %; a full
+  // Lanczos factor 0.083, -3.9 %; the full factor everywhere also dulled the view against the
+  // sun (0.177 to 0.228). A phase under the split's bound is not tapered.
+  double zonalTaper(int l, double mu) const {
+    if (!peak_) return 1.0;
+    const double w = 0.5 * std::clamp(1 - mu, 0.0, 1.0);
+    const double x = kPi * l / (zonal_order_ + 1);
+    return 1 - w * (1 - std::sin(x) / x);
   }
 
   // The bake's cut of the phase's forward peak: cloudbake:peak_cut_deg, 0 (absent: none) or in
