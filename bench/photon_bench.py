@@ -24,7 +24,8 @@ thin (an optically thin Perlin layer, seen from below against the sun and from a
 cumulus (a dense Perlin cumulus lit from behind, seen against the sun and from its lit side); HG
 0.85 as in bench/scenes. Not in the default list: droplet (the Perlin cloud with the real Mie
 table, r_eff 10 um: side, against the sun and with the sun behind the camera; its references
-need about 8x the paths of HG's for the same noise). The bunny and Disney scenes need ../shared/data and are skipped without.
+need about 8x the paths of HG's for the same noise) and skyonly (the Perlin cloud under a uniform
+sky and a black sun). The bunny and Disney scenes need ../shared/data and are skipped without.
 
 Usage: bench/photon_bench.py [--build build] [--threads 2] [--res 160] [--ref-spp 1024]
                              [--samples 16] [--scenes perlin,bunny,disney,thin,cumulus]
@@ -44,7 +45,8 @@ from cloudbake_shot_paths import path_slots  # noqa: E402  (the keys of a shot t
 
 SCENES = {"perlin": "perlin_cloud.json", "bunny": "bunny_cloud.json",
           "disney": "disney_cloud.json", "thin": "thin_layer.json",
-          "cumulus": "cumulus_backlit.json", "droplet": "perlin_droplet.json"}
+          "cumulus": "cumulus_backlit.json", "droplet": "perlin_droplet.json",
+          "skyonly": "perlin_skyonly.json"}
 # (photons, order, light_resolution, tally_resolution, zonal_order) per sweep: the knobs grow
 # together along "default" (its second row is the method's defaults), the order alone along
 # "order", the zonal terms alone along "zonal", the lattices alone along "lattice".
@@ -142,7 +144,8 @@ def main():
     # max_depth 1) measured 0.216, 0.067 and 0.052 at 16, 64 and 256 rays per pixel.
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--cloud-alpha", type=float, default=0.05)
-    ap.add_argument("--scenes", default=",".join(s for s in SCENES if s != "droplet"))
+    ap.add_argument("--scenes",
+                    default=",".join(s for s in SCENES if s not in ("droplet", "skyonly")))
     ap.add_argument("--sweep", default="default", choices=sorted(SWEEPS))
     ap.add_argument("--work", default=None)
     args = ap.parse_args()
