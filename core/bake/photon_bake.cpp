@@ -416,7 +416,6 @@ class PhotonTracer {
     return in_peak;
   }
 
- private:
   const Medium& medium_;
   const MajorantGrid& grid_;
   std::unique_ptr<DensityField::Lookup> lookup_;
@@ -495,10 +494,11 @@ PhotonErrorEstimate estimateErrors(const PhotonTally& full, const PhotonTally& o
 }
 
 // Cd = (sun_transmittance + fluence of the scattered sunlight) / (4 pi), the fluence being
-// sqrt(4 pi) times coefficient 0 (Y_00 = 1 / sqrt(4 pi)), plus that of the light scattered through
-// the peak only (PhotonPeakLight::fluence, exponent e; 1: none): the isotropic DCC preview. The
-// tally lies on the tally lattice: read at each voxel centre of the bake's lattice.
-void addPhotonMeanRadiance(BakedLight* bake, const Rgb& e) {
+// sqrt(4 pi) times coefficient 0 (Y_00 = 1 / sqrt(4 pi)), plus, where the peak was split off
+// (`peak_exponent` not null), that of the light scattered through it only (photonPeakFluence):
+// the isotropic DCC preview. The tally lies on the tally lattice: read at each voxel centre of
+// the bake's lattice.
+void addPhotonMeanRadiance(BakedLight* bake, const Rgb* peak_exponent) {
   const BakeChannel* t = bake->find(bake_grids::kSunTransmittance);
   const BakeChannel* l0 = bake->find(bake_grids::photonSh(0));
   BakeChannel& cd = bake->add(bake_grids::kCd, 3);
@@ -509,9 +509,9 @@ void addPhotonMeanRadiance(BakedLight* bake, const Rgb& e) {
          : std::vector<float>(voxels * 3, 0.f);
   for (size_t v = 0; v < voxels; ++v) {
     const double tsun = t ? t->data[v] : 0.0;
+    const Rgb peak = peak_exponent ? photonPeakFluence(tsun, *peak_exponent) : Rgb(0.0);
     for (int c = 0; c < 3; ++c) {
-      const double peak = tsun > 0 ? std::pow(tsun, e[c]) - tsun : 0.0;
-      const double fluence = std::max(0.0, kSqrt4Pi * l[v * 3 + c]) + peak;
+      const double fluence = std::max(0.0, kSqrt4Pi * l[v * 3 + c]) + peak[c];
       cd.data[v * 3 + c] = float((tsun + fluence) * inv4pi);
     }
   }
@@ -602,7 +602,7 @@ void bakeSunPhotons(const PhotonRun& r, const Vec3& sun_dir, const ForwardPeak& 
   PhotonTally tally(r.bake->tally_grid, o.order, sun.weight(), r.channels, o.zonal_order, -sun_dir);
   if (o.sun) {
     PhotonTally odd(r.bake->tally_grid, 0, sun.weight(), r.channels);
-    PhotonTallies to;  // the light scattered through the peak only: PhotonPeakLight
+    PhotonTallies to;  // no tally for the light scattered through the peak only: PhotonPeakLight
     to.scattered = &tally;
     to.half = &odd;
     tracePhotons(r.medium, r.grid, sun, o.photons, o.seed, 1, to, &split, progress);
@@ -623,13 +623,14 @@ void bakeSkyPhotons(const PhotonRun& r, const std::function<bool(double)>& progr
   const int sky_channels = shape ? 3 : r.channels;
   PhotonTally tally(r.bake->tally_grid, o.order, sky.weight(), sky_channels);
   PhotonTally direct(r.bake->tally_grid, o.order, sky.weight(), sky_channels);
-  PhotonTally odd(r.bake->tally_grid, 0, sky.weight(), sky_channels);
+  std::optional<PhotonTally> odd;  // the error estimates' half, under a black sun only
+  if (!o.sun) odd.emplace(r.bake->tally_grid, 0, sky.weight(), sky_channels);
   PhotonTallies to;
   to.scattered = &tally;
   to.direct = &direct;
-  if (!o.sun) to.half = &odd;
+  to.half = odd ? &*odd : nullptr;
   tracePhotons(r.medium, r.grid, sky, o.photons, o.seed, 2, to, nullptr, progress);
-  if (!o.sun) recordErrors(r, tally, odd);
+  if (odd) recordErrors(r, tally, *odd);
   tally.store(r.bake, bake_grids::photonSkySh);
   direct.store(r.bake, bake_grids::photonSkyDirectSh);
 }
@@ -721,7 +722,8 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   if (options.sky) bakeSkyPhotons(run, stage(1.0 - sky_share, sky_share, "sky photons"));
   bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
   recordKnobs(options, split, tally_resolution, medium.extinction, &bake.metadata);
-  addPhotonMeanRadiance(&bake, Rgb(1.0) - medium.albedo * split.fraction);
+  const Rgb peak_exponent = Rgb(1.0) - medium.albedo * split.fraction;
+  addPhotonMeanRadiance(&bake, split.active() ? &peak_exponent : nullptr);
   bake.trimToSupport();
   if (progress && !progress(1, "done")) throw Cancelled("bake cancelled");
   return bake;

@@ -92,6 +92,16 @@ std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degre
 /// where the phase is cheap to build.
 ForwardPeak photonPeakSplit(const PhaseFunction& phase, const PhotonBakeOptions& o);
 
+/// The fluence of the sunlight scattered through the forward peak only, per unit sun irradiance,
+/// where the sun's transmittance is `tsun`: Tsun^e - Tsun per channel (PhotonPeakLight). Single
+/// precision: views evaluate it at every sample of the march.
+inline Rgb photonPeakFluence(double tsun, const Rgb& e) {
+  if (!(tsun > 0)) return Rgb(0.0);
+  const float l = std::log(float(tsun));
+  return Rgb(std::exp(l * float(e.x)), std::exp(l * float(e.y)), std::exp(l * float(e.z))) -
+         Rgb(tsun);
+}
+
 /// Sunlight scattered through the phase's forward peak only, where a bake split it off
 /// (cloudbake:peak_cut_deg > 0): it travels within the cut of the sun's direction, attenuated by
 /// every scattering but those through the peak, so its fluence per unit sun irradiance is
@@ -105,14 +115,7 @@ struct PhotonPeakLight {
   Rgb exponent;        ///< e per channel
   PhaseLut scattered;  ///< the convolved phase, sr^-1
 
-  Rgb fluence(double tsun) const {
-    if (!(tsun > 0)) return Rgb(0.0);
-    // Single precision: views evaluate this at every sample of the march.
-    const float l = std::log(float(tsun));
-    return Rgb(std::exp(l * float(exponent.x)), std::exp(l * float(exponent.y)),
-               std::exp(l * float(exponent.z))) -
-           Rgb(tsun);
-  }
+  Rgb fluence(double tsun) const { return photonPeakFluence(tsun, exponent); }
 
  private:
   PhotonPeakLight(const PhaseLut& phase, const PeakKernel& kernel, const Rgb& albedo);
@@ -130,8 +133,7 @@ struct PhotonPeakLight {
 /// coefficient at degree max(order, zonal_order, 24) is above 0.1, a sun photon's scatterings
 /// through its forward peak, split off at the narrowest cut that brings it under (ForwardPeak,
 /// at most 30 degrees, else InputError) are not tallied until it scatters through the rest: see
-/// PhotonPeakLight),
-/// are rouletted on their throughput
+/// PhotonPeakLight), are rouletted on their throughput
 /// after three scatterings, and add every segment after their first scattering (for the sky: every
 /// segment, the ones before it to the direct tally) to the voxels it crosses (track-length
 /// estimator: segment length x weight x Y_i(direction of travel) / voxel volume). Tallies are
