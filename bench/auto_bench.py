@@ -63,10 +63,49 @@ def _layer_low_albedo(shot):
     shot["lighting"]["sun"]["direction"] = [0.8, 0.1, 0.3]
 
 
+def _towards_sun(shot, name, target, distance, offset_deg):
+    """A view from `distance` before `target` looking at it, with the sun `offset_deg` from the
+    view's axis (about the up axis): the droplet's aureole seen through the cloud."""
+    s = shot["lighting"]["sun"]["direction"]
+    n = math.sqrt(sum(c * c for c in s))
+    u = [c / n for c in s]
+    a = math.radians(offset_deg)
+    # The sun's direction turned by offset_deg about z: the camera looks along it.
+    d = [u[0] * math.cos(a) - u[1] * math.sin(a), u[0] * math.sin(a) + u[1] * math.cos(a), u[2]]
+    res = shot["views"][0]["resolution"]
+    shot["views"].append({"name": name, "resolution": list(res), "camera": {
+        "type": "perspective", "fov_deg": 45, "up": [0, 0, 1], "look_at": target,
+        "position": [t - distance * c for t, c in zip(target, d)]}})
+
+
+def _droplet_dense(shot):
+    # The Perlin cloud made denser, with a Lorenz-Mie table of larger droplets, lit from the
+    # other side, seen from the side and from below against the sun.
+    shot["volume"]["procedural"].update({"seed": 21, "cover": 0.6})
+    shot["medium"].update({"extinction": 20.0, "albedo": 0.995, "phase": {
+        "type": "mie", "effective_radius_um": 15, "effective_variance": 0.1}})
+    shot["lighting"]["sun"]["direction"] = [-0.6, -0.5, 0.35]
+    shot["views"] = shot["views"][:1]
+    _towards_sun(shot, "to_sun", [0, 0, 0.55], 3.0, 3.0)
+
+
+def _droplet_sphere(shot):
+    # A sphere of droplets (the fitted Mie approximation, 20 um) seen from the side and towards
+    # a sun just behind its limb: the silver lining.
+    shot["volume"] = {"sphere": {"center": [0, 0, 0.5], "radius": 0.7, "density": 1.0}}
+    shot["medium"].update({"extinction": 6.0, "albedo": 0.999, "phase": {
+        "type": "mie_approx", "diameter_um": 20}})
+    shot["lighting"]["sun"]["direction"] = [0.3, 0.9, 0.3]
+    shot["views"] = shot["views"][:1]
+    _towards_sun(shot, "limb", [0, 0, 0.5], 3.0, 12.0)
+
+
 # name: (bench scene it starts from, change)
 HELD_OUT = {"perlin_dense": ("perlin", _perlin_dense), "bunny_thin": ("bunny", _bunny_thin),
             "disney_top": ("disney", _disney_top), "sphere": ("perlin", _sphere),
-            "layer_albedo": ("thin", _layer_low_albedo)}
+            "layer_albedo": ("thin", _layer_low_albedo),
+            "droplet_dense": ("perlin", _droplet_dense),
+            "droplet_sphere": ("perlin", _droplet_sphere)}
 PHOTON_RUNGS = [(1 << 17, 3, 64, 32), (1 << 19, 3, 128, 48), (1 << 21, 4, 192, 48)]
 
 

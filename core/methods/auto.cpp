@@ -26,7 +26,7 @@ class AutoMethod final : public BakeMethod {
     info_.citation =
         "cloudbake's own measured trade curves (2026; docs/methods.md, \"Method auto\"): the "
         "model and its fit; the methods it chooses cite their papers";
-    info_.version = 1;
+    info_.version = 2;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {
@@ -174,8 +174,10 @@ std::vector<std::string> AutoChoice::planLines() const {
                                              " paths x 2 seeds in " + fixed(pilot.seconds, 2) + " s"
                                        : std::string("no views to pilot")) +
                     "; albedo " + fixed(traits.albedo, 3) + ", phase spikiness " +
-                    fixed(traits.phase_spikiness, 1) + ", optical thickness of a 1/128 voxel " +
-                    fixed(traits.tau_voxel_128, 3));
+                    fixed(traits.phase_spikiness, 1) +
+                    (traits.peak_split ? " (photon splits its forward peak off)" : "") +
+                    ", optical thickness of a 1/128 voxel " + fixed(traits.tau_voxel_128, 3) +
+                    ", the aureole's brightness " + fixed(pilot.aureole, 2));
   }
   for (size_t i = 1; i < considered.size() && i < 4; ++i) {
     const AutoCandidate& c = considered[i];
@@ -204,6 +206,8 @@ nlohmann::json AutoChoice::toJson() const {
           {"traits",
            {{"albedo", traits.albedo},
             {"phase_spikiness", traits.phase_spikiness},
+            {"peak_split", traits.peak_split},
+            {"photon_refuses", traits.photon_refuses},
             {"sun", traits.sun},
             {"sky", traits.sky},
             {"tau_voxel_128", traits.tau_voxel_128},
@@ -215,6 +219,7 @@ nlohmann::json AutoChoice::toJson() const {
             {"seconds_per_sample", pilot.seconds_per_sample},
             {"multiple_fraction", pilot.multiple_fraction},
             {"cloud_fraction", pilot.cloud_fraction},
+            {"aureole", pilot.aureole},
             {"samples", pilot.samples},
             {"pixels", pilot.pixels},
             {"seconds", pilot.seconds}}}};

@@ -4,10 +4,12 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/bake/photon_bake.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/math/rng.h"
 #include "core/methods/common.h"
+#include "core/transport/camera.h"
 #include "core/transport/path_tracer.h"
 #include "core/transport/sun_guiding.h"
 
@@ -56,6 +58,11 @@ SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene) {
   const Medium& m = scene.medium;
   t.albedo = maxComponent(m.albedo);
   t.phase_spikiness = phaseSpikiness(*m.phase);
+  try {
+    t.peak_split = photonPeakSplit(*m.phase, PhotonBakeOptions{}).active();
+  } catch (const InputError&) {
+    t.photon_refuses = true;
+  }
   t.sun = shot.lighting.has_sun && maxComponent(scene.sun.irradiance) > 0;
   t.sky = needsSky(shot);
   const Bounds3 b = m.density->bounds();
@@ -91,6 +98,30 @@ void PairNoise::add(const RenderLayers& a, const RenderLayers& b) {
   }
 }
 
+void AureoleLight::add(const RenderLayers& a, const RenderLayers& b, const Camera& camera,
+                       const Vec3& sun_dir) {
+  const CameraRays rays(camera);
+  const double cos_max = std::cos(kAureoleDegrees * kPi / 180.0);
+  for (int y = 0; y < a.beauty.height; ++y) {
+    for (int x = 0; x < a.beauty.width; ++x) {
+      if (a.beauty.at(x, y)[3] < kCloudAlpha || b.beauty.at(x, y)[3] < kCloudAlpha) continue;
+      const bool inside = dot(rays.generate(x + 0.5, y + 0.5).d, sun_dir) >= cos_max;
+      for (int c = 0; c < 3; ++c) {
+        const double va = double(a.sun.at(x, y)[c]) + a.sky.at(x, y)[c];
+        const double vb = double(b.sun.at(x, y)[c]) + b.sky.at(x, y)[c];
+        sum += 0.5 * (va + vb);
+        ++values;
+        if (inside) sum_product += va * vb;
+      }
+    }
+  }
+}
+
+double AureoleLight::relativeRms() const {
+  if (values == 0 || !(sum > 0) || !(sum_product > 0)) return 0;
+  return std::sqrt(sum_product / double(values)) / (sum / double(values));
+}
+
 double PairNoise::relativeNoise() const {
   if (values == 0 || !(sum_mean > 0)) return 0;
   return std::sqrt(sum_sq_diff / double(values) / 2.0) / (sum_mean / double(values));
@@ -105,6 +136,9 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   pm.samples = o.samples;
   const auto t0 = std::chrono::steady_clock::now();
   PairNoise noise;
+  double aureole_sum = 0;
+  int aureole_views = 0;
+  const bool sun = maxComponent(scene.sun.irradiance) > 0;
   const int n = std::min<int>(int(scene.cameras.size()), o.max_views);
   for (int v = 0; v < n; ++v) {
     const Camera cam = pilotCamera(scene.cameras[size_t(v)], o.longest_side_px);
@@ -121,11 +155,20 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
       });
     }
     noise.add(pair[0], pair[1]);
+    AureoleLight aureole;
+    if (sun) aureole.add(pair[0], pair[1], cam, normalize(scene.sun.direction));
+    if (aureole.values > 0) {
+      aureole_sum += aureole.relativeRms();
+      ++aureole_views;
+    }
   }
   pm.seconds = secondsSince(t0);
   pm.pixels = noise.pixels;
   pm.noise_1spp = noise.relativeNoise() * std::sqrt(double(o.samples));
   pm.multiple_fraction = noise.multipleFraction();
+  // Per view, then averaged, as the error is: a view's aureole is measured against its own
+  // cloud, not against darker views beside it.
+  pm.aureole = aureole_views > 0 ? aureole_sum / aureole_views : 0.0;
   pm.cloud_fraction = noise.pixels > 0 ? double(noise.cloud_pixels) / double(noise.pixels) : 0;
   // Cost per path: measured at the pilot's size; a pixel at full size costs the same (the
   // framing is the same, only finer).

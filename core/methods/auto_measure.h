@@ -43,4 +43,14 @@ struct PairNoise {
   double multipleFraction() const;
 };
 
+/// PilotMeasure::aureole of one view: the pair's light (sun + sky layers, pixels with
+/// alpha >= 0.05 in both) and, where the pixel's centre ray lies within kAureoleDegrees of
+/// `sun_dir` (unit, towards the sun), the product of the two renders' values.
+struct AureoleLight {
+  double sum = 0, sum_product = 0;
+  int64_t values = 0;
+  void add(const RenderLayers& a, const RenderLayers& b, const Camera& camera, const Vec3& sun_dir);
+  double relativeRms() const;
+};
+
 }  // namespace cloudbake

@@ -16,8 +16,12 @@ namespace cloudbake {
 struct SceneTraits {
   double albedo = 1;           ///< the largest channel's single-scattering albedo
   double phase_spikiness = 0;  ///< V = 4 pi integral(p^2) - 1 (core/transport/sun_guiding.h)
-  bool sun = false;            ///< a sun with irradiance > 0
-  bool sky = false;            ///< a sky that is not black
+  /// photon bakes this phase by splitting its forward peak off (droplets; photonPeakSplit).
+  bool peak_split = false;
+  /// photon refuses this phase (a backward peak no forward cut removes).
+  bool photon_refuses = false;
+  bool sun = false;  ///< a sun with irradiance > 0
+  bool sky = false;  ///< a sky that is not black
   /// Optical thickness of one voxel of a 128-voxel lattice over the cloud's box where the
   /// cloud is dense (the 90th percentile of sigma_t inside it): how much a lattice's linear
   /// interpolation of the transmittance errs.
@@ -38,9 +42,16 @@ struct PilotMeasure {
   double seconds_per_sample = 0;  ///< per path per pixel, on the pilot's threads
   double multiple_fraction = 0;   ///< multiple / (single + multiple) over the cloud's pixels
   double cloud_fraction = 0;      ///< the pixels with alpha >= 0.05
-  double seconds = 0;             ///< what the pilot itself took
-  int samples = 0;                ///< paths per pixel of each pilot render
-  int64_t pixels = 0;             ///< pixels of each pilot render, over the views
+  /// How bright the cloud is where a view looks within kAureoleDegrees of the sun, relative to
+  /// its cloud as a whole: sqrt(sum of a x b over those pixels' values / all the cloud's values)
+  /// / the cloud's mean, a and b the two renders' sun + sky light (their product has no noise
+  /// bias), averaged over the views as the error is. 0 where no view looks towards the sun
+  /// through the cloud; 2.2-2.5 for a view whose sun is behind the cloud mid-frame. photon's error
+  /// on droplet phases gathers there (auto_model.cpp).
+  double aureole = 0;
+  double seconds = 0;  ///< what the pilot itself took
+  int samples = 0;     ///< paths per pixel of each pilot render
+  int64_t pixels = 0;  ///< pixels of each pilot render, over the views
 };
 
 /// One method and its knobs as the model sees it.
@@ -54,6 +65,9 @@ struct AutoCandidate {
   double seconds = 0;  ///< predicted seconds of the whole shot
   std::string why;     ///< one line: what the prediction rests on
 };
+
+/// Half-angle of the cone about the sun's direction in which PilotMeasure::aureole is measured.
+constexpr double kAureoleDegrees = 8.0;
 
 /// The photon ladder: each rung one of bench/photon_bench.py's measured settings (and beyond).
 struct PhotonRung {
@@ -69,6 +83,11 @@ const std::vector<PhotonRung>& photonRungs();
 /// the worst of the five bench scenes (the rungs' errors across scenes keep their ratios within
 /// about 20 %, but no trait of the scene predicted the ratio on held-out scenes; auto_model.cpp).
 double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
+
+/// photon's error where its phase's forward peak was split off: the relative error in the
+/// aureole (the light within kAureoleDegrees of the sun) times how bright that is
+/// (PilotMeasure::aureole); 0 for a phase that is not split (auto_model.cpp).
+double photonAureoleError(const SceneTraits& traits, const PilotMeasure& pilot);
 
 /// Bias of single scattering read from a lattice of `resolution` voxels, relative: tau^2 / 2 per
 /// voxel of optical thickness tau (measured on Disney's cloud; auto_model.cpp).

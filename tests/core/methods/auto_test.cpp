@@ -11,9 +11,11 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/methods/auto_measure.h"
 #include "core/methods/registry.h"
 #include "core/shot/scene_builder.h"
 #include "core/shot/shot_parser.h"
+#include "core/transport/camera.h"
 
 namespace cloudbake {
 namespace {
@@ -110,11 +112,53 @@ TEST(AutoModel, SingleWhereMultipleScatteringIsNegligible) {
   }
 }
 
-TEST(AutoModel, NoPhotonPredictionForPeakyPhases) {
+TEST(AutoModel, NoPhotonPredictionForPeakyPhasesItDoesNotSplit) {
   SceneTraits t = traitsOf(0.1);
-  t.phase_spikiness = 3000;  // a droplet's Mie peak: outside what photon was measured on
+  t.phase_spikiness = 3000;  // peaky, but not split by photon: outside what it was measured on
   for (const AutoCandidate& x : autoCandidates(t, pilotOf(4, 0.6), 0.1, 0)) {
     EXPECT_NE(x.method, "photon");
+  }
+  t = traitsOf(0.1);
+  t.photon_refuses = true;  // a backward peak: photon would refuse the shot
+  for (const AutoCandidate& x : autoCandidates(t, pilotOf(4, 0.6), 0.5, 0)) {
+    EXPECT_NE(x.method, "photon");
+  }
+}
+
+// A droplet phase, whose peak photon splits off: photon is a candidate, predicted with the HG
+// scenes' bound where no view looks towards the sun, and with the aureole's error added in
+// quadrature where one does (kAureoleRelativeError times the pilot's aureole brightness).
+TEST(AutoModel, DropletPhasesGetPhotonWithTheAureolesError) {
+  SceneTraits hg = traitsOf(0.1), droplet = traitsOf(0.1);
+  droplet.phase_spikiness = 1474;  // the Mie table at 10 um
+  droplet.peak_split = true;
+  PilotMeasure side = pilotOf(4, 0.6), facing = side;
+  facing.aureole = 2.2;
+  EXPECT_EQ(photonAureoleError(droplet, side), 0.0);
+  EXPECT_EQ(photonAureoleError(hg, facing), 0.0);  // a phase that is not split
+  EXPECT_NEAR(photonAureoleError(droplet, facing), 0.086 * 2.2, 1e-12);
+  auto photon = [](const std::vector<AutoCandidate>& all, int64_t photons) {
+    for (const AutoCandidate& c : all) {
+      if (c.method == "photon" && c.knobs.front().second == photons) return c;
+    }
+    ADD_FAILURE() << "no photon candidate with " << photons << " photons";
+    return AutoCandidate{};
+  };
+  for (const PhotonRung& r : photonRungs()) {
+    const double base = photon(autoCandidates(hg, side, 0.2, 0), r.photons).error;
+    EXPECT_DOUBLE_EQ(photon(autoCandidates(droplet, side, 0.2, 0), r.photons).error, base);
+    const AutoCandidate c = photon(autoCandidates(droplet, facing, 0.2, 0), r.photons);
+    // Not below what the view against the sun measured at any rung (0.165-0.213) ...
+    EXPECT_GE(c.error, 0.213);
+    EXPECT_NEAR(c.error, std::hypot(base, 1.1 * 0.086 * 2.2), 1e-12);
+    EXPECT_NE(c.why.find("aureole"), std::string::npos) << c.why;
+  }
+  // ... so against the sun photon is chosen for 30 %, not for 10 %.
+  EXPECT_EQ(autoCandidates(droplet, facing, 0.3, 0).front().method, "photon");
+  for (const AutoCandidate& c : autoCandidates(droplet, facing, 0.1, 0)) {
+    if (c.method == "photon") {
+      EXPECT_GT(c.error, 0.1);
+    }
   }
 }
 
@@ -223,6 +267,59 @@ TEST(AutoPilot, NoiseMatchesTheNoiseOfLongerRenders) {
   EXPECT_NEAR(p.multiple_fraction, pair.multipleFraction(), 0.1);
   EXPECT_GT(p.cloud_fraction, 0.3);
   EXPECT_LT(p.cloud_fraction, 0.7);  // a sphere of radius 1 in a 2.5-wide square: ~0.5
+}
+
+// The aureole's brightness: the RMS of the light within kAureoleDegrees of the sun over the
+// cloud's values, relative to its mean, from the product of the two renders.
+TEST(AutoPilot, AureoleIsTheLightTowardsTheSun) {
+  Camera cam;
+  cam.type = Camera::Type::kPerspective;
+  cam.position = Vec3(0, -5, 0);
+  cam.look_at = Vec3(0, 0, 0);
+  cam.fov_deg = 60;  // neighbours 6.6 degrees apart at the centre, diagonals 9.3
+  cam.width_px = cam.height_px = 10;
+  RenderLayers r[2];
+  for (RenderLayers& l : r) {
+    l.beauty = Image(10, 10, 4);
+    l.sun = l.sky = Image(10, 10, 3);
+    for (int y = 0; y < 10; ++y) {
+      for (int x = 0; x < 10; ++x) {
+        l.beauty.at(x, y)[3] = 1;
+        for (int c = 0; c < 3; ++c) l.sun.at(x, y)[c] = (x == 5 && y == 5) ? 10.f : 1.f;
+      }
+    }
+  }
+  r[1].sun.at(5, 5)[0] = 12.f;  // the two renders differ: the product, not the square
+  const CameraRays rays(cam);
+  // The sun behind pixel (5, 5): it and its four edge neighbours lie within 8 degrees.
+  const Vec3 towards = rays.generate(5.5, 5.5).d;
+  AureoleLight a;
+  a.add(r[0], r[1], cam, towards);
+  const double mean = (99 * 3 + 10 + 11 + 10) / 300.0;
+  EXPECT_NEAR(a.relativeRms(), std::sqrt((120.0 + 100 + 100 + 4 * 3) / 300.0) / mean, 1e-9);
+  AureoleLight away;
+  away.add(r[0], r[1], cam, -towards);
+  EXPECT_EQ(away.relativeRms(), 0.0);
+  AureoleLight empty;
+  EXPECT_EQ(empty.relativeRms(), 0.0);
+}
+
+// What auto reads of the phase: whether photon splits its peak, or refuses it.
+TEST(AutoPilot, TraitsSayWhetherPhotonSplitsOrRefusesThePhase) {
+  auto traits = [](const std::string& phase) {
+    std::string text = shot(R"({"method": "auto", "tolerance": 0.2})");
+    text.replace(text.find(R"({"type": "hg", "g": 0.6})"), 24, phase);
+    const ShotSpec s = parseShot(text, "");
+    return measureSceneTraits(s, buildScene(s, "shot.json"));
+  };
+  const SceneTraits hg = traits(R"({"type": "hg", "g": 0.6})");
+  EXPECT_FALSE(hg.peak_split);
+  EXPECT_FALSE(hg.photon_refuses);
+  const SceneTraits droplet = traits(R"({"type": "mie_approx", "diameter_um": 20})");
+  EXPECT_TRUE(droplet.peak_split);
+  EXPECT_GT(droplet.phase_spikiness, 50);
+  const SceneTraits back = traits(R"({"type": "hg", "g": -0.99})");
+  EXPECT_TRUE(back.photon_refuses);
 }
 
 // Absorbing media scatter once at most: the pilot measures no multiple scattering there, and a
