@@ -2,9 +2,12 @@
 """Method `auto` on scenes its model was not fitted on: how often it meets the tolerance, and how
 much slower it is than the best choice in hindsight (issue 13).
 
-The model (core/methods/auto_model.cpp) was fitted on bench/photon_bench.py's five scenes. This
-bench renders five others, made by changing their clouds, media and lights (HELD_OUT below), at
---res x 3/4 --res pixels, two views each. For each scene it renders a reference with `pathtrace`
+The model (core/methods/auto_model.cpp) was fitted on bench/photon_bench.py's five scenes (and
+its droplet term on perlin_droplet's view against the sun). This bench renders seven others, made
+by changing their clouds, media and lights (HELD_OUT below), at --res x 3/4 --res pixels, two
+views each; two of them have droplet phases (a Lorenz-Mie table at 15 um, the fitted Mie
+approximation at 20 um), each with a view towards the sun, and need about 8x the reference paths
+of the others for the same noise (--ref-spp 16384; --scenes picks them). For each scene it renders a reference with `pathtrace`
 twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/), then `auto` at each tolerance,
 and the candidates auto chooses among (single, photon's first three rungs; the path tracer's
 cost for a tolerance follows from the references' own noise and seconds). It prints

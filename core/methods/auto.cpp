@@ -177,7 +177,9 @@ std::vector<std::string> AutoChoice::planLines() const {
                     fixed(traits.phase_spikiness, 1) +
                     (traits.peak_split ? " (photon splits its forward peak off)" : "") +
                     ", optical thickness of a 1/128 voxel " + fixed(traits.tau_voxel_128, 3) +
-                    ", the aureole's brightness " + fixed(pilot.aureole, 2));
+                    ", views towards the sun " + fixed(pilot.aureole, 2) +
+                    " (aureole brightness, mean over views, " + fixed(pilot.aureole_brightness, 2) +
+                    ")");
   }
   for (size_t i = 1; i < considered.size() && i < 4; ++i) {
     const AutoCandidate& c = considered[i];
@@ -220,6 +222,7 @@ nlohmann::json AutoChoice::toJson() const {
             {"multiple_fraction", pilot.multiple_fraction},
             {"cloud_fraction", pilot.cloud_fraction},
             {"aureole", pilot.aureole},
+            {"aureole_brightness", pilot.aureole_brightness},
             {"samples", pilot.samples},
             {"pixels", pilot.pixels},
             {"seconds", pilot.seconds}}}};

@@ -36,8 +36,8 @@ struct SceneTraits {
 /// cost of the reference on this scene, and how much of the cloud's light is multiply scattered.
 struct PilotMeasure {
   /// Relative noise per pixel of the cloud's own light (sun + sky layers, pixels with alpha >=
-  /// 0.05) at one path per pixel: the two renders' RMS difference / sqrt 2 / their mean,
-  /// times sqrt(spp).
+  /// 0.05) at one path per pixel: the two renders' RMS difference / sqrt 2 / their mean, per
+  /// view, averaged over the views, times sqrt(spp).
   double noise_1spp = 0;
   double seconds_per_sample = 0;  ///< per path per pixel, on the pilot's threads
   double multiple_fraction = 0;   ///< multiple / (single + multiple) over the cloud's pixels
@@ -45,9 +45,12 @@ struct PilotMeasure {
   /// How bright the cloud is where a view looks within kAureoleDegrees of the sun, relative to
   /// its cloud as a whole: sqrt(sum of a x b over those pixels' values / all the cloud's values)
   /// / the cloud's mean, a and b the two renders' sun + sky light (their product has no noise
-  /// bias), averaged over the views as the error is. 0 where no view looks towards the sun
-  /// through the cloud; 2.2-2.5 for a view whose sun is behind the cloud mid-frame. photon's error
-  /// on droplet phases gathers there (auto_model.cpp).
+  /// bias), averaged over the views. 0 where no view looks towards the sun through the cloud;
+  /// 0.8-2.2 for the views of the droplet benches whose sun is behind the cloud.
+  double aureole_brightness = 0;
+  /// The views that look towards the sun through the cloud, each counted min(1, its aureole's
+  /// brightness / kAureoleFull), over all views: in [0, 1]. photon's error on droplet phases
+  /// gathers there (auto_model.cpp).
   double aureole = 0;
   double seconds = 0;  ///< what the pilot itself took
   int samples = 0;     ///< paths per pixel of each pilot render
@@ -68,6 +71,8 @@ struct AutoCandidate {
 
 /// Half-angle of the cone about the sun's direction in which PilotMeasure::aureole is measured.
 constexpr double kAureoleDegrees = 8.0;
+/// An aureole this bright (PilotMeasure::aureole_brightness of one view) counts fully.
+constexpr double kAureoleFull = 0.7;
 
 /// The photon ladder: each rung one of bench/photon_bench.py's measured settings (and beyond).
 struct PhotonRung {
@@ -84,9 +89,9 @@ const std::vector<PhotonRung>& photonRungs();
 /// about 20 %, but no trait of the scene predicted the ratio on held-out scenes; auto_model.cpp).
 double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
 
-/// photon's error where its phase's forward peak was split off: the relative error in the
-/// aureole (the light within kAureoleDegrees of the sun) times how bright that is
-/// (PilotMeasure::aureole); 0 for a phase that is not split (auto_model.cpp).
+/// photon's error where its phase's forward peak was split off: what a view towards the sun
+/// measured in its aureole (the light within kAureoleDegrees of the sun), times
+/// PilotMeasure::aureole; 0 for a phase that is not split (auto_model.cpp).
 double photonAureoleError(const SceneTraits& traits, const PilotMeasure& pilot);
 
 /// Bias of single scattering read from a lattice of `resolution` voxels, relative: tau^2 / 2 per

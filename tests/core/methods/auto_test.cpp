@@ -127,16 +127,19 @@ TEST(AutoModel, NoPhotonPredictionForPeakyPhasesItDoesNotSplit) {
 
 // A droplet phase, whose peak photon splits off: photon is a candidate, predicted with the HG
 // scenes' bound where no view looks towards the sun, and with the aureole's error added in
-// quadrature where one does (kAureoleRelativeError times the pilot's aureole brightness).
+// quadrature where one does (0.19 per view towards the sun, auto_model.cpp).
 TEST(AutoModel, DropletPhasesGetPhotonWithTheAureolesError) {
   SceneTraits hg = traitsOf(0.1), droplet = traitsOf(0.1);
   droplet.phase_spikiness = 1474;  // the Mie table at 10 um
   droplet.peak_split = true;
   PilotMeasure side = pilotOf(4, 0.6), facing = side;
-  facing.aureole = 2.2;
+  facing.aureole = 1;  // one view, against the sun
   EXPECT_EQ(photonAureoleError(droplet, side), 0.0);
   EXPECT_EQ(photonAureoleError(hg, facing), 0.0);  // a phase that is not split
-  EXPECT_NEAR(photonAureoleError(droplet, facing), 0.086 * 2.2, 1e-12);
+  EXPECT_NEAR(photonAureoleError(droplet, facing), 0.19, 1e-12);
+  PilotMeasure half = facing;
+  half.aureole = 0.5;  // one of two views
+  EXPECT_NEAR(photonAureoleError(droplet, half), 0.095, 1e-12);
   auto photon = [](const std::vector<AutoCandidate>& all, int64_t photons) {
     for (const AutoCandidate& c : all) {
       if (c.method == "photon" && c.knobs.front().second == photons) return c;
@@ -150,7 +153,7 @@ TEST(AutoModel, DropletPhasesGetPhotonWithTheAureolesError) {
     const AutoCandidate c = photon(autoCandidates(droplet, facing, 0.2, 0), r.photons);
     // Not below what the view against the sun measured at any rung (0.165-0.213) ...
     EXPECT_GE(c.error, 0.213);
-    EXPECT_NEAR(c.error, std::hypot(base, 1.1 * 0.086 * 2.2), 1e-12);
+    EXPECT_NEAR(c.error, std::hypot(base, 1.1 * 0.19), 1e-12);
     EXPECT_NE(c.why.find("aureole"), std::string::npos) << c.why;
   }
   // ... so against the sun photon is chosen for 30 %, not for 10 %.
@@ -302,6 +305,22 @@ TEST(AutoPilot, AureoleIsTheLightTowardsTheSun) {
   EXPECT_EQ(away.relativeRms(), 0.0);
   AureoleLight empty;
   EXPECT_EQ(empty.relativeRms(), 0.0);
+}
+
+// The pilot counts a view towards the sun through the cloud, and not one from the side.
+TEST(AutoPilot, CountsTheViewsTowardsTheSun) {
+  PilotOptions po;
+  po.threads = 2;
+  const ShotSpec side = parseShot(shot(R"({"method": "pathtrace"})"), "");
+  const PilotMeasure ps = runPilot(buildScene(side, ""), po);
+  EXPECT_EQ(ps.aureole, 0.0);
+  EXPECT_EQ(ps.aureole_brightness, 0.0);
+  std::string text = shot(R"({"method": "pathtrace"})");
+  text.replace(text.find("[0.5, 0, 0.8660254]"), 19, "[0, 1, 0.05]");  // behind the sphere
+  const ShotSpec facing = parseShot(text, "");
+  const PilotMeasure pf = runPilot(buildScene(facing, ""), po);
+  EXPECT_GT(pf.aureole_brightness, kAureoleFull);  // every cloud pixel looks at the sun
+  EXPECT_EQ(pf.aureole, 1.0);
 }
 
 // What auto reads of the phase: whether photon splits its peak, or refuses it.
