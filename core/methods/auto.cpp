@@ -111,6 +111,14 @@ AutoChoice chooseSequence(const ShotSpec& shot, double tolerance, const AutoOpti
   return choice;
 }
 
+// "0.00, 2.15" per view, or "not measured".
+std::string aureoleList(const std::vector<double>& a) {
+  if (a.empty()) return "not measured";
+  std::string s;
+  for (double v : a) s += (s.empty() ? "" : ", ") + fixed(v, 2);
+  return s;
+}
+
 }  // namespace
 
 const BakeMethod& autoMethod() {
@@ -177,9 +185,7 @@ std::vector<std::string> AutoChoice::planLines() const {
                     fixed(traits.phase_spikiness, 1) +
                     (traits.peak_split ? " (photon splits its forward peak off)" : "") +
                     ", optical thickness of a 1/128 voxel " + fixed(traits.tau_voxel_128, 3) +
-                    ", views towards the sun " + fixed(pilot.aureole, 2) +
-                    " (aureole brightness, mean over views, " + fixed(pilot.aureole_brightness, 2) +
-                    ")");
+                    ", the views' aureole brightness " + aureoleList(pilot.aureole));
   }
   for (size_t i = 1; i < considered.size() && i < 4; ++i) {
     const AutoCandidate& c = considered[i];
@@ -222,7 +228,6 @@ nlohmann::json AutoChoice::toJson() const {
             {"multiple_fraction", pilot.multiple_fraction},
             {"cloud_fraction", pilot.cloud_fraction},
             {"aureole", pilot.aureole},
-            {"aureole_brightness", pilot.aureole_brightness},
             {"samples", pilot.samples},
             {"pixels", pilot.pixels},
             {"seconds", pilot.seconds}}}};

@@ -136,8 +136,8 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   pm.samples = o.samples;
   const auto t0 = std::chrono::steady_clock::now();
   PairNoise noise;
-  double noise_sum = 0, brightness_sum = 0, weight_sum = 0;
-  int noise_views = 0, aureole_views = 0;
+  double noise_sum = 0;
+  int noise_views = 0;
   const bool sun = maxComponent(scene.sun.irradiance) > 0;
   const int n = std::min<int>(int(scene.cameras.size()), o.max_views);
   for (int v = 0; v < n; ++v) {
@@ -163,11 +163,7 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
     }
     AureoleLight aureole;
     if (sun) aureole.add(pair[0], pair[1], cam, normalize(scene.sun.direction));
-    if (aureole.values > 0) {
-      brightness_sum += aureole.relativeRms();
-      weight_sum += std::min(1.0, aureole.relativeRms() / kAureoleFull);
-      ++aureole_views;
-    }
+    if (aureole.values > 0) pm.aureole.push_back(aureole.relativeRms());
   }
   pm.seconds = secondsSince(t0);
   pm.pixels = noise.pixels;
@@ -177,10 +173,6 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   // path, the mean of theirs 5.1, and the references measured 4.4).
   pm.noise_1spp = noise_views > 0 ? noise_sum / noise_views * std::sqrt(double(o.samples)) : 0.0;
   pm.multiple_fraction = noise.multipleFraction();
-  if (aureole_views > 0) {
-    pm.aureole_brightness = brightness_sum / aureole_views;
-    pm.aureole = weight_sum / aureole_views;
-  }
   pm.cloud_fraction = noise.pixels > 0 ? double(noise.cloud_pixels) / double(noise.pixels) : 0;
   // Cost per path: measured at the pilot's size; a pixel at full size costs the same (the
   // framing is the same, only finer).

@@ -42,16 +42,13 @@ struct PilotMeasure {
   double seconds_per_sample = 0;  ///< per path per pixel, on the pilot's threads
   double multiple_fraction = 0;   ///< multiple / (single + multiple) over the cloud's pixels
   double cloud_fraction = 0;      ///< the pixels with alpha >= 0.05
-  /// How bright the cloud is where a view looks within kAureoleDegrees of the sun, relative to
-  /// its cloud as a whole: sqrt(sum of a x b over those pixels' values / all the cloud's values)
-  /// / the cloud's mean, a and b the two renders' sun + sky light (their product has no noise
-  /// bias), averaged over the views. 0 where no view looks towards the sun through the cloud;
-  /// 0.8-2.2 for the views of the droplet benches whose sun is behind the cloud.
-  double aureole_brightness = 0;
-  /// The views that look towards the sun through the cloud, each counted min(1, its aureole's
-  /// brightness / kAureoleFull), over all views: in [0, 1]. photon's error on droplet phases
-  /// gathers there (auto_model.cpp).
-  double aureole = 0;
+  /// Per piloted view, how bright its cloud is where it looks within kAureoleDegrees of the sun,
+  /// relative to its cloud as a whole: sqrt(sum of a x b over those pixels' values / all the
+  /// cloud's values) / the cloud's mean, a and b the two renders' sun + sky light (their
+  /// product has no noise bias). 0 where the view does not look towards the sun through the
+  /// cloud; 0.8-5.2 for the droplet benches' views whose sun is behind the cloud. photon's
+  /// error on droplet phases gathers there (auto_model.cpp).
+  std::vector<double> aureole;
   double seconds = 0;  ///< what the pilot itself took
   int samples = 0;     ///< paths per pixel of each pilot render
   int64_t pixels = 0;  ///< pixels of each pilot render, over the views
@@ -71,7 +68,7 @@ struct AutoCandidate {
 
 /// Half-angle of the cone about the sun's direction in which PilotMeasure::aureole is measured.
 constexpr double kAureoleDegrees = 8.0;
-/// An aureole this bright (PilotMeasure::aureole_brightness of one view) counts fully.
+/// An aureole at least this bright (PilotMeasure::aureole of a view) counts fully.
 constexpr double kAureoleFull = 0.7;
 
 /// The photon ladder: each rung one of bench/photon_bench.py's measured settings (and beyond).
@@ -89,9 +86,9 @@ const std::vector<PhotonRung>& photonRungs();
 /// about 20 %, but no trait of the scene predicted the ratio on held-out scenes; auto_model.cpp).
 double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
 
-/// photon's error where its phase's forward peak was split off: what a view towards the sun
-/// measured in its aureole (the light within kAureoleDegrees of the sun), times
-/// PilotMeasure::aureole; 0 for a phase that is not split (auto_model.cpp).
+/// photon's error where its phase's forward peak was split off, from its views' aureoles (the
+/// light within kAureoleDegrees of the sun), averaged over the views as the error is; 0 for a
+/// phase that is not split (auto_model.cpp).
 double photonAureoleError(const SceneTraits& traits, const PilotMeasure& pilot);
 
 /// Bias of single scattering read from a lattice of `resolution` voxels, relative: tau^2 / 2 per
