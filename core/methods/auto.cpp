@@ -149,6 +149,7 @@ AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOption
     // No views: the product is bake.vdb, whose views come later. Nothing measures how much of
     // the light is multiply scattered, so single is not trusted with it.
     choice.pilot.multiple_fraction = 1;
+    choice.pilot.multiple_rms = 1;
   }
   for (const AutoCandidate& c :
        autoCandidates(choice.traits, choice.pilot, tolerance, o.max_samples)) {
@@ -226,6 +227,7 @@ nlohmann::json AutoChoice::toJson() const {
            {{"noise_1spp", pilot.noise_1spp},
             {"seconds_per_sample", pilot.seconds_per_sample},
             {"multiple_fraction", pilot.multiple_fraction},
+            {"multiple_rms", pilot.multiple_rms},
             {"cloud_fraction", pilot.cloud_fraction},
             {"aureole", pilot.aureole},
             {"samples", pilot.samples},

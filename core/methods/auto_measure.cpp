@@ -91,7 +91,9 @@ void PairNoise::add(const RenderLayers& a, const RenderLayers& b) {
         const double vb = double(b.sun.at(x, y)[c]) + b.sky.at(x, y)[c];
         sum_sq_diff += (va - vb) * (va - vb);
         sum_mean += 0.5 * (va + vb);
-        sum_multiple += 0.5 * (double(a.multiple.at(x, y)[c]) + b.multiple.at(x, y)[c]);
+        const double ma = a.multiple.at(x, y)[c], mb = b.multiple.at(x, y)[c];
+        sum_multiple += 0.5 * (ma + mb);
+        sum_multiple_product += ma * mb;
         ++values;
       }
     }
@@ -127,6 +129,11 @@ double PairNoise::relativeNoise() const {
   return std::sqrt(sum_sq_diff / double(values) / 2.0) / (sum_mean / double(values));
 }
 
+double PairNoise::multipleRms() const {
+  if (values == 0 || !(sum_mean > 0) || !(sum_multiple_product > 0)) return 0;
+  return std::sqrt(sum_multiple_product / double(values)) / (sum_mean / double(values));
+}
+
 double PairNoise::multipleFraction() const {
   return sum_mean > 0 ? std::clamp(sum_multiple / sum_mean, 0.0, 1.0) : 0.0;
 }
@@ -136,7 +143,7 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   pm.samples = o.samples;
   const auto t0 = std::chrono::steady_clock::now();
   PairNoise noise;
-  double noise_sum = 0;
+  double noise_sum = 0, multiple_rms_sum = 0;
   int noise_views = 0;
   const bool sun = maxComponent(scene.sun.irradiance) > 0;
   const int n = std::min<int>(int(scene.cameras.size()), o.max_views);
@@ -159,6 +166,7 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
     view_noise.add(pair[0], pair[1]);
     if (view_noise.values > 0) {
       noise_sum += view_noise.relativeNoise();
+      multiple_rms_sum += view_noise.multipleRms();
       ++noise_views;
     }
     AureoleLight aureole;
@@ -173,6 +181,7 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   // path, the mean of theirs 5.1, and the references measured 4.4).
   pm.noise_1spp = noise_views > 0 ? noise_sum / noise_views * std::sqrt(double(o.samples)) : 0.0;
   pm.multiple_fraction = noise.multipleFraction();
+  pm.multiple_rms = noise_views > 0 ? multiple_rms_sum / noise_views : 0.0;
   pm.cloud_fraction = noise.pixels > 0 ? double(noise.cloud_pixels) / double(noise.pixels) : 0;
   // Cost per path: measured at the pilot's size; a pixel at full size costs the same (the
   // framing is the same, only finer).

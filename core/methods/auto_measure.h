@@ -37,10 +37,16 @@ struct PairNoise {
   /// Sums over the cloud's pixels and channels: squared differences, the pair's mean of the
   /// cloud's own light (sun + sky) and of its multiply scattered part.
   double sum_sq_diff = 0, sum_mean = 0, sum_multiple = 0;
+  /// Sum over the same values of the product of the two renders' multiply scattered light.
+  double sum_multiple_product = 0;
   int64_t values = 0, cloud_pixels = 0, pixels = 0;
   void add(const RenderLayers& a, const RenderLayers& b);
   double relativeNoise() const;
   double multipleFraction() const;
+  /// sqrt(sum_multiple_product / values) / the mean: the relative RMSE of leaving the multiply
+  /// scattered light out (method single), which the fraction understates where that light is
+  /// concentrated in a few pixels.
+  double multipleRms() const;
 };
 
 /// PilotMeasure::aureole of one view: the pair's light (sun + sky layers, pixels with

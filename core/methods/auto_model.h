@@ -41,7 +41,11 @@ struct PilotMeasure {
   double noise_1spp = 0;
   double seconds_per_sample = 0;  ///< per path per pixel, on the pilot's threads
   double multiple_fraction = 0;   ///< multiple / (single + multiple) over the cloud's pixels
-  double cloud_fraction = 0;      ///< the pixels with alpha >= 0.05
+  /// Per view, the relative RMSE of leaving the multiply scattered light out (PairNoise::
+  /// multipleRms), averaged over the views: at least the fraction, and far more where that
+  /// light gathers in a few bright pixels, such as a droplet's silver lining.
+  double multiple_rms = 0;
+  double cloud_fraction = 0;  ///< the pixels with alpha >= 0.05
   /// Per piloted view, how bright its cloud is where it looks within kAureoleDegrees of the sun,
   /// relative to its cloud as a whole: sqrt(sum of a x b over those pixels' values / all the
   /// cloud's values) / the cloud's mean, a and b the two renders' sun + sky light (their

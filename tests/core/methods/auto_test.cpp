@@ -316,6 +316,43 @@ TEST(AutoPilot, AureoleIsTheLightTowardsTheSun) {
   EXPECT_EQ(empty.relativeRms(), 0.0);
 }
 
+// Leaving out multiply scattered light that gathers in one pixel costs more, as an RMSE, than its
+// share of the light says; spread evenly, the two agree.
+TEST(AutoPilot, MultipleRmsExceedsTheShareWhereTheLightGathers) {
+  auto layers = [](bool gathered) {
+    RenderLayers l;
+    l.beauty = Image(10, 10, 4);
+    l.sun = l.sky = l.multiple = Image(10, 10, 3);
+    for (int y = 0; y < 10; ++y) {
+      for (int x = 0; x < 10; ++x) {
+        l.beauty.at(x, y)[3] = 1;
+        const bool bright = x == 3 && y == 4;
+        for (int c = 0; c < 3; ++c) {
+          l.multiple.at(x, y)[c] = gathered ? (bright ? 50.f : 0.f) : 0.5f;
+          l.sun.at(x, y)[c] = 0.5f + l.multiple.at(x, y)[c];  // single 0.5 everywhere
+        }
+      }
+    }
+    return l;
+  };
+  PairNoise even, gathered;
+  even.add(layers(false), layers(false));
+  gathered.add(layers(true), layers(true));
+  EXPECT_NEAR(even.multipleFraction(), 0.5, 1e-9);
+  EXPECT_NEAR(even.multipleRms(), 0.5, 1e-9);
+  EXPECT_NEAR(gathered.multipleFraction(), 0.5, 1e-9);         // 50 / 100 pixels over a mean of 1
+  EXPECT_NEAR(gathered.multipleRms(), std::sqrt(25.0), 1e-9);  // sqrt(2500 / 100) / 1
+  // single's prediction follows the RMS.
+  SceneTraits t = traitsOf(0.05);
+  PilotMeasure p = pilotOf(2, 0.5);
+  p.multiple_rms = 5;
+  for (const AutoCandidate& c : autoCandidates(t, p, 0.3, 0)) {
+    if (c.method == "single") {
+      EXPECT_GE(c.error, 1.25 * 5);
+    }
+  }
+}
+
 // The pilot counts a view towards the sun through the cloud, and not one from the side.
 TEST(AutoPilot, CountsTheViewsTowardsTheSun) {
   PilotOptions po;
