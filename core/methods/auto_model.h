@@ -104,7 +104,11 @@ double latticeSingleBias(const SceneTraits& traits, int resolution);
 std::vector<AutoCandidate> autoCandidates(const SceneTraits& traits, const PilotMeasure& pilot,
                                           double tolerance, int max_samples);
 
+/// How much less noise than the tolerance the path tracer is asked for: 1.2 (the pilot's noise
+/// is itself uncertain), 1.75 for droplet phases, whose heavy-tailed noise a pilot reads low.
+double pathtraceMargin(const SceneTraits& traits);
+
 /// Paths per pixel that bring the reference's noise to `tolerance` on this scene.
-int64_t pathtraceSamplesFor(const PilotMeasure& pilot, double tolerance);
+int64_t pathtraceSamplesFor(const SceneTraits& traits, const PilotMeasure& pilot, double tolerance);
 
 }  // namespace cloudbake
