@@ -142,7 +142,7 @@ AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOption
   po.progress = o.progress;
   // A droplet's spike makes the path tracer's noise heavy-tailed: a short pilot may miss the
   // rare large samples and read the noise low, so peaky phases get 4x the pilot's paths.
-  if (choice.traits.phase_spikiness > 100) po.samples = 32;
+  if (choice.traits.phase_spikiness > kHeavyTailSpikiness) po.samples = 32;
   if (choice.traits.pixels > 0) {
     choice.pilot = runPilot(scene, po);
   } else {
@@ -150,6 +150,9 @@ AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOption
     // the light is multiply scattered, so single is not trusted with it.
     choice.pilot.multiple_fraction = 1;
     choice.pilot.multiple_rms = 1;
+    // Nor whether they look towards the sun: photon's droplet error is taken as the worst
+    // measured there.
+    choice.pilot.aureole = {kAureoleWorst};
   }
   for (const AutoCandidate& c :
        autoCandidates(choice.traits, choice.pilot, tolerance, o.max_samples)) {

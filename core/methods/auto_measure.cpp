@@ -164,7 +164,7 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
     noise.add(pair[0], pair[1]);
     PairNoise view_noise;
     view_noise.add(pair[0], pair[1]);
-    if (view_noise.values > 0) {
+    if (view_noise.values > 0 && view_noise.sum_mean > 0) {
       noise_sum += view_noise.relativeNoise();
       multiple_rms_sum += view_noise.multipleRms();
       ++noise_views;

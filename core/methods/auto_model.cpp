@@ -14,12 +14,11 @@ namespace {
 // A pilot's noise is itself uncertain (two renders of a few samples each): the reference is
 // asked for this much less noise than the tolerance, so a noise measured 20 % low still meets it.
 constexpr double kPathtraceMargin = 1.2;
-// A droplet's spike (spikiness above kHeavyTailSpikiness) makes the noise heavy-tailed: its 32-path
-// pilot read 0.85-1.46x the noise that 16384-path references measured on the three droplet
-// scenes (perlin_droplet, auto_bench's droplet_dense and droplet_sphere, whose silver lining
+// A droplet's spike (spikiness above kHeavyTailSpikiness) makes the noise heavy-tailed: 16384-path
+// references measured 0.85-1.46x the noise its 32-path pilot read on the three droplet scenes
+// (perlin_droplet, auto_bench's droplet_dense and droplet_sphere, whose silver lining the pilot
 // read lowest), so the margin covers the worst: 1.2 x 1.46.
 constexpr double kHeavyTailMargin = 1.75;
-constexpr double kHeavyTailSpikiness = 100;
 // single's prediction rests on the pilot's multiple-scattering share (itself noisy) and a
 // voxel's optical thickness; photon's on the worst factor measured (photonSceneFactor).
 constexpr double kModelMargin = 1.25;
@@ -61,7 +60,8 @@ AutoCandidate singleCandidate(const SceneTraits& traits, const PilotMeasure& pil
   const double bias = latticeSingleBias(traits, resolution);
   // What it leaves out, as the error is measured: the RMS of the multiply scattered light over
   // the cloud's mean, which the fraction understates where that light is concentrated (a
-  // droplet's silver lining: fraction 0.79, measured error 2.9).
+  // droplet's silver lining: auto_bench's droplet_sphere, share 0.82, single measured 1.92 over
+  // its two views, 2.9 on the one against the sun).
   const double missing = std::max(pilot.multiple_fraction, pilot.multiple_rms);
   c.error = kModelMargin * std::hypot(missing, bias);
   c.seconds =
@@ -80,9 +80,9 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
              {"order", rung.order},
              {"light_resolution", rung.light_resolution},
              {"tally_resolution", rung.tally_resolution}};
-  const double error = std::hypot(rung.bunny_error * factor, photonAureoleError(traits, pilot));
+  const double aureole = photonAureoleError(traits, pilot);
   c.samples = bakeViewSamples(traits);
-  c.error = kPhotonMargin * error;
+  c.error = kPhotonMargin * photonViewsError(traits, pilot, rung.bunny_error * factor);
   // A photon's walk costs about what a camera path through the cloud does: both random-walk
   // the same medium with a next event per collision (fitted in docs/methods.md).
   const double path_seconds = pilot.seconds_per_sample / std::max(pilot.cloud_fraction, 0.02);
@@ -96,7 +96,7 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
           " % on the bunny scene and at most " + fixed(factor, 2) +
           " times that on the five bench scenes";
   if (traits.peak_split) {
-    c.why += "; the droplet's aureole adds " + fixed(100 * photonAureoleError(traits, pilot), 1) +
+    c.why += "; the droplet's aureole adds " + fixed(100 * aureole, 1) +
              " % (views against the sun, " + fixed(100 * kAureoleFloor, 0) + " % + " +
              fixed(100 * kAureoleSlope, 0) + " % per unit of the aureole's brightness)";
   }
@@ -143,22 +143,33 @@ double photonSceneFactor(const SceneTraits&, const PilotMeasure&) {
   return kPhotonWorstFactor;
 }
 
-double photonAureoleError(const SceneTraits& traits, const PilotMeasure& pilot) {
+double aureoleTerm(double brightness) {
   // Where the peak was split, the light scattered through it more than once spreads further
   // than the views' beam model gives (docs/methods.md, "Droplet phases"), and more photons do
   // not reduce it. Measured at 80x60 against 16384-spp references (their noise removed), the
   // views towards the sun of three droplet scenes, as (the pilot's aureole brightness A, what
-  // the aureole added to the view's error at every rung): perlin_droplet (2.2, 0.16-0.17: 98 %
-  // of the squared error within 8 degrees of the sun), auto_bench's droplet_dense (0.8, 0.17:
-  // a fainter aureole, erring 21 % there against 7 %) and droplet_sphere (5.2, 0.26-0.28: the
-  // sun just behind a thin limb). 0.15 + 0.03 A bounds all three (0.17, 0.22, 0.31); a view
-  // whose aureole is fainter than 0.7 pays a share of it. The side and glory views, which do
-  // not look towards the sun, stay within the HG scenes' bound; the two add in quadrature.
+  // the aureole added to the view's error at every rung): perlin_droplet (2.15, 0.16-0.17: 98 %
+  // of the squared error within 8 degrees of the sun), auto_bench's droplet_dense (0.76, 0.17:
+  // a fainter aureole, erring 21 % there against 7 %) and droplet_sphere (4.64, 0.26-0.28: the
+  // sun just behind a thin limb). 0.15 + 0.03 A bounds all three (0.21, 0.17 and 0.29 in that
+  // order); a view whose aureole is fainter than 0.7 pays a share of it. The side and glory
+  // views, which do not look towards the sun, stay within the HG scenes' bound.
+  return std::min(1.0, brightness / kAureoleFull) * (kAureoleFloor + kAureoleSlope * brightness);
+}
+
+double photonAureoleError(const SceneTraits& traits, const PilotMeasure& pilot) {
   if (!traits.peak_split || pilot.aureole.empty()) return 0.0;
   double sum = 0;
-  for (double a : pilot.aureole) {
-    sum += std::min(1.0, a / kAureoleFull) * (kAureoleFloor + kAureoleSlope * a);
-  }
+  for (double a : pilot.aureole) sum += aureoleTerm(a);
+  return sum / double(pilot.aureole.size());
+}
+
+double photonViewsError(const SceneTraits& traits, const PilotMeasure& pilot, double bound) {
+  if (!traits.peak_split || pilot.aureole.empty()) return bound;
+  // Per view, the bound and its aureole's term in quadrature, then the mean over the views, as
+  // the error of a shot is (the mean of the terms in quadrature would read lower).
+  double sum = 0;
+  for (double a : pilot.aureole) sum += std::hypot(bound, aureoleTerm(a));
   return sum / double(pilot.aureole.size());
 }
 

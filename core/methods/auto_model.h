@@ -50,8 +50,9 @@ struct PilotMeasure {
   /// relative to its cloud as a whole: sqrt(sum of a x b over those pixels' values / all the
   /// cloud's values) / the cloud's mean, a and b the two renders' sun + sky light (their
   /// product has no noise bias). 0 where the view does not look towards the sun through the
-  /// cloud; 0.8-5.2 for the droplet benches' views whose sun is behind the cloud. photon's
-  /// error on droplet phases gathers there (auto_model.cpp).
+  /// cloud; 0.76-4.64 for the droplet benches' views whose sun is behind the cloud. photon's
+  /// error on droplet phases gathers there (auto_model.cpp). Views whose cloud covers no pixel
+  /// are left out, as they have no error to measure; empty under a black sun.
   std::vector<double> aureole;
   double seconds = 0;  ///< what the pilot itself took
   int samples = 0;     ///< paths per pixel of each pilot render
@@ -74,6 +75,12 @@ struct AutoCandidate {
 constexpr double kAureoleDegrees = 8.0;
 /// An aureole at least this bright (PilotMeasure::aureole of a view) counts fully.
 constexpr double kAureoleFull = 0.7;
+/// The brightest aureole measured (auto_bench's droplet_sphere): assumed for a shot without
+/// views, whose views come later and may look towards the sun.
+constexpr double kAureoleWorst = 4.64;
+/// Phases peakier than this (droplets' Mie tables; HG 0.85 is 21) give the path tracer
+/// heavy-tailed noise: the pilot traces more paths, and the path tracer gets a wider margin.
+constexpr double kHeavyTailSpikiness = 100;
 
 /// The photon ladder: each rung one of bench/photon_bench.py's measured settings (and beyond).
 struct PhotonRung {
@@ -90,10 +97,15 @@ const std::vector<PhotonRung>& photonRungs();
 /// about 20 %, but no trait of the scene predicted the ratio on held-out scenes; auto_model.cpp).
 double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
 
-/// photon's error where its phase's forward peak was split off, from its views' aureoles (the
-/// light within kAureoleDegrees of the sun), averaged over the views as the error is; 0 for a
-/// phase that is not split (auto_model.cpp).
+/// What a view's aureole (the light within kAureoleDegrees of the sun) of brightness A adds to
+/// photon's error where its phase's forward peak was split off: min(1, A / kAureoleFull)
+/// (0.15 + 0.03 A), fitted in auto_model.cpp.
+double aureoleTerm(double brightness);
+/// aureoleTerm averaged over the piloted views; 0 for a phase that is not split.
 double photonAureoleError(const SceneTraits& traits, const PilotMeasure& pilot);
+/// photon's predicted error before its margin: per view hypot(`bound`, aureoleTerm), averaged
+/// over the views; `bound` itself for a phase that is not split.
+double photonViewsError(const SceneTraits& traits, const PilotMeasure& pilot, double bound);
 
 /// Bias of single scattering read from a lattice of `resolution` voxels, relative: tau^2 / 2 per
 /// voxel of optical thickness tau (measured on Disney's cloud; auto_model.cpp).
