@@ -667,9 +667,11 @@ TEST(JobManager, FinishedJobsArePrunedByCountAndAge) {
       ASSERT_EQ(waitFinished(jobs, ids.back()).state, JobState::kSucceeded);
     }
     // The third job's end pruned the first: the oldest beyond two. The runner prunes just after
-    // it publishes the end that waitFinished saw, so allow it a moment.
+    // it publishes the end that waitFinished saw, and deletes the files after it drops the record
+    // (outside the lock), so allow it a moment for both.
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (jobs.list(std::nullopt, 0).size() > 2u && std::chrono::steady_clock::now() < deadline) {
+    while ((jobs.list(std::nullopt, 0).size() > 2u || fs::exists(dir / "jobs" / ids[0])) &&
+           std::chrono::steady_clock::now() < deadline) {
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
     EXPECT_THROW(jobs.get(ids[0]), NotFoundError);
