@@ -107,21 +107,30 @@ void AureoleLight::add(const RenderLayers& a, const RenderLayers& b, const Camer
   for (int y = 0; y < a.beauty.height; ++y) {
     for (int x = 0; x < a.beauty.width; ++x) {
       if (a.beauty.at(x, y)[3] < kCloudAlpha || b.beauty.at(x, y)[3] < kCloudAlpha) continue;
-      const bool inside = dot(rays.generate(x + 0.5, y + 0.5).d, sun_dir) >= cos_max;
+      if (dot(rays.generate(x + 0.5, y + 0.5).d, sun_dir) < cos_max) continue;
       for (int c = 0; c < 3; ++c) {
         const double va = double(a.sun.at(x, y)[c]) + a.sky.at(x, y)[c];
         const double vb = double(b.sun.at(x, y)[c]) + b.sky.at(x, y)[c];
-        sum += 0.5 * (va + vb);
-        ++values;
-        if (inside) sum_product += va * vb;
+        sum_product += va * vb;
       }
     }
   }
 }
 
-double AureoleLight::relativeRms() const {
-  if (values == 0 || !(sum > 0) || !(sum_product > 0)) return 0;
-  return std::sqrt(sum_product / double(values)) / (sum / double(values));
+double AureoleLight::relativeRms(const PairNoise& view) const {
+  if (view.values == 0 || !(view.sum_mean > 0) || !(sum_product > 0)) return 0;
+  const double n = double(view.values);
+  return std::sqrt(sum_product / n) / (view.sum_mean / n);
+}
+
+void PairNoise::merge(const PairNoise& o) {
+  sum_sq_diff += o.sum_sq_diff;
+  sum_mean += o.sum_mean;
+  sum_multiple += o.sum_multiple;
+  sum_multiple_product += o.sum_multiple_product;
+  values += o.values;
+  cloud_pixels += o.cloud_pixels;
+  pixels += o.pixels;
 }
 
 double PairNoise::relativeNoise() const {
@@ -161,17 +170,19 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
         return !o.progress || o.progress(done + f / double(2 * n));
       });
     }
-    noise.add(pair[0], pair[1]);
     PairNoise view_noise;
     view_noise.add(pair[0], pair[1]);
+    noise.merge(view_noise);
     if (view_noise.values > 0 && view_noise.sum_mean > 0) {
       noise_sum += view_noise.relativeNoise();
       multiple_rms_sum += view_noise.multipleRms();
       ++noise_views;
     }
-    AureoleLight aureole;
-    if (sun) aureole.add(pair[0], pair[1], cam, normalize(scene.sun.direction));
-    if (aureole.values > 0) pm.aureole.push_back(aureole.relativeRms());
+    if (sun && view_noise.values > 0) {
+      AureoleLight aureole;
+      aureole.add(pair[0], pair[1], cam, normalize(scene.sun.direction));
+      pm.aureole.push_back(aureole.relativeRms(view_noise));
+    }
   }
   pm.seconds = secondsSince(t0);
   pm.pixels = noise.pixels;

@@ -41,6 +41,8 @@ struct PairNoise {
   double sum_multiple_product = 0;
   int64_t values = 0, cloud_pixels = 0, pixels = 0;
   void add(const RenderLayers& a, const RenderLayers& b);
+  /// Adds another accumulation's sums (one view's into the shot's).
+  void merge(const PairNoise& other);
   double relativeNoise() const;
   double multipleFraction() const;
   /// sqrt(sum_multiple_product / values) / the mean: the relative RMSE of leaving the multiply
@@ -49,14 +51,15 @@ struct PairNoise {
   double multipleRms() const;
 };
 
-/// PilotMeasure::aureole of one view: the pair's light (sun + sky layers, pixels with
-/// alpha >= 0.05 in both) and, where the pixel's centre ray lies within kAureoleDegrees of
-/// `sun_dir` (unit, towards the sun), the product of the two renders' values.
+/// PilotMeasure::aureole of one view: over the pair's cloud pixels (alpha >= 0.05 in both) whose
+/// centre ray lies within kAureoleDegrees of `sun_dir` (unit, towards the sun), the sum of the
+/// product of the two renders' light (sun + sky layers). The view's mean comes from its
+/// PairNoise, which sums the same pixels.
 struct AureoleLight {
-  double sum = 0, sum_product = 0;
-  int64_t values = 0;
+  double sum_product = 0;
   void add(const RenderLayers& a, const RenderLayers& b, const Camera& camera, const Vec3& sun_dir);
-  double relativeRms() const;
+  /// sqrt(sum_product / the view's values) / the view's mean; 0 where either is empty.
+  double relativeRms(const PairNoise& view) const;
 };
 
 }  // namespace cloudbake

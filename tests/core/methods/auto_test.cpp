@@ -313,7 +313,7 @@ TEST(AutoPilot, AureoleIsTheLightTowardsTheSun) {
   RenderLayers r[2];
   for (RenderLayers& l : r) {
     l.beauty = Image(10, 10, 4);
-    l.sun = l.sky = Image(10, 10, 3);
+    l.sun = l.sky = l.multiple = Image(10, 10, 3);
     for (int y = 0; y < 10; ++y) {
       for (int x = 0; x < 10; ++x) {
         l.beauty.at(x, y)[3] = 1;
@@ -325,15 +325,17 @@ TEST(AutoPilot, AureoleIsTheLightTowardsTheSun) {
   const CameraRays rays(cam);
   // The sun behind pixel (5, 5): it and its four edge neighbours lie within 8 degrees.
   const Vec3 towards = rays.generate(5.5, 5.5).d;
+  PairNoise view;
+  view.add(r[0], r[1]);
   AureoleLight a;
   a.add(r[0], r[1], cam, towards);
   const double mean = (99 * 3 + 10 + 11 + 10) / 300.0;
-  EXPECT_NEAR(a.relativeRms(), std::sqrt((120.0 + 100 + 100 + 4 * 3) / 300.0) / mean, 1e-9);
+  EXPECT_NEAR(a.relativeRms(view), std::sqrt((120.0 + 100 + 100 + 4 * 3) / 300.0) / mean, 1e-9);
   AureoleLight away;
   away.add(r[0], r[1], cam, -towards);
-  EXPECT_EQ(away.relativeRms(), 0.0);
+  EXPECT_EQ(away.relativeRms(view), 0.0);
   AureoleLight empty;
-  EXPECT_EQ(empty.relativeRms(), 0.0);
+  EXPECT_EQ(empty.relativeRms(PairNoise{}), 0.0);
 }
 
 // Leaving out multiply scattered light that gathers in one pixel costs more, as an RMSE, than its
@@ -362,6 +364,15 @@ TEST(AutoPilot, MultipleRmsExceedsTheShareWhereTheLightGathers) {
   EXPECT_NEAR(even.multipleRms(), 0.5, 1e-9);
   EXPECT_NEAR(gathered.multipleFraction(), 0.5, 1e-9);         // 50 / 100 pixels over a mean of 1
   EXPECT_NEAR(gathered.multipleRms(), std::sqrt(25.0), 1e-9);  // sqrt(2500 / 100) / 1
+  // Merging the two views' sums is accumulating both views.
+  PairNoise both, merged = even;
+  both.add(layers(false), layers(false));
+  both.add(layers(true), layers(true));
+  merged.merge(gathered);
+  EXPECT_EQ(merged.values, both.values);
+  EXPECT_EQ(merged.pixels, both.pixels);
+  EXPECT_DOUBLE_EQ(merged.multipleRms(), both.multipleRms());
+  EXPECT_DOUBLE_EQ(merged.multipleFraction(), both.multipleFraction());
   // single's prediction follows the RMS.
   SceneTraits t = traitsOf(0.05);
   PilotMeasure p = pilotOf(2, 0.5);
