@@ -10,8 +10,12 @@ namespace cloudbake {
 
 void sampleTrilinear(const BakeGrid& g, const float* data, int components, const Vec3& p,
                      float* out) {
+  sampleTrilinearAtIndex(g, data, components, g.toIndex(p), out);
+}
+
+void sampleTrilinearAtIndex(const BakeGrid& g, const float* data, int components, const Vec3& u,
+                            float* out) {
   for (int c = 0; c < components; ++c) out[c] = 0.f;
-  const Vec3 u = g.toIndex(p);
   const double fx = std::floor(u.x), fy = std::floor(u.y), fz = std::floor(u.z);
   // Far outside (or NaN): nothing to read. Keeps the int conversions below in range.
   if (!(fx >= -1 && fy >= -1 && fz >= -1 && fx < g.nx && fy < g.ny && fz < g.nz)) return;
@@ -59,7 +63,9 @@ std::vector<float> resampleTrilinear(const BakeGrid& from, const float* data, in
 
 namespace {
 
-// marchTransmittance's march with the density read by `sample(point)`.
+// marchTransmittance's march with the density read by `sample(index point)`. Samples are
+// stepped in index coordinates, u(t) = u(p) + t dir / voxel_size: three divisions a ray where a
+// world point's conversion took three a sample.
 template <class Sample>
 double marchWith(const BakeGrid& grid, double extinction, const Vec3& p, const Vec3& dir,
                  double step, Sample&& sample) {
@@ -69,10 +75,11 @@ double marchWith(const BakeGrid& grid, double extinction, const Vec3& p, const V
   const double length = t1 - t0;
   const int n = std::max(1, int(std::ceil(length / step)));
   const double dt = length / n;
+  const Vec3 u0 = grid.toIndex(p), du = dir / grid.voxel_size;
   double tau = 0;
-  double prev = sample(p + dir * t0);
+  double prev = sample(u0 + du * t0);
   for (int s = 1; s <= n; ++s) {
-    const double cur = sample(p + dir * (t0 + s * dt));
+    const double cur = sample(u0 + du * (t0 + s * dt));
     tau += 0.5 * (prev + cur) * dt * extinction;
     prev = cur;
     if (tau > 16.2) return 0.0;  // exp(-16.2) < 1e-7
@@ -84,8 +91,11 @@ double marchWith(const BakeGrid& grid, double extinction, const Vec3& p, const V
 
 double marchTransmittance(const BakeGrid& grid, const float* density, double extinction,
                           const Vec3& p, const Vec3& dir, double step) {
-  return marchWith(grid, extinction, p, dir, step,
-                   [&](const Vec3& x) { return sampleTrilinear(grid, density, x); });
+  return marchWith(grid, extinction, p, dir, step, [&](const Vec3& u) {
+    float v;
+    sampleTrilinearAtIndex(grid, density, 1, u, &v);
+    return v;
+  });
 }
 
 TransmittanceMarcher::TransmittanceMarcher(const BakeGrid& grid, const float* density,
@@ -117,8 +127,11 @@ TransmittanceMarcher::TransmittanceMarcher(const BakeGrid& grid, const float* de
 }
 
 float TransmittanceMarcher::density(const Vec3& p) const {
+  return densityAtIndex(grid_.toIndex(p));
+}
+
+float TransmittanceMarcher::densityAtIndex(const Vec3& u) const {
   const BakeGrid& g = grid_;
-  const Vec3 u = g.toIndex(p);
   const double fx = std::floor(u.x), fy = std::floor(u.y), fz = std::floor(u.z);
   if (!(fx >= -1 && fy >= -1 && fz >= -1 && fx < g.nx && fy < g.ny && fz < g.nz)) return 0.f;
   const int i0 = int(fx), j0 = int(fy), k0 = int(fz);
@@ -127,7 +140,9 @@ float TransmittanceMarcher::density(const Vec3& p) const {
       size_t((i0 + 1) / kBlock);
   if (!occupied_[block]) return 0.f;
   if (i0 < 0 || j0 < 0 || k0 < 0 || i0 + 1 >= g.nx || j0 + 1 >= g.ny || k0 + 1 >= g.nz) {
-    return sampleTrilinear(g, density_, p);
+    float v;
+    sampleTrilinearAtIndex(g, density_, 1, u, &v);
+    return v;
   }
   // sampleTrilinear's sum, in its order, without its bounds checks.
   const double t[3] = {u.x - fx, u.y - fy, u.z - fz};
@@ -149,9 +164,8 @@ float TransmittanceMarcher::density(const Vec3& p) const {
   return out;
 }
 
-int TransmittanceMarcher::stepsInEmptyBlock(const Vec3& x, const Vec3& dir, double dt) const {
+int TransmittanceMarcher::stepsInEmptyBlock(const Vec3& u, const Vec3& du, double dt) const {
   const BakeGrid& g = grid_;
-  const Vec3 u = g.toIndex(x);
   const int n[3] = {g.nx, g.ny, g.nz};
   double exit = std::numeric_limits<double>::infinity();  // world units along dir
   size_t block = 0;
@@ -162,7 +176,7 @@ int TransmittanceMarcher::stepsInEmptyBlock(const Vec3& x, const Vec3& dir, doub
     const int b = (int(f) + 1) / kBlock;
     block = block * nb[a] + size_t(b);
     // The block holds the lookups with index in [8b - 1, 8b + 7) along each axis.
-    const double v = dir[a] / g.voxel_size;
+    const double v = du[a];
     if (v > 0) exit = std::min(exit, (kBlock * b + 7 - u[a]) / v);
     if (v < 0) exit = std::min(exit, (kBlock * b - 1 - u[a]) / v);
   }
@@ -181,13 +195,14 @@ double TransmittanceMarcher::operator()(const Vec3& p, const Vec3& dir, double s
   const double length = t1 - t0;
   const int n = std::max(1, int(std::ceil(length / step)));
   const double dt = length / n;
+  const Vec3 u0 = grid_.toIndex(p), du = dir / grid_.voxel_size;  // as marchWith
   double tau = 0;
-  double prev = density(p + dir * t0);
+  double prev = densityAtIndex(u0 + du * t0);
   for (int s = 1; s <= n; ++s) {
-    const Vec3 x = p + dir * (t0 + s * dt);
-    const double cur = density(x);
+    const Vec3 u = u0 + du * (t0 + s * dt);
+    const double cur = densityAtIndex(u);
     if (cur == 0 && prev == 0) {
-      s += std::min(stepsInEmptyBlock(x, dir, dt), n - s);
+      s += std::min(stepsInEmptyBlock(u, du, dt), n - s);
       continue;
     }
     tau += 0.5 * (prev + cur) * dt * extinction_;

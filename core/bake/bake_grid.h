@@ -40,6 +40,10 @@ struct BakeGrid {
 void sampleTrilinear(const BakeGrid& grid, const float* data, int components, const Vec3& p,
                      float* out);
 
+/// sampleTrilinear at index coordinates u (BakeGrid::toIndex of the point).
+void sampleTrilinearAtIndex(const BakeGrid& grid, const float* data, int components, const Vec3& u,
+                            float* out);
+
 /// Single-component convenience form of sampleTrilinear.
 float sampleTrilinear(const BakeGrid& grid, const float* data, const Vec3& p);
 
@@ -67,11 +71,13 @@ class TransmittanceMarcher {
   double operator()(const Vec3& p, const Vec3& dir, double step) const;
   /// sampleTrilinear(grid, density, p).
   float density(const Vec3& p) const;
+  /// The same at index coordinates u.
+  float densityAtIndex(const Vec3& u) const;
 
  private:
-  /// How many further samples dt apart along `dir` from x lie in x's block when it is empty
-  /// (0 when it is not).
-  int stepsInEmptyBlock(const Vec3& x, const Vec3& dir, double dt) const;
+  /// How many further samples dt apart (du index units per world unit) from index point u lie
+  /// in u's block when it is empty (0 when it is not).
+  int stepsInEmptyBlock(const Vec3& u, const Vec3& du, double dt) const;
 
   static constexpr int kBlock = 8;
   const BakeGrid& grid_;
