@@ -462,7 +462,12 @@ class BakeMarcher {
     if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
     if (s.sky > 0) sum->sky += scale_sky_ * s.sky;
     sum->sky += scale_sky_ * s.sky_ss;
-    if (sky_sh_) {
+    // The sky's SH terms weight sums that stay exactly 0 on a ray that met no medium: their
+    // weights (243 products each, issue 18's frame profile) are then skipped, with the same
+    // result.
+    const bool sky_sh_met =
+        std::any_of(std::begin(s.sky_sh), std::end(s.sky_sh), [](double v) { return v != 0; });
+    if (sky_sh_ && sky_sh_met) {
       double wts[3 * kShCoefficients];
       sky_sh_->weights(ray.d, wts);
       Rgb sky_single;
@@ -473,7 +478,12 @@ class BakeMarcher {
       }
       sum->sky += sky_single;
     }
-    if (sky_unit_sh_) {
+    const bool sky_ms_sh_met =
+        std::any_of(std::begin(s.sky_ms_sh), std::end(s.sky_ms_sh),
+                    [](const Rgb& v) { return v.x != 0 || v.y != 0 || v.z != 0; });
+    if (sky_unit_sh_ && !sky_ms_sh_met) {
+      for (int c = 0; c < 3; ++c) s.sky_ms[c] = std::max(0.0, s.sky_ms[c]);  // as v = 0 below
+    } else if (sky_unit_sh_) {
       // Precomputed: the scattered sky light seen along d, f (1 - integral T p), f per unit
       // (see SkyMsShape).
       double wts[3 * kShCoefficients];
