@@ -462,40 +462,7 @@ class BakeMarcher {
     if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
     if (s.sky > 0) sum->sky += scale_sky_ * s.sky;
     sum->sky += scale_sky_ * s.sky_ss;
-    // The sky's SH terms weight sums that stay exactly 0 on a ray that met no medium: their
-    // weights (243 products each, issue 18's frame profile) are then skipped, with the same
-    // result.
-    const bool sky_sh_met =
-        std::any_of(std::begin(s.sky_sh), std::end(s.sky_sh), [](double v) { return v != 0; });
-    if (sky_sh_ && sky_sh_met) {
-      double wts[3 * kShCoefficients];
-      sky_sh_->weights(ray.d, wts);
-      Rgb sky_single;
-      for (int c = 0; c < 3; ++c) {
-        double v = 0;
-        for (int i = 0; i < kShCoefficients; ++i) v += s.sky_sh[i] * wts[c * kShCoefficients + i];
-        sky_single[c] = albedo_[c] * std::max(0.0, v);
-      }
-      sum->sky += sky_single;
-    }
-    const bool sky_ms_sh_met =
-        std::any_of(std::begin(s.sky_ms_sh), std::end(s.sky_ms_sh),
-                    [](const Rgb& v) { return v.x != 0 || v.y != 0 || v.z != 0; });
-    if (sky_unit_sh_ && !sky_ms_sh_met) {
-      for (int c = 0; c < 3; ++c) s.sky_ms[c] = std::max(0.0, s.sky_ms[c]);  // as v = 0 below
-    } else if (sky_unit_sh_) {
-      // Precomputed: the scattered sky light seen along d, f (1 - integral T p), f per unit
-      // (see SkyMsShape).
-      double wts[3 * kShCoefficients];
-      sky_unit_sh_->weights(ray.d, wts);
-      for (int c = 0; c < 3; ++c) {
-        double v = 0;
-        for (int i = 0; i < kShCoefficients; ++i) {
-          v += s.sky_ms_sh[i][c] * wts[c * kShCoefficients + i];
-        }
-        s.sky_ms[c] = std::max(0.0, s.sky_ms[c] - v);
-      }
-    }
+    addSkyShTerms(ray.d, &s, sum);
     sum->sky_multiple += scale_sky_ * s.sky_ms;
     sum->multiple += s.ms;
     sum->alpha += 1 - s.transmittance;
@@ -526,6 +493,45 @@ class BakeMarcher {
     TallyAnchor anchor[2];  // the last two tally anchors along the ray (tallySources)
     bool done = false;
   };
+
+  // Seed 002's Eq. 5 terms of the sky (precomputed's bakes): its single scattering and the
+  // view-dependent shape of its multiple scattering, from the ray's SH sums.
+  void addSkyShTerms(const Vec3& d, RayState* s, PixelSum* sum) const {
+    // The sky's SH terms weight sums that stay exactly 0 on a ray that met no medium: their
+    // weights (243 products each, issue 18's frame profile) are then skipped, with the same
+    // result.
+    const bool sky_sh_met =
+        std::any_of(std::begin(s->sky_sh), std::end(s->sky_sh), [](double v) { return v != 0; });
+    if (sky_sh_ && sky_sh_met) {
+      double wts[3 * kShCoefficients];
+      sky_sh_->weights(d, wts);
+      Rgb sky_single;
+      for (int c = 0; c < 3; ++c) {
+        double v = 0;
+        for (int i = 0; i < kShCoefficients; ++i) v += s->sky_sh[i] * wts[c * kShCoefficients + i];
+        sky_single[c] = albedo_[c] * std::max(0.0, v);
+      }
+      sum->sky += sky_single;
+    }
+    const bool sky_ms_sh_met =
+        std::any_of(std::begin(s->sky_ms_sh), std::end(s->sky_ms_sh),
+                    [](const Rgb& v) { return v.x != 0 || v.y != 0 || v.z != 0; });
+    if (sky_unit_sh_ && !sky_ms_sh_met) {
+      for (int c = 0; c < 3; ++c) s->sky_ms[c] = std::max(0.0, s->sky_ms[c]);  // as v = 0 below
+    } else if (sky_unit_sh_) {
+      // Precomputed: the scattered sky light seen along d, f (1 - integral T p), f per unit
+      // (see SkyMsShape).
+      double wts[3 * kShCoefficients];
+      sky_unit_sh_->weights(d, wts);
+      for (int c = 0; c < 3; ++c) {
+        double v = 0;
+        for (int i = 0; i < kShCoefficients; ++i) {
+          v += s->sky_ms_sh[i][c] * wts[c * kShCoefficients + i];
+        }
+        s->sky_ms[c] = std::max(0.0, s->sky_ms[c] - v);
+      }
+    }
+  }
 
   // Method photon's tallies (angular model "sh"): radiance coefficients of scattered sun and
   // sky light, and the phase's Legendre coefficients for the Funk-Hecke convolution.
