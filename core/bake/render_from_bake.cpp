@@ -418,10 +418,19 @@ class BakeMarcher {
     buildPack();
   }
 
+  /// Per-thread scratch of trace, reused from ray to ray: photon's per-ray phase weights,
+  /// written before they are read (zeroing 2.5 kB a ray was a tenth of a `single` view's
+  /// per-ray cost).
+  struct Scratch {
+    // Photon tallies: p_l Y_lm(-d) per coefficient, then the zonal terms'.
+    Rgb shw[shCount(kMaxShDegree) + kMaxZonalDegree];
+  };
+
   /// Marches `ray` (unit direction) and adds its layers to `sum`.
-  void trace(const Ray& ray, PixelSum* sum) const {
+  void trace(const Ray& ray, PixelSum* sum, Scratch* scratch) const {
     RayState s;
     s.d = ray.d;
+    s.shw = scratch->shw;
     if (sh_order_ > 0) {
       // Funk-Hecke: the light travelling along w' scatters towards the camera (-d) with
       // p(w' . -d), so J(-d) = sum over l, m of p_l L_lm Y_lm(-d).
@@ -487,10 +496,9 @@ class BakeMarcher {
     Rgb sky_ss;                           // integral of T_v sigma_t J_sky (photon tally)
     double sky_sh[kShCoefficients] = {};  // integrals of T_v sigma_t T_sky,i (Eq. 5)
     Rgb sky_ms_sh[kShCoefficients];       // precomputed: integrals of T_v sigma_t f T_sky,i
-    // Photon tallies: p_l Y_lm(-d) per coefficient, then the zonal terms'.
-    Rgb shw[shCount(kMaxShDegree) + kMaxZonalDegree];
-    Rgb peak_phase;         // photon: PhotonPeakLight::scattered towards the camera
-    TallyAnchor anchor[2];  // the last two tally anchors along the ray (tallySources)
+    Rgb* shw = nullptr;                   // photon: the per-ray weights, in the caller's Scratch
+    Rgb peak_phase;                       // photon: PhotonPeakLight::scattered towards the camera
+    TallyAnchor anchor[2];                // the last two tally anchors along the ray (tallySources)
     bool done = false;
   };
 
@@ -500,9 +508,8 @@ class BakeMarcher {
     // The sky's SH terms weight sums that stay exactly 0 on a ray that met no medium: their
     // weights (243 products each, issue 18's frame profile) are then skipped, with the same
     // result.
-    const bool sky_sh_met =
-        std::any_of(std::begin(s->sky_sh), std::end(s->sky_sh), [](double v) { return v != 0; });
-    if (sky_sh_ && sky_sh_met) {
+    if (sky_sh_ &&
+        std::any_of(std::begin(s->sky_sh), std::end(s->sky_sh), [](double v) { return v != 0; })) {
       double wts[3 * kShCoefficients];
       sky_sh_->weights(d, wts);
       Rgb sky_single;
@@ -513,12 +520,13 @@ class BakeMarcher {
       }
       sum->sky += sky_single;
     }
+    if (!sky_unit_sh_) return;
     const bool sky_ms_sh_met =
         std::any_of(std::begin(s->sky_ms_sh), std::end(s->sky_ms_sh),
                     [](const Rgb& v) { return v.x != 0 || v.y != 0 || v.z != 0; });
-    if (sky_unit_sh_ && !sky_ms_sh_met) {
+    if (!sky_ms_sh_met) {
       for (int c = 0; c < 3; ++c) s->sky_ms[c] = std::max(0.0, s->sky_ms[c]);  // as v = 0 below
-    } else if (sky_unit_sh_) {
+    } else {
       // Precomputed: the scattered sky light seen along d, f (1 - integral T p), f per unit
       // (see SkyMsShape).
       double wts[3 * kShCoefficients];
@@ -1114,12 +1122,13 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
   std::optional<BakeMarcher> marcher;
   auto render_tile = [&](const TileRect& t, const TilePoll& poll) {
     Rng rng;
+    BakeMarcher::Scratch scratch;
     for (int y = t.y0; y < t.y1; ++y) {
       for (int x = t.x0; x < t.x1; ++x) {
         if (poll.stop()) return;
         PixelSum sum;
         if (spp == 1) {
-          marcher->trace(rays.generate(x + 0.5, y + 0.5), &sum);
+          marcher->trace(rays.generate(x + 0.5, y + 0.5), &sum, &scratch);
         } else {
           // One stream per pixel: the image depends neither on threads nor on tiling.
           const uint64_t pixel = uint64_t(y) * uint64_t(w) + uint64_t(x);
@@ -1133,7 +1142,7 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
               fx = x + rng.uniform();
               fy = y + rng.uniform();
             }
-            marcher->trace(rays.generate(fx, fy), &sum);
+            marcher->trace(rays.generate(fx, fy), &sum, &scratch);
           }
         }
         const Rgb sun_total = sum.sun_single + sum.multiple;
