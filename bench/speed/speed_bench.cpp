@@ -177,15 +177,24 @@ void framePart(const Args& a) {
   // A cross-dissolve of the first two basic volumes: each repeat lights a new weight.
   int frame = 0;
   BakedLight light;
+  FrameLightStats stats;
   const auto lightFrame = [&] {
     const BlendFrame bf{0, 1, 0.2 + 0.6 * ((frame++ % 7) / 6.0)};
-    light = lightAnimationFrame(db, bf, sunDirection(shot), lights.medium.albedo, sky_sh, fo);
+    light =
+        lightAnimationFrame(db, bf, sunDirection(shot), lights.medium.albedo, sky_sh, fo, &stats);
   };
   const auto render = [&](int threads) {
     renderFromBake(light, lights.medium, lights.sun, lights.sky, camera,
                    bakeRenderOptions(shot, threads));
   };
   timeAtThreads(a, "frame precomputed: light", [&](int) { lightFrame(); });
+  // The stages of the last frame lit (at the last thread count).
+  std::printf(
+      "  at %d threads: light %.3f s = sun %.3f + sky (SHEXP) %.3f + receivers %.3f + orders %.3f"
+      " + multiple %.3f + trim and checks %.3f; %d orders\n",
+      a.threads.back(), stats.seconds, stats.seconds_sun, stats.seconds_sky,
+      stats.seconds_receivers, stats.seconds_orders, stats.seconds_multiple, stats.seconds_finish,
+      stats.orders);
   timeAtThreads(a, "frame precomputed: view '" + camera.name + "'", render);
   timeAtThreads(a, "frame precomputed: light + view", [&](int threads) {
     lightFrame();

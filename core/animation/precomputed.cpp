@@ -626,13 +626,22 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   bake.grid = g;
   bake.method = "precomputed";
   bake.sun_direction = normalize(sun_direction);
+  FrameLightStats local;
+  FrameLightStats& st = stats ? *stats : local;
+  auto lap = [t = t0]() mutable {
+    const double s = secondsSince(t);
+    t = std::chrono::steady_clock::now();
+    return s;
+  };
   bake.density = blendFrame(db.volumes.frames, frame);
   const std::vector<uint8_t> support = densitySupport(g, bake.density);
   addSunTransmittance(db, bake);
+  st.seconds_sun = lap();
   bool sky = false;
   for (const auto& c : sky_sh)
     for (float x : c) sky = sky || x != 0;
   if (sky) addSkyTransmittance(db, frame, support, bake);
+  st.seconds_sky = lap();
 
   const float* tsun = bake.find(bake_grids::kSunTransmittance)->data.data();
   const Rgb inv4pi_albedo = sim.albedo / (4 * kPi);
@@ -640,12 +649,15 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   size_t merged = 0;
   for (const auto& m : rec.nodes) merged += m.size();
   const std::vector<float> sigma_q = sampleCollisionWeights(db, frame, bake.density, rec, sim.s);
+  st.seconds_receivers = lap();
   int orders = 0;
   std::vector<float> sky_tail;
   std::vector<float> co =
       scatterOrders(db, sigma_q, inv4pi_albedo, options, rec, &orders, &sky_tail);
   const int64_t capped = sky ? skyFractions(rec, sky_tail, co) : 0;
+  st.seconds_orders = lap();
   addMultipleScattering(db, co, sim.s, sky ? &sky_sh : nullptr, tsun, support, bake);
+  st.seconds_multiple = lap();
 
   bake.metadata["cloudbake:frame_blend"] =
       std::to_string(frame.a) + "," + std::to_string(frame.b) + "," + std::to_string(frame.w);
@@ -655,18 +667,17 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   if (sim.s < 1) bake.metadata["cloudbake:angular_model"] = "p1";
   bake.metadata["cloudbake:sample_points"] = std::to_string(db.tree.points.size());
   bake.addMeanRadiance();
-  bake.trimToSupport();
+  bake.trimToSupport(support);
   try {
     bake.validate("precomputed frame");
   } catch (const InputError& e) {
     // Never NaN or out-of-range light in an output; and not the shot's fault if it happens.
     throw std::runtime_error(std::string("internal error: ") + e.what());
   }
-  if (stats) {
-    stats->orders = orders;
-    stats->merged_entries = merged;
-    stats->seconds = secondsSince(t0);
-  }
+  st.orders = orders;
+  st.merged_entries = merged;
+  st.seconds_finish = lap();
+  st.seconds = secondsSince(t0);
   return bake;
 }
 

@@ -85,6 +85,12 @@ struct FrameLightStats {
   int orders = 0;  ///< scattering orders iterated (Eq. 8)
   double seconds = 0;
   size_t merged_entries = 0;  ///< entries of the merged cuts, summed over receivers
+  /// Seconds of each stage, which add up to `seconds`: the blended density and its sun
+  /// transmittance; the sky transmittance (Eq. 6-7, SHEXP); the receivers' cuts and first-order
+  /// sources; the scattering orders (Eq. 8) and the sky's fractions; the multiple-scattering
+  /// grids; the mean radiance, the trim to the support and the checks of every grid.
+  double seconds_sun = 0, seconds_sky = 0, seconds_receivers = 0, seconds_orders = 0,
+         seconds_multiple = 0, seconds_finish = 0;
 };
 
 /// Lights the blended frame `frame` (rho = w rho_a + (1 - w) rho_b) for a sun towards

@@ -1,5 +1,7 @@
 #include "core/bake/baked_light.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <sstream>
 
@@ -65,17 +67,48 @@ void BakedLight::addMeanRadiance() {
 
 void BakedLight::trimToSupport() {
   if (density.size() != grid.voxelCount()) return;  // validate() reports it
-  const std::vector<uint8_t> support = densitySupport(grid, density);
-  for (size_t v = 0; v < support.size(); ++v) {
-    if (support[v]) continue;
-    for (auto& [name, c] : channels) {
-      if (c.on_tally_grid || c.data.size() != grid.voxelCount() * size_t(c.components)) continue;
-      for (int e = 0; e < c.components; ++e) c.data[v * size_t(c.components) + size_t(e)] = 0;
-    }
+  trimToSupport(densitySupport(grid, density));
+}
+
+void BakedLight::trimToSupport(const std::vector<uint8_t>& support) {
+  if (density.size() != grid.voxelCount() || support.size() != grid.voxelCount()) return;
+  // Channel by channel, in parallel chunks of voxels: a precomputed frame's 25 grids were
+  // trimmed voxel by voxel through the channel map, 0.06 s of its 1.1 s (issue 18).
+  constexpr int64_t kChunk = 1 << 14;
+  for (auto& [name, c] : channels) {
+    if (c.on_tally_grid || c.data.size() != grid.voxelCount() * size_t(c.components)) continue;
+    const size_t k = size_t(c.components);
+    float* data = c.data.data();
+    parallelFor(0, int64_t((support.size() + kChunk - 1) / kChunk), [&](int64_t chunk) {
+      const size_t v0 = size_t(chunk * kChunk), v1 = std::min(support.size(), v0 + kChunk);
+      for (size_t v = v0; v < v1; ++v) {
+        if (support[v]) continue;
+        for (size_t e = 0; e < k; ++e) data[v * k + e] = 0;
+      }
+    });
   }
 }
 
 namespace {
+
+// The first index in [0, n) with bad(i), or n: chunks scanned in parallel, each in order, so
+// the index a serial scan stops at (validate's message names it).
+template <class Bad>
+size_t firstBad(size_t n, const Bad& bad) {
+  constexpr int64_t kChunk = 1 << 15;
+  std::atomic<size_t> first{n};
+  parallelFor(0, int64_t((n + kChunk - 1) / kChunk), [&](int64_t chunk) {
+    const size_t b = size_t(chunk * kChunk), e = std::min(n, b + size_t(kChunk));
+    for (size_t i = b; i < e && i < first.load(std::memory_order_relaxed); ++i) {
+      if (!bad(i)) continue;
+      size_t seen = first.load();
+      while (i < seen && !first.compare_exchange_weak(seen, i)) {
+      }
+      return;
+    }
+  });
+  return first.load();
+}
 
 void validateLattice(const std::string& what, const char* which, const BakeGrid& g) {
   if (g.nx < 1 || g.ny < 1 || g.nz < 1 || !(g.voxel_size > 0) || !std::isfinite(g.voxel_size) ||
@@ -118,10 +151,14 @@ void BakedLight::validate(const std::string& what) const {
     }
   };
   checkSize(bake_grids::kDensity, density.size(), 1, grid);
-  for (size_t v = 0; v < density.size(); ++v) {
+  const size_t bad_density = firstBad(density.size(), [&](size_t v) {
     const float d = density[v];
-    if (!std::isfinite(d)) fail(bake_grids::kDensity, v, "value is not finite");
-    if (d < 0) fail(bake_grids::kDensity, v, "negative density " + std::to_string(d));
+    return !std::isfinite(d) || d < 0;
+  });
+  if (bad_density < density.size()) {
+    const float d = density[bad_density];
+    if (!std::isfinite(d)) fail(bake_grids::kDensity, bad_density, "value is not finite");
+    fail(bake_grids::kDensity, bad_density, "negative density " + std::to_string(d));
   }
   for (const auto& [name, c] : channels) {
     if (c.components != 1 && c.components != 3) {
@@ -135,23 +172,32 @@ void BakedLight::validate(const std::string& what) const {
                               name == bake_grids::kSkyMultipleFluence || name == bake_grids::kCd;
     const bool direction = name == bake_grids::kLightDir;
     const size_t n = gridOf(c).voxelCount();
-    for (size_t v = 0; v < n; ++v) {
+    // Checks the voxel's values in order; with `report` it throws at the first bad one,
+    // otherwise it says whether there is one (the parallel scan finds the voxel, then the
+    // report names it as a serial scan would).
+    auto check = [&](size_t v, bool report) {
       const float* x = &c.data[v * size_t(c.components)];
       for (int e = 0; e < c.components; ++e) {
-        if (!std::isfinite(x[e])) fail(name, v, "value is not finite");
-        if (unit_range && (x[e] < 0 || x[e] > 1)) {
-          fail(name, v, "value " + std::to_string(x[e]) + " outside [0, 1]");
-        }
-        if (non_negative && x[e] < 0) fail(name, v, "negative value " + std::to_string(x[e]));
+        const bool finite = std::isfinite(x[e]);
+        const bool outside = unit_range && (x[e] < 0 || x[e] > 1);
+        const bool negative = non_negative && x[e] < 0;
+        if (!report && (!finite || outside || negative)) return true;
+        if (!finite) fail(name, v, "value is not finite");
+        if (outside) fail(name, v, "value " + std::to_string(x[e]) + " outside [0, 1]");
+        if (negative) fail(name, v, "negative value " + std::to_string(x[e]));
       }
       if (direction && c.components == 3) {
         const double len =
             std::sqrt(double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
         if (len != 0 && std::abs(len - 1) > 1e-3) {
+          if (!report) return true;
           fail(name, v, "direction of length " + std::to_string(len) + " (unit or zero expected)");
         }
       }
-    }
+      return false;
+    };
+    const size_t bad = firstBad(n, [&](size_t v) { return check(v, false); });
+    if (bad < n) check(bad, true);
   }
 }
 

@@ -91,6 +91,8 @@ struct BakedLight {
   /// file read back are identical. Bake methods call it last. Channels on tally_grid keep their
   /// values (a file stores their non-zero voxels).
   void trimToSupport();
+  /// The same with the support already computed (densitySupport of this density).
+  void trimToSupport(const std::vector<uint8_t>& support);
 
   /// Throws InputError("<what>: grid '<name>': ...") naming the grid and the first bad voxel
   /// (index and world position) when: a size does not match the lattice; a value is NaN or

@@ -70,6 +70,17 @@ TEST(Precomputed, FrameMatchesThePathTracerOnASphere) {
                                               projectSkyRadiance(sky_light), {}, &stats);
   EXPECT_NO_THROW(bake.validate("frame"));
   EXPECT_GT(stats.orders, 2);
+  // The stages' seconds are each >= 0 and add up to no more than the whole (the rest: the
+  // clock reads between them).
+  const double stages[] = {stats.seconds_sun,    stats.seconds_sky,      stats.seconds_receivers,
+                           stats.seconds_orders, stats.seconds_multiple, stats.seconds_finish};
+  double sum = 0;
+  for (double st : stages) {
+    EXPECT_GE(st, 0);
+    sum += st;
+  }
+  EXPECT_GT(stats.seconds_sky, 0);  // a sky: its SHEXP ran
+  EXPECT_LE(sum, stats.seconds);
 
   Medium m;
   m.extinction = extinction;

@@ -3,10 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "core/bake/baked_light_vdb.h"
 #include "core/error.h"
@@ -63,6 +65,40 @@ TEST(BakedLight, TrimKeepsTheNeighboursOfDensityOnly) {
   EXPECT_EQ(t[b.grid.index(1, 5, 5)], 0.f);
   EXPECT_EQ(t[b.grid.index(0, 0, 0)], 0.f);
   EXPECT_EQ(b.find("nothing"), nullptr);
+}
+
+// The checks scan chunks of voxels in parallel, yet name the first bad voxel, as a scan in
+// order does, and its first problem; trimming with a given support equals trimming.
+TEST(BakedLight, ValidateNamesTheFirstBadVoxelOfALargeGrid) {
+  BakedLight b;
+  b.grid.voxel_size = 0.1;
+  b.grid.nx = b.grid.ny = 64;
+  b.grid.nz = 48;  // 196608 voxels: six chunks of the scan
+  b.sun_direction = Vec3(0, 0, 1);
+  b.density.assign(b.grid.voxelCount(), 0.5f);
+  std::vector<float>& t = b.add(bake_grids::kSunTransmittance, 1).data;
+  std::fill(t.begin(), t.end(), 0.5f);
+  t[b.grid.index(3, 2, 40)] = -2.f;  // in a later chunk
+  t[b.grid.index(5, 9, 20)] = 7.f;   // the first in order
+  t[b.grid.index(6, 9, 20)] = std::nanf("");
+  expectErrorNaming([&] { b.validate("bake"); },
+                    "grid 'sun_transmittance': voxel (5, 9, 20) at (0.5, 0.9, 2): value 7.000000 "
+                    "outside [0, 1]");
+  b.density[b.grid.index(60, 1, 47)] = -1.f;
+  b.density[b.grid.index(1, 60, 10)] = std::nanf("");
+  expectErrorNaming([&] { b.validate("bake"); }, "grid 'density': voxel (1, 60, 10)");
+
+  BakedLight a = smallBake(), c = smallBake();
+  for (BakedLight* x : {&a, &c}) {
+    std::vector<float>& d = x->channels[bake_grids::kSunTransmittance].data;
+    std::fill(d.begin(), d.end(), 0.25f);
+  }
+  a.trimToSupport();
+  c.trimToSupport(densitySupport(c.grid, c.density));
+  EXPECT_EQ(a.channels[bake_grids::kSunTransmittance].data,
+            c.channels[bake_grids::kSunTransmittance].data);
+  EXPECT_EQ(a.channels[bake_grids::kSunTransmittance].data[a.grid.index(0, 0, 0)], 0.f);
+  EXPECT_EQ(a.channels[bake_grids::kSunTransmittance].data[a.grid.index(4, 4, 4)], 0.25f);
 }
 
 TEST(BakedLight, ValidateNamesTheGridAndTheVoxel) {
