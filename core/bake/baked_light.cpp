@@ -160,7 +160,11 @@ void BakedLight::validate(const std::string& what) const {
     if (!std::isfinite(d)) fail(bake_grids::kDensity, bad_density, "value is not finite");
     fail(bake_grids::kDensity, bad_density, "negative density " + std::to_string(d));
   }
-  for (const auto& [name, c] : channels) {
+  for (const auto& entry : channels) {
+    // Named references, not a structured binding: the check below captures them, which C++17
+    // does not allow of a binding (clang refuses it).
+    const std::string& name = entry.first;
+    const BakeChannel& c = entry.second;
     if (c.components != 1 && c.components != 3) {
       throw InputError(what + ": grid '" + name + "' has " + std::to_string(c.components) +
                        " components per voxel (1 or 3 expected)");
