@@ -110,6 +110,42 @@ size_t firstBad(size_t n, const Bad& bad) {
   return first.load();
 }
 
+// Throws, by fail(voxel, problem), at the first voxel of channel `name` (n voxels) whose values
+// break its grid's rules (BakedLight::validate).
+template <class Fail>
+void checkValues(const std::string& name, const BakeChannel& c, size_t n, const Fail& fail) {
+  const bool unit_range = name == bake_grids::kSunTransmittance ||
+                          name == bake_grids::kSkyVisibility || name == bake_grids::kMieRatio;
+  const bool non_negative = name == bake_grids::kMultipleFluence ||
+                            name == bake_grids::kSkyMultipleFluence || name == bake_grids::kCd;
+  const bool direction = name == bake_grids::kLightDir;
+  // Checks the voxel's values in order; with `report` it throws at the first bad one,
+  // otherwise it says whether there is one (the parallel scan finds the voxel, then the
+  // report names it as a serial scan would).
+  auto check = [&](size_t v, bool report) {
+    const float* x = &c.data[v * size_t(c.components)];
+    for (int e = 0; e < c.components; ++e) {
+      const bool finite = std::isfinite(x[e]);
+      const bool outside = unit_range && (x[e] < 0 || x[e] > 1);
+      const bool negative = non_negative && x[e] < 0;
+      if (!report && (!finite || outside || negative)) return true;
+      if (!finite) fail(v, "value is not finite");
+      if (outside) fail(v, "value " + std::to_string(x[e]) + " outside [0, 1]");
+      if (negative) fail(v, "negative value " + std::to_string(x[e]));
+    }
+    if (direction && c.components == 3) {
+      const double len = std::sqrt(double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
+      if (len != 0 && std::abs(len - 1) > 1e-3) {
+        if (!report) return true;
+        fail(v, "direction of length " + std::to_string(len) + " (unit or zero expected)");
+      }
+    }
+    return false;
+  };
+  const size_t bad = firstBad(n, [&](size_t v) { return check(v, false); });
+  if (bad < n) check(bad, true);
+}
+
 void validateLattice(const std::string& what, const char* which, const BakeGrid& g) {
   if (g.nx < 1 || g.ny < 1 || g.nz < 1 || !(g.voxel_size > 0) || !std::isfinite(g.voxel_size) ||
       !isFinite(g.origin)) {
@@ -161,7 +197,7 @@ void BakedLight::validate(const std::string& what) const {
     fail(bake_grids::kDensity, bad_density, "negative density " + std::to_string(d));
   }
   for (const auto& entry : channels) {
-    // Named references, not a structured binding: the check below captures them, which C++17
+    // Named references, not a structured binding: the lambda below captures them, which C++17
     // does not allow of a binding (clang refuses it).
     const std::string& name = entry.first;
     const BakeChannel& c = entry.second;
@@ -170,38 +206,8 @@ void BakedLight::validate(const std::string& what) const {
                        " components per voxel (1 or 3 expected)");
     }
     checkSize(name, c.data.size(), c.components, gridOf(c));
-    const bool unit_range = name == bake_grids::kSunTransmittance ||
-                            name == bake_grids::kSkyVisibility || name == bake_grids::kMieRatio;
-    const bool non_negative = name == bake_grids::kMultipleFluence ||
-                              name == bake_grids::kSkyMultipleFluence || name == bake_grids::kCd;
-    const bool direction = name == bake_grids::kLightDir;
-    const size_t n = gridOf(c).voxelCount();
-    // Checks the voxel's values in order; with `report` it throws at the first bad one,
-    // otherwise it says whether there is one (the parallel scan finds the voxel, then the
-    // report names it as a serial scan would).
-    auto check = [&](size_t v, bool report) {
-      const float* x = &c.data[v * size_t(c.components)];
-      for (int e = 0; e < c.components; ++e) {
-        const bool finite = std::isfinite(x[e]);
-        const bool outside = unit_range && (x[e] < 0 || x[e] > 1);
-        const bool negative = non_negative && x[e] < 0;
-        if (!report && (!finite || outside || negative)) return true;
-        if (!finite) fail(name, v, "value is not finite");
-        if (outside) fail(name, v, "value " + std::to_string(x[e]) + " outside [0, 1]");
-        if (negative) fail(name, v, "negative value " + std::to_string(x[e]));
-      }
-      if (direction && c.components == 3) {
-        const double len =
-            std::sqrt(double(x[0]) * x[0] + double(x[1]) * x[1] + double(x[2]) * x[2]);
-        if (len != 0 && std::abs(len - 1) > 1e-3) {
-          if (!report) return true;
-          fail(name, v, "direction of length " + std::to_string(len) + " (unit or zero expected)");
-        }
-      }
-      return false;
-    };
-    const size_t bad = firstBad(n, [&](size_t v) { return check(v, false); });
-    if (bad < n) check(bad, true);
+    checkValues(name, c, gridOf(c).voxelCount(),
+                [&](size_t v, const std::string& problem) { fail(name, v, problem); });
   }
 }
 
