@@ -41,6 +41,12 @@ void sampleTrilinearAtIndex(const BakeGrid& g, const float* data, int components
   }
 }
 
+float sampleTrilinearAtIndex(const BakeGrid& grid, const float* data, const Vec3& u) {
+  float v;
+  sampleTrilinearAtIndex(grid, data, 1, u, &v);
+  return v;
+}
+
 float sampleTrilinear(const BakeGrid& grid, const float* data, const Vec3& p) {
   float v;
   sampleTrilinear(grid, data, 1, p, &v);
@@ -91,11 +97,8 @@ double marchWith(const BakeGrid& grid, double extinction, const Vec3& p, const V
 
 double marchTransmittance(const BakeGrid& grid, const float* density, double extinction,
                           const Vec3& p, const Vec3& dir, double step) {
-  return marchWith(grid, extinction, p, dir, step, [&](const Vec3& u) {
-    float v;
-    sampleTrilinearAtIndex(grid, density, 1, u, &v);
-    return v;
-  });
+  return marchWith(grid, extinction, p, dir, step,
+                   [&](const Vec3& u) { return sampleTrilinearAtIndex(grid, density, u); });
 }
 
 TransmittanceMarcher::TransmittanceMarcher(const BakeGrid& grid, const float* density,
@@ -140,9 +143,7 @@ float TransmittanceMarcher::densityAtIndex(const Vec3& u) const {
       size_t((i0 + 1) / kBlock);
   if (!occupied_[block]) return 0.f;
   if (i0 < 0 || j0 < 0 || k0 < 0 || i0 + 1 >= g.nx || j0 + 1 >= g.ny || k0 + 1 >= g.nz) {
-    float v;
-    sampleTrilinearAtIndex(g, density_, 1, u, &v);
-    return v;
+    return sampleTrilinearAtIndex(g, density_, u);
   }
   // sampleTrilinear's sum, in its order, without its bounds checks.
   const double t[3] = {u.x - fx, u.y - fy, u.z - fz};

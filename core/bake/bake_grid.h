@@ -44,6 +44,9 @@ void sampleTrilinear(const BakeGrid& grid, const float* data, int components, co
 void sampleTrilinearAtIndex(const BakeGrid& grid, const float* data, int components, const Vec3& u,
                             float* out);
 
+/// Single-component form of sampleTrilinearAtIndex.
+float sampleTrilinearAtIndex(const BakeGrid& grid, const float* data, const Vec3& u);
+
 /// Single-component convenience form of sampleTrilinear.
 float sampleTrilinear(const BakeGrid& grid, const float* data, const Vec3& p);
 

@@ -521,23 +521,18 @@ class BakeMarcher {
       sum->sky += sky_single;
     }
     if (!sky_unit_sh_) return;
-    const bool sky_ms_sh_met =
-        std::any_of(std::begin(s->sky_ms_sh), std::end(s->sky_ms_sh),
-                    [](const Rgb& v) { return v.x != 0 || v.y != 0 || v.z != 0; });
-    if (!sky_ms_sh_met) {
-      for (int c = 0; c < 3; ++c) s->sky_ms[c] = std::max(0.0, s->sky_ms[c]);  // as v = 0 below
-    } else {
-      // Precomputed: the scattered sky light seen along d, f (1 - integral T p), f per unit
-      // (see SkyMsShape).
-      double wts[3 * kShCoefficients];
-      sky_unit_sh_->weights(d, wts);
-      for (int c = 0; c < 3; ++c) {
-        double v = 0;
-        for (int i = 0; i < kShCoefficients; ++i) {
-          v += s->sky_ms_sh[i][c] * wts[c * kShCoefficients + i];
-        }
-        s->sky_ms[c] = std::max(0.0, s->sky_ms[c] - v);
+    // Precomputed: the scattered sky light seen along d, f (1 - integral T p), f per unit (see
+    // SkyMsShape).
+    const bool met = std::any_of(std::begin(s->sky_ms_sh), std::end(s->sky_ms_sh),
+                                 [](const Rgb& v) { return v.x != 0 || v.y != 0 || v.z != 0; });
+    double wts[3 * kShCoefficients];
+    if (met) sky_unit_sh_->weights(d, wts);
+    for (int c = 0; c < 3; ++c) {
+      double v = 0;
+      for (int i = 0; met && i < kShCoefficients; ++i) {
+        v += s->sky_ms_sh[i][c] * wts[c * kShCoefficients + i];
       }
+      s->sky_ms[c] = std::max(0.0, s->sky_ms[c] - v);
     }
   }
 
