@@ -30,31 +30,54 @@ ShCoefficients scaled(const ShCoefficients& g, int k) {
   return out;
 }
 
-// The SH projection of exp(g(w)) by quadrature over the directions whose basis values are
-// `basis`; `transmittance` keeps g(w) <= 0 (g = -tau: a transmittance is at most 1).
-ShCoefficients projectExp(const ShCoefficients& g,
-                          const std::vector<std::array<double, kShCoefficients>>& basis,
-                          bool transmittance) {
+// The SH projection of exp(g(w)) by quadrature over the directions of `q`; `transmittance`
+// keeps g(w) <= 0 (g = -tau: a transmittance is at most 1). Directions go in blocks: each
+// block's g(w) runs across directions per coefficient (a loop the compiler vectorises, with
+// every direction's sum still taken in coefficient order), then its exps, then the
+// accumulation by direction; the result is the direction-at-a-time loop's, bit for bit.
+ShCoefficients projectExp(const ShCoefficients& g, const ShQuadrature& q, bool transmittance) {
+  constexpr size_t kBlock = 64;
+  const size_t n = q.by_direction.size();
   std::array<double, kShCoefficients> acc{};
-  for (const auto& y : basis) {
-    double f = 0;
-    for (int i = 0; i < kShCoefficients; ++i) f += double(g[size_t(i)]) * y[size_t(i)];
-    const double e = std::exp(transmittance ? std::min(0.0, f) : f);
-    for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += e * y[size_t(i)];
+  std::array<double, kBlock> f;
+  for (size_t d0 = 0; d0 < n; d0 += kBlock) {
+    const size_t m = std::min(kBlock, n - d0);
+    std::fill(f.begin(), f.end(), 0.0);
+    for (int i = 0; i < kShCoefficients; ++i) {
+      const double gi = g[size_t(i)];
+      const double* y = q.by_coefficient.data() + size_t(i) * n + d0;
+      for (size_t j = 0; j < m; ++j) f[j] += gi * y[j];
+    }
+    for (size_t j = 0; j < m; ++j) f[j] = std::exp(transmittance ? std::min(0.0, f[j]) : f[j]);
+    for (size_t j = 0; j < m; ++j) {
+      // exp underflowed to 0 adds +-0 to sums that start at +0 and so never become -0.
+      if (f[j] == 0) continue;
+      const std::array<double, kShCoefficients>& y = q.by_direction[d0 + j];
+      for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += f[j] * y[size_t(i)];
+    }
   }
   ShCoefficients out{};
   for (int i = 0; i < kShCoefficients; ++i) {
-    out[size_t(i)] = float(acc[size_t(i)] * 4 * kPi / double(basis.size()));
+    out[size_t(i)] = float(acc[size_t(i)] * 4 * kPi / double(n));
   }
   return out;
 }
 
 }  // namespace
 
+ShQuadrature::ShQuadrature(int directions) {
+  for (const Vec3& w : sphereDirections(directions)) by_direction.push_back(shBasis(w));
+  const size_t n = by_direction.size();
+  by_coefficient.resize(n * kShCoefficients);
+  for (size_t d = 0; d < n; ++d) {
+    for (int i = 0; i < kShCoefficients; ++i) {
+      by_coefficient[size_t(i) * n + d] = by_direction[d][size_t(i)];
+    }
+  }
+}
+
 ShCoefficients shExpReference(const ShCoefficients& g, int directions) {
-  std::vector<std::array<double, kShCoefficients>> basis;
-  for (const Vec3& w : sphereDirections(directions)) basis.push_back(shBasis(w));
-  return projectExp(g, basis, /*transmittance=*/false);
+  return projectExp(g, ShQuadrature(directions), /*transmittance=*/false);
 }
 
 ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int directions) {
@@ -66,7 +89,7 @@ ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int direc
     throw InputError("shexp: bins must be in [4, 4096], got " + std::to_string(bins));
   }
   ShExp e;
-  e.quadrature_ = makeQuadrature();
+  e.quadrature_ = ShQuadrature(kQuadratureDirections);
   std::vector<ShCoefficients> reduced;
   reduced.reserve(samples.size());
   for (const ShCoefficients& g : samples) {
@@ -107,12 +130,6 @@ ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int direc
     }
   }
   return e;
-}
-
-ShExp::Quadrature ShExp::makeQuadrature() {
-  Quadrature q;
-  for (const Vec3& w : sphereDirections(kQuadratureDirections)) q.push_back(shBasis(w));
-  return q;
 }
 
 ShCoefficients ShExp::projectTransmittance(const ShCoefficients& g) const {
@@ -160,7 +177,7 @@ ShExp ShExp::fromTables(std::vector<double> a, std::vector<double> b, double ran
     }
   }
   ShExp e;
-  e.quadrature_ = makeQuadrature();
+  e.quadrature_ = ShQuadrature(kQuadratureDirections);
   e.a_ = std::move(a);
   e.b_ = std::move(b);
   e.range_ = range;

@@ -9,6 +9,15 @@
 
 namespace cloudbake {
 
+/// The real SH basis at `directions` spherical-Fibonacci directions, in two layouts: by
+/// direction, and by coefficient ([i * n + d], for loops that run across directions).
+struct ShQuadrature {
+  ShQuadrature() = default;
+  explicit ShQuadrature(int directions);
+  std::vector<std::array<double, kShCoefficients>> by_direction;
+  std::vector<double> by_coefficient;
+};
+
 /// The SH projection of exp(g(w)) by quadrature over `directions` spherical-Fibonacci directions:
 /// the reference SHEXP approximates (and what its tables are fitted to).
 ShCoefficients shExpReference(const ShCoefficients& g, int directions = 256);
@@ -45,13 +54,11 @@ class ShExp {
 
  private:
   static constexpr int kQuadratureDirections = 256;
-  using Quadrature = std::vector<std::array<double, kShCoefficients>>;
-  static Quadrature makeQuadrature();
   ShCoefficients projectTransmittance(const ShCoefficients& g) const;
 
   std::vector<double> a_, b_;
   double range_ = 0;
-  Quadrature quadrature_;  // the SH basis at kQuadratureDirections spherical-Fibonacci points
+  ShQuadrature quadrature_;  // at kQuadratureDirections directions
 };
 
 }  // namespace cloudbake
