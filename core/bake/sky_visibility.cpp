@@ -78,15 +78,19 @@ void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgres
     const double seg = extinction * g.voxel_size *
                        std::sqrt(double(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])) * 0.5;
     // The slowest axis with a non-zero step is swept in order (upstream slice first); voxels of
-    // one slice depend only on the previous slice, so a slice is done in parallel.
+    // one slice depend only on the previous slice, so a slice is done in parallel, in any order:
+    // rows along x where the slice has them (c, the inner loop, is the contiguous axis).
     const int a = e[2] ? 2 : (e[1] ? 1 : 0);
-    const int b = (a + 1) % 3, c = (a + 2) % 3;
+    const int c = a == 0 ? 1 : 0, b = 3 - a - c;
     for (int s = 0; s < dims[a]; ++s) {
       const int ia = e[a] > 0 ? dims[a] - 1 - s : s;  // upstream (towards +e) first
       parallelFor(0, dims[b], [&](int ib) {
         int idx[3];
         idx[a] = ia;
         idx[b] = ib;
+        // Piecewise-constant densities (a mesh's inside) repeat tau along a row: its exp is
+        // reused, the same value as computed afresh.
+        double last_tau = -1, last_exp = 1;
         for (int ic = 0; ic < dims[c]; ++ic) {
           idx[c] = ic;
           const size_t v = g.index(idx[0], idx[1], idx[2]);
@@ -95,7 +99,11 @@ void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgres
           if (ux >= 0 && uy >= 0 && uz >= 0 && ux < g.nx && uy < g.ny && uz < g.nz) {
             const size_t u = g.index(ux, uy, uz);
             const double tau = seg * (double(rho[v]) + rho[u]);
-            tv = tau > 0 ? float(t[u] * std::exp(-tau)) : t[u];
+            if (tau > 0 && tau != last_tau) {
+              last_tau = tau;
+              last_exp = std::exp(-tau);
+            }
+            tv = tau > 0 ? float(t[u] * last_exp) : t[u];
           } else if (rho[v] > 0) {
             // The last voxel before leaving the lattice: half a segment of its own density.
             tv = float(std::exp(-seg * rho[v]));
@@ -105,7 +113,7 @@ void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgres
       });
     }
     const double w = dirs[d].weight;
-    for (size_t v = 0; v < n; ++v) sum[v] += w * t[v];
+    parallelFor(0, int64_t(n), [&](size_t v) { sum[v] += w * t[v]; }, {kCheapIterationGrain});
     if (progress && !progress((d + 1) / 26.0, "sky visibility")) {
       throw Cancelled("bake cancelled while computing the sky visibility");
     }
