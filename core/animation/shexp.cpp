@@ -35,7 +35,11 @@ ShCoefficients scaled(const ShCoefficients& g, int k) {
 // block's g(w) runs across directions per coefficient (a loop the compiler vectorises, with
 // every direction's sum still taken in coefficient order), then its exps, then the
 // accumulation by direction; the result is the direction-at-a-time loop's, bit for bit.
-ShCoefficients projectExp(const ShCoefficients& g, const ShQuadrature& q, bool transmittance) {
+// Compiled twice, for AVX2 (wider vectors: no FMA, so the same roundings) and for the baseline,
+// and chosen at load time by the CPU.
+__attribute__((target_clones("avx2", "default"))) ShCoefficients projectExp(const ShCoefficients& g,
+                                                                            const ShQuadrature& q,
+                                                                            bool transmittance) {
   constexpr size_t kBlock = 64;
   const size_t n = q.by_direction.size();
   std::array<double, kShCoefficients> acc{};
