@@ -7,6 +7,7 @@
 #include "core/animation/optical_depth_sh.h"
 #include "core/error.h"
 #include "core/math/spherical_harmonics.h"
+#include "core/math/vector_clones.h"
 
 namespace cloudbake {
 namespace {
@@ -35,11 +36,8 @@ ShCoefficients scaled(const ShCoefficients& g, int k) {
 // block's g(w) runs across directions per coefficient (a loop the compiler vectorises, with
 // every direction's sum still taken in coefficient order), then its exps, then the
 // accumulation by direction; the result is the direction-at-a-time loop's, bit for bit.
-// Compiled twice, for AVX2 (wider vectors: no FMA, so the same roundings) and for the baseline,
-// and chosen at load time by the CPU.
-__attribute__((target_clones("avx2", "default"))) ShCoefficients projectExp(const ShCoefficients& g,
-                                                                            const ShQuadrature& q,
-                                                                            bool transmittance) {
+CLOUDBAKE_VECTOR_CLONES ShCoefficients projectExp(const ShCoefficients& g, const ShQuadrature& q,
+                                                  bool transmittance) {
   constexpr size_t kBlock = 64;
   const size_t n = q.by_direction.size();
   std::array<double, kShCoefficients> acc{};
