@@ -121,17 +121,27 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
 
   // sky_visibility is also the escape probability the normalised rule conserves energy with.
   t0 = Clock::now();
-  const bool need_sky = options.sky || options.rule == PointcloudOptions::Rule::kNormalized;
+  // The normalised rule's passes also need the reduced medium's (passExtinction): both come
+  // from one sweep of the lattice.
+  const bool normalised = options.rule == PointcloudOptions::Rule::kNormalized;
+  const bool need_sky = options.sky || normalised;
+  const double pass_ext = passExtinction(medium, options);
+  std::vector<float> pass_vis;
   if (need_sky) {
     report(kSun, "sky visibility");
-    computeSkyVisibility(bake, medium.extinction, subRange(progress, kSun, kSky));
+    std::vector<double> ext{medium.extinction};
+    if (normalised && pass_ext != medium.extinction) ext.push_back(pass_ext);
+    std::vector<std::vector<float>> v =
+        skyVisibilities(bake.grid, bake.density.data(), ext, subRange(progress, kSun, kSky));
+    bake.add(bake_grids::kSkyVisibility, 1).data = std::move(v[0]);
+    if (v.size() > 1) pass_vis = std::move(v[1]);
   }
   seconds.sky = secondsSince(t0);
 
   const BakeChannel* vis = bake.find(bake_grids::kSkyVisibility);
   const PointCloudResult result =
       runPointcloud(bake.grid, bake.density, vis ? vis->data : std::vector<float>(), medium,
-                    sun_dir, options, options.tail, subRange(progress, kSky, kPoints));
+                    sun_dir, options, options.tail, subRange(progress, kSky, kPoints), pass_vis);
   if (!options.sky) bake.channels.erase(bake_grids::kSkyVisibility);
 
   t0 = Clock::now();

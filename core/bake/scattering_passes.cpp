@@ -517,9 +517,11 @@ NeighbourPairs findNeighbours(const BakeGrid& grid, const std::vector<float>& de
 // visibility serves only when there is one and no reduction (s = 1); else it is computed into
 // `computed`.
 const std::vector<float>* escapeVisibility(const BakeGrid& grid, const std::vector<float>& density,
-                                           const std::vector<float>& sky_visibility, double s,
+                                           const std::vector<float>& sky_visibility,
+                                           const std::vector<float>& pass_sky_visibility, double s,
                                            double ext, std::vector<float>* computed) {
   if (sky_visibility.size() == grid.voxelCount() && s == 1) return &sky_visibility;
+  if (pass_sky_visibility.size() == grid.voxelCount()) return &pass_sky_visibility;
   BakedLight tmp;
   tmp.grid = grid;
   tmp.density = density;
@@ -559,10 +561,17 @@ void checkPointcloudInput(const Medium& medium, const PointcloudOptions& o) {
   }
 }
 
+double passExtinction(const Medium& medium, const PointcloudOptions& options) {
+  const bool normalised = options.rule == PointcloudOptions::Rule::kNormalized;
+  const TransportScaling ts = normalised ? transportScaling(medium) : TransportScaling{};
+  return medium.extinction * ts.s;
+}
+
 PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& density,
                                const std::vector<float>& sky_visibility, const Medium& medium,
                                const Vec3& sun_dir_in, const PointcloudOptions& options,
-                               bool geometric_tail, const BakeProgressFn& progress) {
+                               bool geometric_tail, const BakeProgressFn& progress,
+                               const std::vector<float>& pass_sky_visibility) {
   checkPointcloudInput(medium, options);
   if (!isFinite(sun_dir_in) || !(length(sun_dir_in) > 0)) {
     throw InputError("sun: direction: must be a finite nonzero vector");
@@ -591,7 +600,7 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   report(0.1, "neighbours");
   const bool normalised = options.rule == PointcloudOptions::Rule::kNormalized;
   const TransportScaling ts = normalised ? transportScaling(medium) : TransportScaling{};
-  const double ext = medium.extinction * ts.s;
+  const double ext = passExtinction(medium, options);
   const NeighbourPairs pairs = findNeighbours(grid, density, options, ext, progress, out);
   out.seconds_neighbours = secondsSince(t0);
 
@@ -615,7 +624,7 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   if (normalised) {
     std::vector<float> computed;
     const std::vector<float>* vis =
-        escapeVisibility(grid, density, sky_visibility, ts.s, ext, &computed);
+        escapeVisibility(grid, density, sky_visibility, pass_sky_visibility, ts.s, ext, &computed);
     const bool sky = options.sky && sky_visibility.size() == grid.voxelCount();
     in.grid = &grid;
     in.escape_visibility = vis;

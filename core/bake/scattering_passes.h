@@ -157,10 +157,19 @@ void checkPointcloudInput(const Medium& medium, const PointcloudOptions& options
 /// pairs within the cut-off, and runs up to options.passes passes of options.rule. With
 /// `geometric_tail` false the normalised rule returns exactly the first passes_run orders
 /// (for pass-by-pass figures). Progress fractions are within this stage, [0, 1]. InputError for
-/// an empty volume or an unusable radius; Cancelled on request.
+/// an empty volume or an unusable radius; Cancelled on request. The normalised rule's passes
+/// run on a similarity-reduced medium (passExtinction) whose own sky visibility they need where
+/// it differs: `pass_sky_visibility`, when the caller computed it alongside the true one
+/// (skyVisibilities, one sweep for both), else computed here.
 PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& density,
                                const std::vector<float>& sky_visibility, const Medium& medium,
                                const Vec3& sun_dir, const PointcloudOptions& options,
-                               bool geometric_tail = true, const BakeProgressFn& progress = {});
+                               bool geometric_tail = true, const BakeProgressFn& progress = {},
+                               const std::vector<float>& pass_sky_visibility = {});
+
+/// The extinction of the medium the passes run on, per unit density: s sigma_t for the
+/// normalised rule (s = 1 - lum(albedo x g), the similarity reduction), sigma_t for the paper
+/// rule.
+double passExtinction(const Medium& medium, const PointcloudOptions& options);
 
 }  // namespace cloudbake

@@ -1,6 +1,8 @@
 // How much of the sky each voxel sees: the ambient term of the bake renders.
 #pragma once
 
+#include <vector>
+
 #include "core/bake/bake_progress.h"
 #include "core/bake/baked_light.h"
 
@@ -13,6 +15,13 @@ namespace cloudbake {
 /// the exact trapezoidal segment between the two voxel centres, so each direction is one O(voxels)
 /// sweep with no interpolation. Deterministic. Throws Cancelled when progress returns false.
 void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgressFn& progress = {});
+
+/// The same visibility for one or two extinctions (InternalError otherwise) in one sweep of the
+/// lattice `g` with density `rho`: each the values computeSkyVisibility gives, bit for bit, for
+/// about 1.3x the time of one (the sweeps share their reads and indexing).
+std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* rho,
+                                                const std::vector<double>& extinctions,
+                                                const BakeProgressFn& progress = {});
 
 /// The 26 lattice directions (unit) and their solid-angle weights (summing to 1), for tests.
 struct LatticeDirection {

@@ -6,8 +6,10 @@
 #include <tbb/global_control.h>
 
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/bake/bake_lattice.h"
 #include "core/bake/sky_visibility.h"
@@ -141,6 +143,33 @@ TEST(SkyVisibility, WeightsAreSolidAnglesAndACentreSeesExpOfTau) {
   }
   const double got = b.find(bake_grids::kSkyVisibility)->data[g.index(c, c, c)];
   EXPECT_NEAR(got / expected, 1.0, 0.06) << got << " vs " << expected;
+}
+
+// Two extinctions in one sweep give each what a sweep of its own gives, bit for bit; the
+// thicker medium sees less sky everywhere.
+TEST(SkyVisibility, TwoExtinctionsInOneSweepEqualTwoSweeps) {
+  const Medium m = boxMedium(1.0, Vec3(-0.5, -0.4, -0.3), Vec3(0.5, 0.4, 0.3));
+  BakedLight thin = makeBakeLattice(*m.density, 24);
+  BakedLight thick = thin;
+  computeSkyVisibility(thin, 2.0);
+  computeSkyVisibility(thick, 7.0);
+  const std::vector<std::vector<float>> both =
+      skyVisibilities(thin.grid, thin.density.data(), {2.0, 7.0});
+  ASSERT_EQ(both.size(), 2u);
+  const std::vector<float>& a = thin.find(bake_grids::kSkyVisibility)->data;
+  const std::vector<float>& b = thick.find(bake_grids::kSkyVisibility)->data;
+  ASSERT_EQ(both[0].size(), a.size());
+  ASSERT_EQ(both[1].size(), b.size());
+  EXPECT_EQ(std::memcmp(both[0].data(), a.data(), a.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(both[1].data(), b.data(), b.size() * sizeof(float)), 0);
+  int darker = 0;
+  for (size_t v = 0; v < a.size(); ++v) {
+    ASSERT_LE(b[v], a[v]) << v;
+    darker += b[v] < a[v];
+  }
+  EXPECT_GT(darker, 100);
+  EXPECT_THROW(skyVisibilities(thin.grid, thin.density.data(), {}), InternalError);
+  EXPECT_THROW(skyVisibilities(thin.grid, thin.density.data(), {1.0, 2.0, 3.0}), InternalError);
 }
 
 TEST(BakeSingle, IsDeterministicAcrossThreadCounts) {
