@@ -88,6 +88,7 @@
 #include "core/bake/sky_sh_scatter.h"
 #include "core/error.h"
 #include "core/format.h"
+#include "core/math/large_array.h"
 #include "core/math/parallel.h"
 #include "core/math/rng.h"
 #include "core/math/sh_basis.h"
@@ -344,12 +345,14 @@ struct PackedChannel {
 /// The channels interleaved in one record of `stride` floats per voxel (unused floats 0): a
 /// trilinear lookup then reads eight contiguous records instead of eight voxels of every grid,
 /// which is what the march's reads cost (issue 18's profile: scattered loads, not arithmetic).
-std::vector<float> packChannels(const std::vector<PackedChannel>& channels, size_t voxels,
-                                size_t stride) {
-  std::vector<float> pack(voxels * stride, 0.f);
+LargeArray<float> packChannels(const std::vector<PackedChannel>& channels, size_t voxels,
+                               size_t stride) {
+  LargeArray<float> pack(voxels * stride);
   constexpr size_t kChunk = 1 << 14;
   parallelFor(0, int64_t((voxels + kChunk - 1) / kChunk), [&](int64_t chunk) {
     const size_t v0 = size_t(chunk) * kChunk, v1 = std::min(voxels, v0 + kChunk);
+    // Zeroed here, chunk by chunk in parallel: the slots no channel fills read as 0.
+    std::fill(pack.data() + v0 * stride, pack.data() + v1 * stride, 0.f);
     for (const PackedChannel& ch : channels) {
       const size_t n = size_t(ch.components);
       for (size_t v = v0; v < v1; ++v) {
@@ -1045,11 +1048,11 @@ class BakeMarcher {
   Rgb scale_ss_, scale_ms_, scale_sky_;
   int nbx_ = 0, nby_ = 0, nbz_ = 0;
   std::vector<float> block_max_;
-  std::vector<float> pack_;  // the grids a sample reads, per voxel (buildPack)
+  LargeArray<float> pack_;  // the grids a sample reads, per voxel (buildPack)
   size_t stride_ = 4;
   // Photon tallies per voxel of their lattice (buildTallyPack): radiance, then the sky's.
   static constexpr int kMaxTallyFloats = 3 * (3 * shCount(kMaxShDegree) + kMaxZonalDegree) + 4;
-  std::vector<float> tally_pack_;
+  LargeArray<float> tally_pack_;
   size_t tally_stride_ = 4;
   int tally_floats_ = 0, ssky_slot_ = 0, msky_slot_ = 0;
 };
