@@ -1,7 +1,9 @@
-// A function attribute for loops the compiler vectorises: on x86-64 the function is compiled
-// twice, for AVX2 and for the baseline, and the loader picks one by the CPU (GNU ifunc). AVX2
-// without FMA performs the same IEEE operations in the same order on wider registers, so both
-// versions give the same results bit for bit; only the speed differs.
+// A function attribute for hot code that AVX2's instruction set speeds up: loops the compiler
+// vectorises (wider registers) and code that rounds (SSE4.1's roundsd for std::floor, which the
+// x86-64 baseline lacks). On x86-64 Linux the function is compiled twice, for AVX2 and for the
+// baseline, and the loader picks one by the CPU (GNU ifunc). AVX2 without FMA performs the same
+// IEEE operations in the same order, so both versions give the same results bit for bit; only
+// the speed differs. Not for virtual functions (GCC refuses to multiversion them).
 #pragma once
 
 #if defined(__x86_64__) && defined(__GNUC__) && defined(__linux__)
