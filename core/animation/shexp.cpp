@@ -106,8 +106,9 @@ ShExp ShExp::fit(const std::vector<ShCoefficients>& samples, int bins, int direc
   // basis 1 and g^ are orthogonal, so a and b separate.
   std::vector<double> sa(size_t(bins), 0), na(size_t(bins), 0), sb(size_t(bins), 0),
       nb(size_t(bins), 0);
+  const ShQuadrature quadrature(directions);  // once for every sample, not once each
   for (const ShCoefficients& g : reduced) {
-    const ShCoefficients ref = shExpReference(g, directions);
+    const ShCoefficients ref = projectExp(g, quadrature, /*transmittance=*/false);
     const double scale = std::exp(double(g[0]) / kSqrt4Pi);
     const int k = std::min(bins - 1, int(hatNorm(g) / width));
     sa[size_t(k)] += double(ref[0]) / scale * kSqrt4Pi;

@@ -522,11 +522,7 @@ const std::vector<float>* escapeVisibility(const BakeGrid& grid, const std::vect
                                            double ext, std::vector<float>* computed) {
   if (sky_visibility.size() == grid.voxelCount() && s == 1) return &sky_visibility;
   if (pass_sky_visibility.size() == grid.voxelCount()) return &pass_sky_visibility;
-  BakedLight tmp;
-  tmp.grid = grid;
-  tmp.density = density;
-  computeSkyVisibility(tmp, ext);
-  *computed = std::move(tmp.channels.at(bake_grids::kSkyVisibility).data);
+  *computed = std::move(skyVisibilities(grid, density.data(), {ext})[0]);
   return computed;
 }
 

@@ -53,9 +53,9 @@ class LargeArray {
 
 template <class T>
 LargeArray<T>::LargeArray(size_t count) : n_(count) {
-  if (count == 0) return;
-  if (count > (size_t(-1) - (size_t(2) << 20)) / sizeof(T)) throw std::bad_alloc();
   constexpr size_t kHugePage = size_t(2) << 20;
+  if (count == 0) return;
+  if (count > (size_t(-1) - kHugePage) / sizeof(T)) throw std::bad_alloc();
   const size_t bytes = count * sizeof(T);
   // Below a few huge pages the rounding would waste more than the faults cost.
   const size_t align = bytes >= 2 * kHugePage ? kHugePage : alignof(std::max_align_t);
