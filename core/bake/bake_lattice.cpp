@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include "core/error.h"
@@ -9,8 +10,86 @@
 
 namespace cloudbake {
 
-BakedLight makeBakeLattice(const DensityField& field, int resolution) {
-  return makeBakeLatticeOver(field, field.bounds(), resolution);
+namespace {
+
+// A request this much short of the field's own voxels still gets them: a mesh voxelised at 128
+// holds 129 voxels along its longest side, and its lattice of 128 should not blur it.
+constexpr double kSnapToOwnVoxels = 1.0 / 16;
+
+// The lattice of spacing lat.spacing / m aligned with `lat` that covers `b`; m = floor(resolution
+// / n + kSnapToOwnVoxels), n the field's own voxels along b's longest side; nullopt where m is 0.
+// A grid's bounds include one voxel of trilinear footprint beyond its outermost samples on each
+// side: n is the extent in voxels less one.
+std::optional<BakeGrid> alignedGeometry(const SampleLattice& lat, int resolution,
+                                        const Bounds3& b) {
+  if (!(lat.spacing > 0)) return std::nullopt;
+  const double own = std::max(1.0, std::round(maxComponent(b.extent()) / lat.spacing) - 1);
+  const double m = std::floor(resolution / own + kSnapToOwnVoxels);
+  if (!(m >= 1)) return std::nullopt;
+  const double h = lat.spacing / m;
+  BakeGrid g;
+  g.voxel_size = h;
+  int lo[3], n[3];
+  for (int a = 0; a < 3; ++a) {
+    // Vertices from the last one at or below b.min to the first at or above b.max: the field
+    // is 0 there (a grid's are the zeros of its footprint), so lookups fade to 0 beyond them.
+    lo[a] = int(std::floor((b.min[a] - lat.origin[a]) / h + 1e-6));
+    const int hi = int(std::ceil((b.max[a] - lat.origin[a]) / h - 1e-6));
+    n[a] = hi - lo[a] + 1;
+  }
+  g.nx = n[0];
+  g.ny = n[1];
+  g.nz = n[2];
+  g.origin = lat.origin + Vec3(lo[0], lo[1], lo[2]) * h;
+  if (g.voxelCount() > kMaxBakeVoxels) return std::nullopt;
+  return g;
+}
+
+// Fills bake->density voxel by voxel, value(lookup, centre) each, in parallel over z slices
+// with one density lookup per thread.
+template <typename Value>
+void fillVoxels(const DensityField& field, BakedLight* bake, const Value& value) {
+  const BakeGrid& g = bake->grid;
+  parallelFor(0, g.nz, [&](int64_t k0, int64_t k1) {
+    std::unique_ptr<DensityField::Lookup> lookup = field.lookup();
+    for (int k = int(k0); k < k1; ++k) {
+      for (int j = 0; j < g.ny; ++j) {
+        for (int i = 0; i < g.nx; ++i) {
+          bake->density[g.index(i, j, k)] = value(*lookup, g.center(i, j, k));
+        }
+      }
+    }
+  });
+}
+
+// Each voxel the field's value at its centre (exact on an aligned lattice).
+void sampleCentres(const DensityField& field, BakedLight* bake) {
+  const MajorantGrid& maj = field.majorants();
+  fillVoxels(field, bake, [&](DensityField::Lookup& lookup, const Vec3& c) {
+    Bounds3 point;
+    point.min = c;
+    point.max = c;
+    return maj.maxOver(point) > 0 ? float(lookup.density(c)) : 0.f;
+  });
+}
+
+}  // namespace
+
+BakedLight makeBakeLattice(const DensityField& field, int resolution, LatticeSampling sampling) {
+  const Bounds3 b = field.bounds();
+  const std::optional<SampleLattice> lat = field.sampleLattice();
+  if (sampling == LatticeSampling::kFieldAligned && lat) {
+    bakeLatticeGeometry(b, resolution, field.describe());  // validates the request
+    if (std::optional<BakeGrid> g = alignedGeometry(*lat, resolution, b)) {
+      BakedLight bake;
+      bake.grid = *g;
+      bake.density.assign(g->voxelCount(), 0.f);
+      bake.metadata["cloudbake:light_resolution"] = std::to_string(resolution);
+      sampleCentres(field, &bake);
+      return bake;
+    }
+  }
+  return makeBakeLatticeOver(field, b, resolution);
 }
 
 BakeGrid bakeLatticeGeometry(const Bounds3& b, int resolution, const std::string& what,
@@ -65,33 +144,24 @@ BakedLight makeBakeLatticeOver(const DensityField& field, const Bounds3& b, int 
   const int ss = std::clamp(int(std::ceil(2.0 * h / std::max(feature, 1e-300))), 2, 4);
   const double inv = 1.0 / (double(ss) * ss * ss);
   const MajorantGrid& maj = field.majorants();
-  parallelFor(0, g.nz, [&](int64_t k0, int64_t k1) {
-    std::unique_ptr<DensityField::Lookup> lookup = field.lookup();
-    for (int k = int(k0); k < k1; ++k) {
-      for (int j = 0; j < g.ny; ++j) {
-        for (int i = 0; i < g.nx; ++i) {
-          const Vec3 c = g.center(i, j, k);
-          // Skip voxels outside the field's bounds (the margin) without sampling.
-          Bounds3 vb;
-          vb.min = c - Vec3(0.5 * h);
-          vb.max = c + Vec3(0.5 * h);
-          if (vb.max.x < b.min.x || vb.max.y < b.min.y || vb.max.z < b.min.z ||
-              vb.min.x > b.max.x || vb.min.y > b.max.y || vb.min.z > b.max.z) {
-            continue;
-          }
-          // Every lookup inside a cell of bound 0 reads 0: the mean is 0 without sampling.
-          if (!(maj.maxOver(vb) > 0)) continue;
-          double sum = 0;
-          for (int sz = 0; sz < ss; ++sz)
-            for (int sy = 0; sy < ss; ++sy)
-              for (int sx = 0; sx < ss; ++sx) {
-                const Vec3 p = vb.min + Vec3(sx + 0.5, sy + 0.5, sz + 0.5) * (h / ss);
-                sum += lookup->density(p);
-              }
-          bake.density[g.index(i, j, k)] = float(sum * inv);
-        }
-      }
+  fillVoxels(field, &bake, [&](DensityField::Lookup& lookup, const Vec3& c) {
+    // Skip voxels outside the field's bounds (the margin) without sampling.
+    Bounds3 vb;
+    vb.min = c - Vec3(0.5 * h);
+    vb.max = c + Vec3(0.5 * h);
+    if (vb.max.x < b.min.x || vb.max.y < b.min.y || vb.max.z < b.min.z || vb.min.x > b.max.x ||
+        vb.min.y > b.max.y || vb.min.z > b.max.z) {
+      return 0.f;
     }
+    // Every lookup inside a cell of bound 0 reads 0: the mean is 0 without sampling.
+    if (!(maj.maxOver(vb) > 0)) return 0.f;
+    double sum = 0;
+    for (int sz = 0; sz < ss; ++sz)
+      for (int sy = 0; sy < ss; ++sy)
+        for (int sx = 0; sx < ss; ++sx) {
+          sum += lookup.density(vb.min + Vec3(sx + 0.5, sy + 0.5, sz + 0.5) * (h / ss));
+        }
+    return float(sum * inv);
   });
   return bake;
 }

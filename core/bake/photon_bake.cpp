@@ -694,7 +694,8 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   };
   if (progress && !progress(0, "lattice")) throw Cancelled("bake cancelled");
   auto t0 = std::chrono::steady_clock::now();
-  BakedLight bake = makeBakeLattice(*medium.density, options.light_resolution);
+  BakedLight bake =
+      makeBakeLattice(*medium.density, options.light_resolution, LatticeSampling::kFieldAligned);
   bake.method = "photon";
   bake.sun_direction = sun_dir;
   computeSunTransmittance(bake, sun_dir, medium.extinction, [&](double f, const std::string& s) {
@@ -709,8 +710,10 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   t0 = std::chrono::steady_clock::now();
   const int tally_resolution =
       options.tally_resolution > 0 ? options.tally_resolution : options.light_resolution;
-  bake.tally_grid = bakeLatticeGeometry(medium.density->bounds(), tally_resolution,
-                                        medium.density->describe(), "tally_resolution");
+  bake.tally_grid = options.tally_resolution > 0
+                        ? bakeLatticeGeometry(medium.density->bounds(), tally_resolution,
+                                              medium.density->describe(), "tally_resolution")
+                        : bake.grid;
   const auto grid = medium.density->trackingGrid({medium.extinction, 0});
   // Grey albedo and phase keep every photon's throughput grey: one channel holds all three.
   const bool grey = !medium.phase->chromatic() && medium.albedo.x == medium.albedo.y &&

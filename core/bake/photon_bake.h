@@ -37,10 +37,11 @@ std::string photonZonal(int l);
 
 /// Knobs of method `photon` (docs/shot-format.md).
 struct PhotonBakeOptions {
-  /// Lattice voxels along the longest side of the volume's bounds, [8, 1024]: the density and
-  /// the transmittance to the sun, which the exact single scattering of every view reads.
+  /// Lattice voxels along the longest side of the volume's bounds, [8, 1024] (on a grid's own
+  /// voxels where it allows, LatticeSampling::kFieldAligned): the density and the transmittance
+  /// to the sun, which the exact single scattering of every view reads.
   int light_resolution = 128;
-  /// The tallies' lattice over the same bounds, [8, 1024], or 0 for light_resolution: the
+  /// The tallies' lattice over the same bounds, [8, 1024], or 0 for the bake's lattice: the
   /// scattered light is smooth, so a coarser lattice gathers more photons per voxel.
   int tally_resolution = 48;
   /// Photons from the sun, and as many from the sky when it is not black, [1, 2^31).

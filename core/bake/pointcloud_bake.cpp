@@ -111,7 +111,8 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
   StageSeconds seconds;
   auto t0 = Clock::now();
   report(0.0, "lattice");
-  BakedLight bake = makeBakeLattice(*medium.density, options.light_resolution);
+  BakedLight bake =
+      makeBakeLattice(*medium.density, options.light_resolution, LatticeSampling::kFieldAligned);
   seconds.lattice = secondsSince(t0);
 
   t0 = Clock::now();

@@ -35,7 +35,8 @@ BakedLight bakeSingle(const Medium& medium, const Vec3& sun_dir, const SingleBak
   };
   if (progress && !progress(0, "lattice")) throw Cancelled("bake cancelled");
   auto t0 = Clock::now();
-  BakedLight bake = makeBakeLattice(*medium.density, options.light_resolution);
+  BakedLight bake =
+      makeBakeLattice(*medium.density, options.light_resolution, LatticeSampling::kFieldAligned);
   bake.metadata["cloudbake:seconds_lattice"] = str(secondsSince(t0));
   bake.method = "single";
   bake.sun_direction = sun_dir;

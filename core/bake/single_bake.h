@@ -10,7 +10,8 @@ namespace cloudbake {
 
 /// Knobs of method `single` (shot keys beside "method": "single"; docs/shot-format.md).
 struct SingleBakeOptions {
-  /// Lattice voxels along the longest side of the volume's bounds, [8, 1024].
+  /// Lattice voxels along the longest side of the volume's bounds, [8, 1024]; on a grid's own
+  /// voxels where it allows (makeBakeLattice, LatticeSampling::kFieldAligned).
   int light_resolution = 128;
   /// Ray-march step of the view renders, world units; 0: half a lattice voxel.
   double step = 0;

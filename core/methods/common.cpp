@@ -119,9 +119,14 @@ Knob stepKnob() {
       .viewOnly();
 }
 
-Knob lightResolutionKnob(int64_t default_resolution) {
-  return Knob::integer("light_resolution", 8, 1024, default_resolution,
-                       "bake lattice voxels along the longest side of the volume");
+Knob lightResolutionKnob(int64_t default_resolution, bool aligned_to_grid) {
+  return Knob::integer(
+      "light_resolution", 8, 1024, default_resolution,
+      aligned_to_grid
+          ? "bake lattice voxels along the longest side of the volume; where that is at least a "
+            "grid volume's own voxels n, the lattice is the grid's voxel centres at 1/m of their "
+            "spacing, m = floor(light_resolution / n), so views read the grid's own density"
+          : "bake lattice voxels along the longest side of the volume");
 }
 
 bool needsSun(const ShotSpec& shot) {

@@ -26,7 +26,7 @@ bool needsSun(const ShotSpec& shot);
 
 /// The knobs of every method that renders views from a lattice.
 Knob stepKnob();
-Knob lightResolutionKnob(int64_t default_resolution);
+Knob lightResolutionKnob(int64_t default_resolution, bool aligned_to_grid);
 
 /// How views of a lattice method are rendered: `step`, bake.samples rays per pixel, bake.seed.
 BakeRenderOptions bakeRenderOptions(const ShotSpec& shot, int threads);

@@ -15,7 +15,7 @@ std::vector<Knob> photonKnobs() {
   const PhotonBakeOptions d;
   return {
       stepKnob(),
-      lightResolutionKnob(d.light_resolution),
+      lightResolutionKnob(d.light_resolution, true),
       Knob::integer("photons", 1000, int64_t(1) << 28, d.photons,
                     "photons traced from the sun (and as many from the sky when it is not "
                     "black): the tally's noise falls as 1 / sqrt(photons)"),
@@ -23,8 +23,8 @@ std::vector<Knob> photonKnobs() {
                     "highest spherical-harmonic degree of the tallied radiance: (order + 1)^2 "
                     "coefficients per voxel and colour channel"),
       Knob::integer("tally_resolution", 0, 1024, d.tally_resolution,
-                    "voxels along the longest side of the tallies' lattice (0: "
-                    "light_resolution); the scattered light is smooth, so a coarser lattice "
+                    "voxels along the longest side of the tallies' lattice (0: the bake's "
+                    "lattice itself); the scattered light is smooth, so a coarser lattice "
                     "than the transmittance's gathers more photons per voxel"),
       Knob::integer("zonal_order", 0, kMaxZonalDegree, d.zonal_order,
                     "highest degree of the extra zonal terms of the sunlight's tally about the "
@@ -56,7 +56,7 @@ class PhotonMethod final : public BakeMethod {
         "1977, "
         "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
         "approximation (JQSRT), for a droplet's forward peak split off";
-    info_.version = 5;
+    info_.version = 6;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = photonKnobs();

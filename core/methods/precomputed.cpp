@@ -28,7 +28,7 @@ std::vector<Knob> precomputedKnobs() {
   const PrecomputedShotOptions d;
   return {
       stepKnob(),
-      lightResolutionKnob(d.light_resolution),
+      lightResolutionKnob(d.light_resolution, false),
       Knob::integer("sample_points", 1, int64_t(1) << 20, d.precompute.sample_points,
                     "K: sample points of the multiple-scattering transfer, shared by every "
                     "basic volume"),

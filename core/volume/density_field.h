@@ -2,6 +2,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "core/math/vec3.h"
@@ -16,6 +17,15 @@ struct TrackingGridRequest {
   double extinction = 1;
   /// Voxels per cell edge (grids); 0: chosen by the cost model (core/volume/tracking_grid.h).
   int cell_voxels = 0;
+};
+
+/// An axis-aligned cubic lattice of sample points (`origin` is one of them, `spacing` apart, in
+/// world units) on which the field is exactly the trilinear interpolant of its values: a grid's
+/// voxel centres. A lattice aligned with it whose spacing is spacing / m (m = 1, 2, ...) is one
+/// too, since each of its cells lies inside one of the field's, where the field is trilinear.
+struct SampleLattice {
+  Vec3 origin;
+  double spacing = 0;
 };
 
 /// A scalar density field in world space (unitless density; the medium's `extinction` turns it
@@ -62,6 +72,9 @@ class DensityField {
                                double* t1) const {
     return intersectBounds(bounds(), ray, tmin, tmax, t0, t1);
   }
+  /// The lattice of samples the field interpolates, when it has one (SampleLattice); none by
+  /// default.
+  virtual std::optional<SampleLattice> sampleLattice() const { return std::nullopt; }
   /// Characteristic feature size in world units (voxel size for grids; for analytic shapes a
   /// small fraction of their extent). Ray marchers use it to choose step lengths.
   virtual double featureSize() const = 0;

@@ -381,6 +381,11 @@ std::shared_ptr<const MajorantGrid> GridVolume::trackingGrid(
   if (!cached) cached = std::make_shared<const MajorantGrid>(gridFromCellBounds(levels[level], im));
   return cached;
 }
+std::optional<SampleLattice> GridVolume::sampleLattice() const {
+  if (!impl_->axis_aligned) return std::nullopt;
+  const openvdb::Mat4d& i2w = impl_->index_to_world;
+  return SampleLattice{applyAffine(i2w, 0, 0, 0), impl_->voxel_size};
+}
 double GridVolume::voxelSize() const { return impl_->voxel_size; }
 uint64_t GridVolume::activeVoxelCount() const { return impl_->active_voxels; }
 const std::string& GridVolume::gridName() const { return impl_->name; }

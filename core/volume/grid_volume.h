@@ -40,6 +40,8 @@ class GridVolume final : public DensityField {
   /// Other grids: majorants(), without minorants.
   std::shared_ptr<const MajorantGrid> trackingGrid(
       const TrackingGridRequest& request) const override;
+  /// The voxel centres, for grids without rotation (mirrored axes allowed); none otherwise.
+  std::optional<SampleLattice> sampleLattice() const override;
   double featureSize() const override { return voxelSize(); }
   std::string describe() const override;
 

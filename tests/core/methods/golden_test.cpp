@@ -28,9 +28,17 @@ namespace fs = std::filesystem;
 
 // A sphere of HG 0.6 droplets lit by a low sun and a blue sky, seen from the side: every layer
 // of every method is non-zero.
-std::string goldenShot(const std::string& method, const std::string& knobs) {
+constexpr const char* kSphere = R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})";
+// The same light on a grid (a procedural cloud): the bakes' lattices aligned with its voxels.
+constexpr const char* kGrid =
+    R"({"procedural": {"type": "perlin_cloud", "seed": 3, "center": [0, 0, 0],
+        "size": [2, 2, 2], "resolution": 12, "cover": 0.6, "density": 1}})";
+
+std::string goldenShot(const std::string& method, const std::string& knobs,
+                       const std::string& volume) {
   return R"({"version": 1, "name": "golden",
-    "volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}},
+    "volume": )" +
+         volume + R"(,
     "medium": {"extinction": 3, "albedo": 0.95, "phase": {"type": "hg", "g": 0.6}},
     "lighting": {"sun": {"direction": [0.6, -0.3, 0.74], "irradiance": [1, 0.9, 0.8]},
                  "sky": {"radiance": [0.05, 0.08, 0.12]}},
@@ -46,6 +54,7 @@ struct Golden {
   int version;                         // the method's version these values were pinned for
   std::map<std::string, double> mean;  // per layer: mean of R, G, B over the image
   double pixel;                        // beauty R at the centre pixel
+  const char* volume = kSphere;        // the shot's volume (JSON)
 };
 
 // The pinned values (see the file comment for how to re-pin).
@@ -57,14 +66,19 @@ const std::vector<Golden>& goldens() {
       {"pathtrace", R"(, "samples": 8, "tracking": "delta")", 4, {{"", 0.0538194516}, {"sun", 0.0213323034}, {"sky", 0.0324871482}, {"single", 0.0105096641}, {"multiple", 0.0433097876}}, 0.0459012277},
       // With its variance reduction off too: the version 1 estimator over the support only.
       {"pathtrace", R"(, "samples": 8, "sun_guiding": 0, "sun_split_max": 1, "tracking": "delta")", 4, {{"", 0.0579821683}, {"sun", 0.0248850294}, {"sky", 0.0330971389}, {"single", 0.01079392}, {"multiple", 0.0471882482}}, 0.0742698312},
-      {"single", R"(, "light_resolution": 16)", 1, {{"", 0.0183782794}, {"sun", 0.00397509647}, {"sky", 0.0144031829}, {"single", 0.0183782794}, {"multiple", 0}}, 0.018538259},
-      {"pointcloud", R"(, "light_resolution": 16, "points": 1024, "passes": 4)", 2, {{"", 0.0599056742}, {"sun", 0.0236484939}, {"sky", 0.0362571802}, {"single", 0.0183782794}, {"multiple", 0.0415273947}}, 0.1026292},
+      {"single", R"(, "light_resolution": 16)", 2, {{"", 0.0183782794}, {"sun", 0.00397509647}, {"sky", 0.0144031829}, {"single", 0.0183782794}, {"multiple", 0}}, 0.018538259},
+      {"pointcloud", R"(, "light_resolution": 16, "points": 1024, "passes": 4)", 3, {{"", 0.0599056742}, {"sun", 0.0236484939}, {"sky", 0.0362571802}, {"single", 0.0183782794}, {"multiple", 0.0415273947}}, 0.1026292},
       {"precomputed", R"(, "light_resolution": 12, "sample_points": 128, "transfer_resolution": 6)", 2, {{"", 0.0534448848}, {"sun", 0.0186288485}, {"sky", 0.0348160363}, {"single", 0.0148305696}, {"multiple", 0.0386143152}}, 0.0847593546},
       // Without the zonal terms, tallies on the bake's lattice: the version 2 bake (version 4 rounds
       // each photon's sums per voxel, not each segment's; version 5 splits off a forward peak
       // its expansion cannot hold, which this HG phase does not have: the same values).
-      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "zonal_order": 0, "tally_resolution": 0)", 5, {{"", 0.0565848836}, {"sun", 0.0211094108}, {"sky", 0.0354754729}, {"single", 0.0146377128}, {"multiple", 0.0419471709}}, 0.0953304842},
-      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "tally_resolution": 8)", 5, {{"", 0.0566685522}, {"sun", 0.0211242044}, {"sky", 0.0355443478}, {"single", 0.0157532496}, {"multiple", 0.0409153025}}, 0.0960005224},
+      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "zonal_order": 0, "tally_resolution": 0)", 6, {{"", 0.0565848836}, {"sun", 0.0211094108}, {"sky", 0.0354754729}, {"single", 0.0146377128}, {"multiple", 0.0419471709}}, 0.0953304842},
+      {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "tally_resolution": 8)", 6, {{"", 0.0566685522}, {"sun", 0.0211242044}, {"sky", 0.0355443478}, {"single", 0.0157532496}, {"multiple", 0.0409153025}}, 0.0960005224},
+      // On a grid: the lattices of single, pointcloud and photon are its voxel centres (since
+      // single 2, pointcloud 3, photon 6), every other row's lattice the box means.
+      {"single", R"(, "light_resolution": 12)", 2, {{"", 0.00487296474}, {"sun", 0.000981171805}, {"sky", 0.00389179293}, {"single", 0.00487296473}, {"multiple", 0}}, 0.0295177177, kGrid},
+      {"pointcloud", R"(, "light_resolution": 24, "points": 1024, "passes": 4)", 3, {{"", 0.010018064}, {"sun", 0.00315566243}, {"sky", 0.00686240161}, {"single", 0.00484936911}, {"multiple", 0.00516869489}}, 0.0857899338, kGrid},
+      {"photon", R"(, "light_resolution": 12, "photons": 20000, "order": 2, "tally_resolution": 8)", 6, {{"", 0.00965919539}, {"sun", 0.00291171652}, {"sky", 0.00674747882}, {"single", 0.00457105118}, {"multiple", 0.00508814417}}, 0.0829902962, kGrid},
       // clang-format on
   };
   return kGoldens;
@@ -80,7 +94,7 @@ Measured measure(const Golden& g) {
   RunOptions opt;
   opt.out_dir = dir.string();
   opt.threads = 2;
-  const RunResult r = runShot(parseShot(goldenShot(g.method, g.knobs), ""), opt);
+  const RunResult r = runShot(parseShot(goldenShot(g.method, g.knobs, g.volume), ""), opt);
   std::string exr;
   for (const OutputFile& f : r.files) {
     if (f.name.size() > 4 && f.name.substr(f.name.size() - 4) == ".exr") exr = f.path;
@@ -130,7 +144,7 @@ TEST(Golden, OutputsMatchThePinnedValuesOfTheirVersion) {
       for (const char* l : {"", "sun", "sky", "single", "multiple"}) {
         std::printf("{\"%s\", %.9g}%s", l, m.mean.at(l), std::string(l) == "multiple" ? "" : ", ");
       }
-      std::printf("}, %.9g},\n", m.pixel);
+      std::printf("}, %.9g%s},\n", m.pixel, g.volume == kGrid ? ", kGrid" : "");
       continue;
     }
     ASSERT_EQ(version, g.version) << "method '" << g.method << "' is now version " << version

@@ -5,6 +5,7 @@
 #include <openvdb/tools/Interpolation.h>
 
 #include <cmath>
+#include <optional>
 
 #include "core/error.h"
 #include "core/volume/analytic.h"
@@ -122,6 +123,44 @@ TEST(GridVolume, MajorantsBoundTrilinearLookupsForAllTransforms) {
     EXPECT_EQ(vol->majorantBlockSize(), 8);
     EXPECT_NEAR(vol->featureSize(), xform == rotated ? 0.2 : 0.1, 1e-12);
   }
+}
+
+// The voxel centres are the sample lattice of a grid without rotation: lookups there return the
+// voxel's value; a rotated grid has none.
+TEST(GridVolume, SampleLatticeIsTheVoxelCentres) {
+  openvdb::initialize();
+  auto translated = openvdb::math::Transform::createLinearTransform(0.1);
+  translated->postTranslate(openvdb::Vec3d(1.0, -2.0, 0.5));
+  auto mirrored = openvdb::math::Transform::createLinearTransform(0.1);
+  mirrored->postScale(openvdb::Vec3d(-1.0, 1.0, -1.0));
+  auto rotated = openvdb::math::Transform::createLinearTransform(0.2);
+  rotated->postRotate(0.5, openvdb::math::Y_AXIS);
+  for (const auto& xform : {translated, mirrored}) {
+    const auto vol = makeGridVolume(randomGrid(xform), "test");
+    const std::optional<SampleLattice> lat = vol->sampleLattice();
+    ASSERT_TRUE(lat);
+    EXPECT_NEAR(lat->spacing, 0.1, 1e-12);
+    const auto grid = openvdbGrid(*vol);
+    const auto acc = grid->getConstAccessor();
+    auto lookup = vol->lookup();
+    int nonzero = 0;
+    for (int x = -20; x < 20; ++x) {
+      for (int z = -10; z < 40; ++z) {
+        const openvdb::Vec3d w = xform->indexToWorld(openvdb::Coord(x, 3, z));
+        const Vec3 q(w.x(), w.y(), w.z());
+        // Every voxel centre is a point of the lattice.
+        for (int a = 0; a < 3; ++a) {
+          const double steps = (q[a] - lat->origin[a]) / lat->spacing;
+          EXPECT_NEAR(steps, std::round(steps), 1e-6);
+        }
+        const float v = acc.getValue(openvdb::Coord(x, 3, z));
+        EXPECT_NEAR(lookup->density(q), v, 1e-5 * (1 + v));
+        nonzero += v > 0;
+      }
+    }
+    EXPECT_GT(nonzero, 0);
+  }
+  EXPECT_FALSE(makeGridVolume(randomGrid(rotated), "test")->sampleLattice());
 }
 
 // Lookups read a dense copy of small grids; they must return the tree's own trilinear value, bit

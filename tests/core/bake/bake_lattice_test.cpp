@@ -1,0 +1,85 @@
+#include "core/bake/bake_lattice.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/bake/bake_grid.h"
+#include "core/math/rng.h"
+#include "core/volume/analytic.h"
+#include "core/volume/sources.h"
+
+namespace cloudbake {
+namespace {
+
+// A lumpy grid: a sphere with a density ramp, voxelised at `voxel` (centres at multiples of it).
+DensityFieldPtr lumpyGrid(double voxel) {
+  const SphereDensity sphere(Vec3(0.13, -0.07, 0.21), 1.0, 2.0);
+  return voxelize(sphere, voxel);
+}
+
+// The largest difference between the lattice's trilinear lookups and the field's own, over
+// random points of the field's bounds grown by a voxel.
+double maxLookupDifference(const BakedLight& bake, const DensityField& field) {
+  Rng rng(7);
+  auto lookup = field.lookup();
+  const Bounds3 b = field.bounds();
+  const Vec3 lo = b.min - Vec3(bake.grid.voxel_size);
+  const Vec3 ext = b.extent() + Vec3(2 * bake.grid.voxel_size);
+  double worst = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const Vec3 p = lo + Vec3(rng.uniform() * ext.x, rng.uniform() * ext.y, rng.uniform() * ext.z);
+    const double d = sampleTrilinear(bake.grid, bake.density.data(), p);
+    worst = std::max(worst, std::abs(d - lookup->density(p)));
+  }
+  return worst;
+}
+
+// A lattice aligned with a grid's voxel centres, at its spacing or an integer fraction of it,
+// reads what the grid reads everywhere; the box means at the same resolution blur it.
+TEST(BakeLattice, AlignedLatticeReproducesTheGridsLookups) {
+  const double voxel = 0.05;
+  const DensityFieldPtr grid = lumpyGrid(voxel);
+  // Its own voxels along the longest side (the bounds hold one more, the trilinear footprint).
+  const int own = int(std::round(maxComponent(grid->bounds().extent()) / voxel)) - 1;
+  for (int m : {1, 2, 3}) {
+    const int resolution = own * m;
+    const BakedLight aligned = makeBakeLattice(*grid, resolution, LatticeSampling::kFieldAligned);
+    EXPECT_NEAR(aligned.grid.voxel_size, voxel / m, 1e-12) << "m = " << m;
+    EXPECT_LT(maxLookupDifference(aligned, *grid), 1e-5) << "m = " << m;
+    // The test can fail: box means of the same lattice are a voxel's blur away.
+    const BakedLight box = makeBakeLattice(*grid, resolution, LatticeSampling::kBoxMean);
+    EXPECT_GT(maxLookupDifference(box, *grid), 0.05) << "m = " << m;
+  }
+}
+
+// A request of the grid's own voxels or between two spacings takes the coarser (about as many
+// voxels as asked); a request clearly coarser than the grid, or a field with no sample lattice,
+// keeps the box means.
+TEST(BakeLattice, AlignedLatticeIsAboutTheRequestAndFallsBackToBoxMeans) {
+  const double voxel = 0.05;
+  const DensityFieldPtr grid = lumpyGrid(voxel);
+  const int own = int(std::round(maxComponent(grid->bounds().extent()) / voxel)) - 1;
+  // A request slightly short of the grid's own (a mesh voxelised at 128 holds 129) snaps to it.
+  for (int resolution : {own - 1, own, own * 3 / 2, own * 7 / 4}) {
+    const BakedLight aligned = makeBakeLattice(*grid, resolution, LatticeSampling::kFieldAligned);
+    EXPECT_NEAR(aligned.grid.voxel_size, voxel, 1e-12) << resolution;
+    // At most 1/15 more voxels per axis than the box lattice of the request.
+    const double asked = double(makeBakeLattice(*grid, resolution).grid.voxelCount());
+    EXPECT_LE(double(aligned.grid.voxelCount()), asked * std::pow(16.0 / 15, 3)) << resolution;
+  }
+  for (int resolution : {own / 2, own * 7 / 8}) {
+    const BakedLight coarse = makeBakeLattice(*grid, resolution, LatticeSampling::kFieldAligned);
+    const BakedLight box = makeBakeLattice(*grid, resolution);
+    EXPECT_EQ(coarse.grid.voxel_size, box.grid.voxel_size);
+    EXPECT_EQ(coarse.density, box.density);
+  }
+  const SphereDensity analytic(Vec3(0.0), 1.0, 1.0);
+  EXPECT_FALSE(analytic.sampleLattice());
+  EXPECT_EQ(makeBakeLattice(analytic, 40, LatticeSampling::kFieldAligned).density,
+            makeBakeLattice(analytic, 40).density);
+}
+
+}  // namespace
+}  // namespace cloudbake
