@@ -23,9 +23,9 @@ enum class LatticeSampling {
   /// blurs the field by about a voxel.
   kBoxMean,
   /// Where the field has a SampleLattice (a grid's voxel centres) and `resolution` is at least
-  /// 15/16 of the field's own voxels along the longest side (n, its active voxels' extent): a
-  /// lattice of spacing s / m aligned with it, m = floor(resolution / n + 1/16) (so at most 1/15
-  /// more voxels per axis than asked), each voxel the field's value at its centre, so trilinear
+  /// 4/5 of the field's own voxels along the longest side (n, its active voxels' extent): a
+  /// lattice of spacing s / m aligned with it, m = floor(resolution / n + 1/5) (so at most 1.25x
+  /// the voxels per axis asked for), each voxel the field's value at its centre, so trilinear
   /// lookups of the lattice equal the field's own. Otherwise as kBoxMean.
   kFieldAligned,
 };

@@ -123,9 +123,10 @@ Knob lightResolutionKnob(int64_t default_resolution, bool aligned_to_grid) {
   return Knob::integer(
       "light_resolution", 8, 1024, default_resolution,
       aligned_to_grid
-          ? "bake lattice voxels along the longest side of the volume; where that is at least a "
-            "grid volume's own voxels n, the lattice is the grid's voxel centres at 1/m of their "
-            "spacing, m = floor(light_resolution / n), so views read the grid's own density"
+          ? "bake lattice voxels along the longest side of the volume; where that is at least 4/5 "
+            "of a grid volume's own voxels n, the lattice is the grid's voxel centres at 1/m of "
+            "their spacing, m = floor(light_resolution / n + 1/5), so views read the grid's own "
+            "density"
           : "bake lattice voxels along the longest side of the volume");
 }
 
@@ -195,8 +196,14 @@ void checkPointCount(int64_t points, const std::string& pointer, const MethodLim
 }
 
 std::vector<std::string> lightBakePlanLines(const ShotSpec& shot, int64_t resolution) {
+  // Analytic shapes are always resampled; a grid only where it has far more voxels than asked.
+  const bool analytic = std::holds_alternative<BoxVolumeSpec>(shot.volume) ||
+                        std::holds_alternative<SphereVolumeSpec>(shot.volume);
   return {std::string("volume: ") + volumeTypeName(shot.volume) + ", resampled to a " +
-              std::to_string(resolution) + "-voxel lattice (longest side)",
+              std::to_string(resolution) + "-voxel lattice (longest side)" +
+              (analytic ? ""
+                        : ", or on the grid's own voxels (at 1/m of their spacing) where it has "
+                          "no more than 1.25x as many"),
           shot.lighting.has_sun ? "sun transmittance: one ray march per lattice voxel"
                                 : "sun transmittance: computed, but the shot has no sun",
           needsSky(shot) ? "sky visibility: 26 lattice-direction sweeps"
