@@ -75,6 +75,11 @@ TEST(BakeLattice, AlignedLatticeIsAboutTheRequestAndFallsBackToBoxMeans) {
     EXPECT_EQ(coarse.grid.voxel_size, box.grid.voxel_size);
     EXPECT_EQ(coarse.density, box.density);
   }
+  // One voxel: its footprint is two voxels wide, and its 64-fold lattice would hold 8x the
+  // voxels of the request; it stays box means.
+  const DensityFieldPtr speck = voxelize(SphereDensity(Vec3(0.0), 0.01, 1.0), voxel);
+  const BakedLight tiny = makeBakeLattice(*speck, 64, LatticeSampling::kFieldAligned);
+  EXPECT_EQ(tiny.grid.voxelCount(), makeBakeLattice(*speck, 64).grid.voxelCount());
   const SphereDensity analytic(Vec3(0.0), 1.0, 1.0);
   EXPECT_FALSE(analytic.sampleLattice());
   EXPECT_EQ(makeBakeLattice(analytic, 40, LatticeSampling::kFieldAligned).density,
