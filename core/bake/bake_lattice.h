@@ -31,11 +31,12 @@ enum class LatticeSampling {
 };
 
 /// A BakedLight with only `density` filled: a lattice of cubic voxels covering field.bounds()
-/// with `resolution` voxels along its longest side (fewer with kFieldAligned, above) plus one
-/// empty voxel of margin on every face (so trilinear lookups fall to zero outside the cloud),
-/// sampled as `sampling` says. resolution in [8, 1024]; InputError naming "light_resolution"
-/// otherwise, or when the lattice would exceed kMaxBakeVoxels. Parallel over z slices with one
-/// density lookup per thread; deterministic.
+/// with `resolution` voxels along its longest side plus one empty voxel of margin on every face
+/// (so trilinear lookups fall to zero outside the cloud), sampled as `sampling` says; with
+/// kFieldAligned where it applies, the grid's own voxel centres (or 1/m of them) over its
+/// footprint, whose outermost voxels are zeros. resolution in [8, 1024]; InputError naming
+/// "light_resolution" otherwise, or when the lattice would exceed kMaxBakeVoxels. Parallel over z
+/// slices with one density lookup per thread; deterministic.
 BakedLight makeBakeLattice(const DensityField& field, int resolution,
                            LatticeSampling sampling = LatticeSampling::kBoxMean);
 

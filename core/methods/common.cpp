@@ -196,7 +196,7 @@ void checkPointCount(int64_t points, const std::string& pointer, const MethodLim
 }
 
 std::vector<std::string> lightBakePlanLines(const ShotSpec& shot, int64_t resolution) {
-  // Analytic shapes are always resampled; a grid only where it has far more voxels than asked.
+  // Analytic shapes are always box means; a grid only where it has over 1.25x the voxels asked.
   const bool analytic = std::holds_alternative<BoxVolumeSpec>(shot.volume) ||
                         std::holds_alternative<SphereVolumeSpec>(shot.volume);
   return {std::string("volume: ") + volumeTypeName(shot.volume) + ", resampled to a " +
