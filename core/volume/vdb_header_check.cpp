@@ -37,6 +37,21 @@ class Bytes {
   }
   /// A length-prefixed string (uint32 length, then the characters), skipped.
   void string(const char* what) { skip(static_cast<long long>(integer(4, what)), what); }
+  [[noreturn]] void fail(const std::string& why) const {
+    throw InputError(path_ + ": not a readable OpenVDB file (" + why + ")");
+  }
+  /// The same, read, when it is at most `longest` characters (a type name); skipped otherwise.
+  std::string shortString(const char* what, uint64_t longest) {
+    const uint64_t n = integer(4, what);
+    if (n > longest) {
+      skip(static_cast<long long>(n), what);
+      return {};
+    }
+    need(static_cast<long long>(n), what);
+    std::string text(n, '\0');
+    in_.read(text.data(), static_cast<std::streamsize>(n));
+    return text;
+  }
 
  private:
   void need(long long n, const char* what) {
@@ -51,14 +66,65 @@ class Bytes {
   long long size_ = 0, left_ = 0;
 };
 
+// One buffer of io::DelayedLoadMetadata's value: a uint32 byte count, then a blosc-compressed
+// buffer of that many bytes (whose 16-byte header declares its uncompressed size at byte 4), or,
+// where the count is 0, `count` raw entries of `entry` bytes. OpenVDB allocates each at the size
+// declared before reading it; a leaf's entry is bounded by the file's own size (every leaf takes
+// at least a byte of it).
+void skipDelayedLoadBuffer(Bytes& b, uint64_t count, int entry, long long* left) {
+  const char* what = "a delayed-load metadata buffer";
+  const uint64_t bytes = b.integer(4, what);
+  *left -= 4;
+  if (bytes == 0xFFFFFFFFu && entry == 8) return;  // "no compressed sizes stored"
+  const uint64_t raw = bytes > 0 ? bytes : count * uint64_t(entry);
+  if (*left < 0 || raw > uint64_t(*left) || (bytes > 0 && bytes < 16)) {
+    b.fail(std::string(what) + " declares " + std::to_string(raw) +
+           " bytes, not what its metadata value holds");
+  }
+  if (bytes > 0) {
+    b.skip(4, what);
+    const uint64_t uncompressed = b.integer(4, what);
+    if (uncompressed > uint64_t(entry) * uint64_t(b.size())) {
+      b.fail(std::string(what) + " declares " + std::to_string(uncompressed) +
+             " uncompressed bytes, more than the file's leaves can need");
+    }
+    b.skip(static_cast<long long>(raw) - 8, what);
+  } else {
+    b.skip(static_cast<long long>(raw), what);
+  }
+  *left -= static_cast<long long>(raw);
+}
+
+// io::DelayedLoadMetadata's value (`bytes` declared): a leaf count, the leaves' masks (a byte
+// each) and their compressed sizes (8 bytes each), checked within the declared size.
+void skipDelayedLoad(Bytes& b, long long bytes) {
+  if (bytes == 0) return;
+  long long left = bytes - 4;
+  const uint64_t count = b.integer(4, "a delayed-load leaf count");
+  if (left < 0 || count > uint64_t(b.size())) {
+    b.fail("a delayed-load metadata value declares " + std::to_string(count) +
+           " leaves, more than the file holds");
+  }
+  skipDelayedLoadBuffer(b, count, 1, &left);
+  skipDelayedLoadBuffer(b, count, 8, &left);
+  if (left > 0) b.skip(left, "a delayed-load metadata value");
+}
+
 // A MetaMap as OpenVDB writes it (count, then name, type and sized value per entry): checked
-// before MetaMap::readMeta allocates each string at its declared length.
+// before MetaMap::readMeta allocates each string at its declared length, and each delayed-load
+// value before it allocates its buffers.
 void skipMetadata(Bytes& b) {
   const uint64_t entries = b.integer(4, "the metadata count");
   for (uint64_t i = 0; i < entries; ++i) {
     b.string("a metadata name");
-    b.string("a metadata type");
-    b.skip(static_cast<long long>(b.integer(4, "a metadata value")), "a metadata value");
+    const std::string type = b.shortString("a metadata type", 64);
+    const auto bytes = static_cast<long long>(b.integer(4, "a metadata value"));
+    if (type == "__delayedload") {
+      if (bytes > b.size() - b.position()) b.skip(bytes, "a metadata value");  // throws
+      skipDelayedLoad(b, bytes);
+    } else {
+      b.skip(bytes, "a metadata value");
+    }
   }
 }
 

@@ -195,19 +195,61 @@ TEST_F(VdbIoTest, CorruptHeaderLengthIsRefusedBeforeOpenVdbAllocates) {
   }
 }
 
+// Writes a small Perlin cloud to `path`, checks that its header passes, and returns its bytes.
+std::string writeSmallCloud(const std::string& path) {
+  PerlinCloudOptions cloud;
+  cloud.resolution = 16;
+  writeVdb(path, *makePerlinCloud(cloud), {});
+  EXPECT_NO_THROW(checkVdbHeader(path));
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// A grid's delayed-load metadata (OpenVDB's own, in every file it writes) declares its buffers'
+// sizes inside its value; OpenVDB allocates them before reading (a fuzzing finding: a mask
+// declared 4 GB long in a 67-byte value). Each corrupt size is refused, the file intact is not.
+TEST_F(VdbIoTest, CorruptDelayedLoadBufferIsRefusedBeforeOpenVdbAllocates) {
+  const std::string path = dir_ + "/delayed.vdb";
+  const std::string bytes = writeSmallCloud(path);
+  EXPECT_NO_THROW(loadVdbVolume({path, "density"}));
+  // The type name, then the value's size (4), the leaf count (4) and the mask buffer's size (4).
+  const std::string type = "__delayedload";
+  const size_t at = bytes.find(type);
+  ASSERT_NE(at, std::string::npos);
+  const size_t count_at = at + type.size() + 4;
+  struct Patch {
+    size_t offset;
+    uint32_t value;
+  };
+  for (const Patch& patch :
+       {Patch{count_at, 0xffffffffu}, Patch{count_at + 4, 0xffffffffu}, Patch{count_at + 4, 3u}}) {
+    const std::string corrupt = dir_ + "/delayed_corrupt.vdb";
+    {
+      std::string copy = bytes;
+      for (int i = 0; i < 4; ++i) copy[patch.offset + i] = char((patch.value >> (8 * i)) & 0xff);
+      std::ofstream out(corrupt, std::ios::binary);
+      out.write(copy.data(), std::streamsize(copy.size()));
+    }
+    for (auto read : std::vector<std::function<void()>>{[&] { checkVdbHeader(corrupt); },
+                                                        [&] {
+                                                          loadVdbVolume({corrupt, "density"});
+                                                        }}) {
+      try {
+        read();
+        ADD_FAILURE() << "a corrupt delayed-load value was read (patch at " << patch.offset << ")";
+      } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("delayed-load"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find(corrupt), std::string::npos) << e.what();
+      }
+    }
+  }
+}
+
 // The same inside a grid: its own metadata, which OpenVDB reads before the tree (a fuzzing
 // finding: a name declared 1.7 GB long was allocated before anything failed).
 TEST_F(VdbIoTest, CorruptGridMetadataLengthIsRefusedBeforeOpenVdbAllocates) {
-  PerlinCloudOptions cloud;
-  cloud.resolution = 16;
   const std::string path = dir_ + "/grid_meta.vdb";
-  writeVdb(path, *makePerlinCloud(cloud), {});
-  EXPECT_NO_THROW(checkVdbHeader(path));
-  std::string bytes;
-  {
-    std::ifstream in(path, std::ios::binary);
-    bytes.assign(std::istreambuf_iterator<char>(in), {});
-  }
+  const std::string bytes = writeSmallCloud(path);
   // After the grid type: the instance parent's length (4), the data, block and end offsets
   // (24), the grid's compression flags (4), its metadata count (4), then the first name's length.
   const std::string type = "Tree_float_5_4_3";
