@@ -22,8 +22,8 @@ constexpr double kSnapToOwnVoxels = 0.2;
 // / n + kSnapToOwnVoxels), n the field's own voxels along b's longest side; nullopt where m is 0.
 // A grid's bounds include one voxel of trilinear footprint beyond its outermost samples on each
 // side: n is the extent in voxels less one.
-std::optional<BakeGrid> alignedGeometry(const SampleLattice& lat, int resolution, const Bounds3& b,
-                                        const BakeGrid& requested) {
+std::optional<BakeGrid> alignedGeometry(const SampleLattice& lat, int resolution,
+                                        const Bounds3& b) {
   if (!(lat.spacing > 0)) return std::nullopt;
   const double own = std::max(1.0, std::round(maxComponent(b.extent()) / lat.spacing) - 1);
   const double m = std::floor(resolution / own + kSnapToOwnVoxels);
@@ -43,12 +43,13 @@ std::optional<BakeGrid> alignedGeometry(const SampleLattice& lat, int resolution
   g.ny = n[1];
   g.nz = n[2];
   g.origin = lat.origin + Vec3(lo[0], lo[1], lo[2]) * h;
-  // A grid of few voxels has a footprint wide for its size: its m-fold lattice could hold far
-  // more voxels than asked for (a single voxel at 128: 257^3). The memory limits assume the
-  // request's, so such a lattice stays box means.
-  const double per_axis = 1 / (1 - kSnapToOwnVoxels);  // what the snap allows: 1.25
-  const double most = double(requested.voxelCount()) * per_axis * per_axis * per_axis;
-  if (double(g.voxelCount()) > most || g.voxelCount() > kMaxBakeVoxels) return std::nullopt;
+  // The servers' limits count a lattice as (resolution + 2)^3 voxels, a cube with the margin
+  // (core/methods/common.h, checkLatticeVoxels); an aligned one may take a voxel more per face
+  // for the grid's footprint, no more. One holding more (a cube-shaped grid a little finer than
+  // asked for, or a grid of so few voxels that its footprint is wide for its size: a single
+  // voxel at 128 would take 257^3) stays box means.
+  const double cube = std::pow(double(resolution) + 4, 3);
+  if (double(g.voxelCount()) > cube || g.voxelCount() > kMaxBakeVoxels) return std::nullopt;
   return g;
 }
 
@@ -86,8 +87,8 @@ BakedLight makeBakeLattice(const DensityField& field, int resolution, LatticeSam
   const Bounds3 b = field.bounds();
   const std::optional<SampleLattice> lat = field.sampleLattice();
   if (sampling == LatticeSampling::kFieldAligned && lat) {
-    const BakeGrid requested = bakeLatticeGeometry(b, resolution, field.describe());
-    if (std::optional<BakeGrid> g = alignedGeometry(*lat, resolution, b, requested)) {
+    bakeLatticeGeometry(b, resolution, field.describe());  // validates the request
+    if (std::optional<BakeGrid> g = alignedGeometry(*lat, resolution, b)) {
       BakedLight bake;
       bake.grid = *g;
       bake.density.assign(g->voxelCount(), 0.f);

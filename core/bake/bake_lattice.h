@@ -26,7 +26,9 @@ enum class LatticeSampling {
   /// 4/5 of the field's own voxels along the longest side (n, its active voxels' extent): a
   /// lattice of spacing s / m aligned with it, m = floor(resolution / n + 1/5) (so at most 1.25x
   /// the voxels per axis asked for), each voxel the field's value at its centre, so trilinear
-  /// lookups of the lattice equal the field's own. Otherwise as kBoxMean.
+  /// lookups of the lattice equal the field's own, unless that lattice holds more than
+  /// (resolution + 4)^3 voxels (the (resolution + 2)^3 the servers' limits count, and a voxel
+  /// per face for the grid's footprint). Otherwise as kBoxMean.
   kFieldAligned,
 };
 
