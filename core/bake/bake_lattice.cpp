@@ -35,9 +35,12 @@ std::optional<BakeGrid> alignedGeometry(const SampleLattice& lat, int resolution
   for (int a = 0; a < 3; ++a) {
     // Vertices from the last one at or below b.min to the first at or above b.max: the field
     // is 0 there (a grid's are the zeros of its footprint), so lookups fade to 0 beyond them.
-    lo[a] = int(std::floor((b.min[a] - lat.origin[a]) / h + 1e-6));
-    const int hi = int(std::ceil((b.max[a] - lat.origin[a]) / h - 1e-6));
-    n[a] = hi - lo[a] + 1;
+    const double first = std::floor((b.min[a] - lat.origin[a]) / h + 1e-6);
+    const double last = std::ceil((b.max[a] - lat.origin[a]) / h - 1e-6);
+    // A grid far from its index origin, finely divided, leaves int range: box means then.
+    if (!(std::abs(first) < 1e9 && std::abs(last) < 1e9)) return std::nullopt;
+    lo[a] = int(first);
+    n[a] = int(last) - lo[a] + 1;
   }
   g.nx = n[0];
   g.ny = n[1];
