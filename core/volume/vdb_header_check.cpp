@@ -40,6 +40,13 @@ class Bytes {
   [[noreturn]] void fail(const std::string& why) const {
     throw InputError(path_ + ": not a readable OpenVDB file (" + why + ")");
   }
+  /// Refuses `n` bytes more than the file has left, without reading them.
+  void require(long long n, const char* what) const {
+    if (n < 0 || n > left_) {
+      fail(std::string(what) + " declares " + std::to_string(n) +
+           " bytes, more than the file holds");
+    }
+  }
   /// The same, read, when it is at most `longest` characters (a type name); skipped otherwise.
   std::string shortString(const char* what, uint64_t longest) {
     const uint64_t n = integer(4, what);
@@ -55,10 +62,7 @@ class Bytes {
 
  private:
   void need(long long n, const char* what) {
-    if (n < 0 || n > left_) {
-      throw InputError(path_ + ": not a readable OpenVDB file (" + what + " declares " +
-                       std::to_string(n) + " bytes, more than the file holds)");
-    }
+    require(n, what);
     left_ -= n;
   }
   std::string path_;
@@ -120,7 +124,7 @@ void skipMetadata(Bytes& b) {
     const std::string type = b.shortString("a metadata type", 64);
     const auto bytes = static_cast<long long>(b.integer(4, "a metadata value"));
     if (type == "__delayedload") {
-      if (bytes > b.size() - b.position()) b.skip(bytes, "a metadata value");  // throws
+      b.require(bytes, "a metadata value");
       skipDelayedLoad(b, bytes);
     } else {
       b.skip(bytes, "a metadata value");

@@ -108,15 +108,25 @@ openvdb::FloatGrid::Ptr randomGrid(const openvdb::math::Transform::Ptr& xform) {
   return grid;
 }
 
+// A translated, a mirrored (voxels of 0.1) and a rotated transform (voxels of 0.2).
+struct TestTransforms {
+  openvdb::math::Transform::Ptr aligned, mirrored, rotated;
+};
+TestTransforms testTransforms() {
+  TestTransforms t;
+  t.aligned = openvdb::math::Transform::createLinearTransform(0.1);
+  t.aligned->postTranslate(openvdb::Vec3d(1.0, -2.0, 0.5));
+  t.mirrored = openvdb::math::Transform::createLinearTransform(0.1);
+  t.mirrored->postScale(openvdb::Vec3d(-1.0, 1.0, -1.0));
+  t.rotated = openvdb::math::Transform::createLinearTransform(0.2);
+  t.rotated->postRotate(0.5, openvdb::math::Y_AXIS);
+  t.rotated->postRotate(0.3, openvdb::math::Z_AXIS);
+  return t;
+}
+
 TEST(GridVolume, MajorantsBoundTrilinearLookupsForAllTransforms) {
   openvdb::initialize();
-  auto aligned = openvdb::math::Transform::createLinearTransform(0.1);
-  aligned->postTranslate(openvdb::Vec3d(1.0, -2.0, 0.5));
-  auto mirrored = openvdb::math::Transform::createLinearTransform(0.1);
-  mirrored->postScale(openvdb::Vec3d(-1.0, 1.0, -1.0));
-  auto rotated = openvdb::math::Transform::createLinearTransform(0.2);
-  rotated->postRotate(0.5, openvdb::math::Y_AXIS);
-  rotated->postRotate(0.3, openvdb::math::Z_AXIS);
+  const auto [aligned, mirrored, rotated] = testTransforms();
   for (const auto& xform : {aligned, mirrored, rotated}) {
     const auto vol = makeGridVolume(randomGrid(xform), "test");
     EXPECT_GT(checkMajorants(*vol, 200000), 5000);
@@ -129,12 +139,7 @@ TEST(GridVolume, MajorantsBoundTrilinearLookupsForAllTransforms) {
 // voxel's value; a rotated grid has none.
 TEST(GridVolume, SampleLatticeIsTheVoxelCentres) {
   openvdb::initialize();
-  auto translated = openvdb::math::Transform::createLinearTransform(0.1);
-  translated->postTranslate(openvdb::Vec3d(1.0, -2.0, 0.5));
-  auto mirrored = openvdb::math::Transform::createLinearTransform(0.1);
-  mirrored->postScale(openvdb::Vec3d(-1.0, 1.0, -1.0));
-  auto rotated = openvdb::math::Transform::createLinearTransform(0.2);
-  rotated->postRotate(0.5, openvdb::math::Y_AXIS);
+  const auto [translated, mirrored, rotated] = testTransforms();
   for (const auto& xform : {translated, mirrored}) {
     const auto vol = makeGridVolume(randomGrid(xform), "test");
     const std::optional<SampleLattice> lat = vol->sampleLattice();
