@@ -8,8 +8,12 @@ namespace cloudbake {
 
 /// Adds the `sun_transmittance` channel: for every voxel of the density's support, the
 /// transmittance from its centre towards the sun (`sun_dir`, unit, from the scene towards the
-/// sun) by marchTransmittance with steps of half a voxel; voxels outside the support stay 0.
-/// Parallel over z slices; deterministic. Throws Cancelled when progress returns false.
+/// sun): exp(-extinction x the trapezoidal integral of the lattice's trilinear density) in steps
+/// of half a voxel until the density has fallen to 0 (half a voxel past the lattice's faces);
+/// 0 below 1e-7. Voxels outside the support stay 0. Within the trapezoid's error of
+/// marchTransmittance at the same step, which stops at the faces (the same where the outermost
+/// voxels are empty, as in every bake). Parallel over z slices; deterministic. Throws Cancelled
+/// when progress returns false.
 void computeSunTransmittance(BakedLight& bake, const Vec3& sun_dir, double extinction,
                              const BakeProgressFn& progress = {});
 

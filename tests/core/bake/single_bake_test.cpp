@@ -90,6 +90,71 @@ TEST(SunTransmittance, MatchesBeerLambertInsideABox) {
   }
 }
 
+// The sweep's half-voxel trapezoid (steps shared by every voxel) is within the trapezoid's own
+// error of a march 32x finer, no worse than a march per voxel at the same step, on an uneven
+// lattice (every cell a different trilinear patch), for suns along and between the axes; voxels
+// off the support stay 0, and a clear medium reads 1 on it.
+TEST(SunTransmittance, ConvergesToAFineMarchOnAnUnevenLattice) {
+  BakedLight b;
+  b.grid.origin = Vec3(-1.0, 0.5, 2.0);
+  b.grid.voxel_size = 0.1;
+  b.grid.nx = 23;
+  b.grid.ny = 17;
+  b.grid.nz = 29;
+  const BakeGrid& g = b.grid;
+  b.density.assign(g.voxelCount(), 0.f);
+  uint32_t state = 12345;
+  for (int k = 2; k < g.nz - 2; ++k)  // two empty voxels on every face, the rest uneven
+    for (int j = 2; j < g.ny - 2; ++j)
+      for (int i = 2; i < g.nx - 2; ++i) {
+        state = state * 1664525u + 1013904223u;
+        b.density[g.index(i, j, k)] = float(state >> 8) / float(1 << 24) * 2.f;
+      }
+  const double ext = 3.0;
+  for (const Vec3& sun : {Vec3(0, 0, 1), Vec3(-1, 0, 0), normalize(Vec3(1, -2, 3)),
+                          normalize(Vec3(-0.3, 0.2, -1)), normalize(Vec3(1, 1, 1e-9))}) {
+    SCOPED_TRACE(::testing::Message() << sun.x << " " << sun.y << " " << sun.z);
+    computeSunTransmittance(b, sun, ext);
+    const auto& t = b.find(bake_grids::kSunTransmittance)->data;
+    const std::vector<uint8_t> support = densitySupport(g, b.density);
+    double err = 0, err_per_voxel = 0;
+    int checked = 0;
+    for (int k = 0; k < g.nz; ++k)
+      for (int j = 0; j < g.ny; ++j)
+        for (int i = 0; i < g.nx; ++i) {
+          const size_t v = g.index(i, j, k);
+          if (!support[v]) {
+            EXPECT_EQ(t[v], 0.f);
+            continue;
+          }
+          const Vec3 p = g.center(i, j, k);
+          const double fine =
+              marchTransmittance(g, b.density.data(), ext, p, sun, g.voxel_size / 64);
+          const double coarse =
+              marchTransmittance(g, b.density.data(), ext, p, sun, g.voxel_size / 2);
+          ASSERT_GE(t[v], 0.f);
+          ASSERT_LE(t[v], 1.f);
+          err = std::max(err, std::abs(t[v] - fine));
+          err_per_voxel = std::max(err_per_voxel, std::abs(coarse - fine));
+          ++checked;
+        }
+    EXPECT_GT(checked, 5000);
+    EXPECT_LT(err, 0.02);
+    EXPECT_LE(err, 1.5 * err_per_voxel + 1e-6) << err << " vs " << err_per_voxel;
+  }
+  computeSunTransmittance(b, Vec3(0, 1, 0), 0.0);
+  const auto& clear = b.find(bake_grids::kSunTransmittance)->data;
+  EXPECT_EQ(clear[g.index(10, 10, 10)], 1.f);
+  EXPECT_EQ(clear[g.index(10, 10, g.nz - 1)], 0.f);
+  // A voxel on the lattice's face (never so in a bake, whose outermost voxels are empty): the
+  // integral of the trilinear density to where it reaches 0, half a voxel past the face.
+  b.density.assign(g.voxelCount(), 0.f);
+  b.density[g.index(0, 5, 5)] = 1.f;
+  computeSunTransmittance(b, Vec3(-1, 0, 0), ext);
+  EXPECT_NEAR(b.find(bake_grids::kSunTransmittance)->data[g.index(0, 5, 5)],
+              std::exp(-ext * 0.5 * g.voxel_size), 1e-6);
+}
+
 TEST(SkyVisibility, WeightsAreSolidAnglesAndACentreSeesExpOfTau) {
   const LatticeDirection* dirs = latticeDirections();
   double sum = 0, axis = 0, body = 0;
