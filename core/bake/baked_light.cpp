@@ -11,22 +11,36 @@
 namespace cloudbake {
 
 std::vector<uint8_t> densitySupport(const BakeGrid& g, const std::vector<float>& density) {
-  std::vector<uint8_t> support(g.voxelCount(), 0);
-  // A gather (each voxel looks at its neighbours), so threads never write the same byte.
-  parallelFor(0, g.nz, [&](int k) {
-    for (int j = 0; j < g.ny; ++j) {
-      for (int i = 0; i < g.nx; ++i) {
-        bool any = false;
-        for (int dk = -1; dk <= 1 && !any; ++dk)
-          for (int dj = -1; dj <= 1 && !any; ++dj)
-            for (int di = -1; di <= 1 && !any; ++di) {
-              const int a = i + di, b = j + dj, c = k + dk;
-              if (a < 0 || b < 0 || c < 0 || a >= g.nx || b >= g.ny || c >= g.nz) continue;
-              any = density[g.index(a, b, c)] > 0;
-            }
-        support[g.index(i, j, k)] = any ? 1 : 0;
+  // The 3^3 neighbourhood is a box, so "any density > 0 in it" is three passes of "any in the
+  // 3 neighbours along one axis": 9 reads a voxel where the 27 of each voxel were 0.1 s of the
+  // bunny's bake, which asks for the support three times.
+  const int nx = g.nx, ny = g.ny, nz = g.nz;
+  std::vector<uint8_t> along_x(g.voxelCount()), along_xy(g.voxelCount()), support(g.voxelCount());
+  parallelFor(0, nz, [&](int k) {
+    for (int j = 0; j < ny; ++j) {
+      const float* d = density.data() + g.index(0, j, k);
+      uint8_t* out = along_x.data() + g.index(0, j, k);
+      for (int i = 0; i < nx; ++i) {
+        out[i] = (i > 0 && d[i - 1] > 0) || d[i] > 0 || (i + 1 < nx && d[i + 1] > 0);
       }
     }
+  });
+  parallelFor(0, nz, [&](int k) {
+    for (int j = 0; j < ny; ++j) {
+      const uint8_t* mid = along_x.data() + g.index(0, j, k);
+      const uint8_t* lo = j > 0 ? mid - nx : mid;
+      const uint8_t* hi = j + 1 < ny ? mid + nx : mid;
+      uint8_t* out = along_xy.data() + g.index(0, j, k);
+      for (int i = 0; i < nx; ++i) out[i] = lo[i] | mid[i] | hi[i];
+    }
+  });
+  const size_t slice = size_t(nx) * size_t(ny);
+  parallelFor(0, nz, [&](int k) {
+    const uint8_t* mid = along_xy.data() + size_t(k) * slice;
+    const uint8_t* lo = k > 0 ? mid - slice : mid;
+    const uint8_t* hi = k + 1 < nz ? mid + slice : mid;
+    uint8_t* out = support.data() + size_t(k) * slice;
+    for (size_t v = 0; v < slice; ++v) out[v] = lo[v] | mid[v] | hi[v];
   });
   return support;
 }

@@ -1,5 +1,6 @@
 #include "core/bake/sky_visibility.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <mutex>
@@ -8,6 +9,7 @@
 
 #include "core/error.h"
 #include "core/math/parallel.h"
+#include "core/math/vector_clones.h"
 
 namespace cloudbake {
 namespace {
@@ -69,61 +71,80 @@ const LatticeDirection* latticeDirections() {
 
 namespace {
 
-// One slice of one direction's sweep for every extinction: t[x] of the voxels with index ia
-// along axis a from their upstream neighbours (offset e), rows along axis c.
-struct SweepSlice {
-  const BakeGrid& g;
-  const float* rho;
-  const int* e;
-  int a, b, c;
-  const std::vector<double>& seg;      // per extinction: extinction x half the step length
-  std::vector<std::vector<float>>& t;  // per extinction
-};
-
-// K extinctions (1 or 2), a compile-time count so that one extinction's loop is as tight as it
-// was alone.
-template <size_t K>
-void sweepRow(const SweepSlice& sl, int ia, int ib) {
-  const BakeGrid& g = sl.g;
-  const int dims[3] = {g.nx, g.ny, g.nz};
-  float* ts[K];
-  double seg[K];
-  for (size_t x = 0; x < K; ++x) {
-    ts[x] = sl.t[x].data();
-    seg[x] = sl.seg[x];
-  }
-  int idx[3];
-  idx[sl.a] = ia;
-  idx[sl.b] = ib;
-  // Piecewise-constant densities (a mesh's inside) repeat tau along a row: its exp is reused,
-  // the same value as computed afresh.
-  double last_tau[K], last_exp[K];
-  for (size_t x = 0; x < K; ++x) {
-    last_tau[x] = -1;
-    last_exp[x] = 1;
-  }
-  for (int ic = 0; ic < dims[sl.c]; ++ic) {
-    idx[sl.c] = ic;
-    const size_t v = g.index(idx[0], idx[1], idx[2]);
-    const int ux = idx[0] + sl.e[0], uy = idx[1] + sl.e[1], uz = idx[2] + sl.e[2];
-    const bool inside = ux >= 0 && uy >= 0 && uz >= 0 && ux < g.nx && uy < g.ny && uz < g.nz;
-    const size_t u = inside ? g.index(ux, uy, uz) : 0;
-    for (size_t x = 0; x < K; ++x) {
-      float* t = ts[x];
-      float tv = 1.f;
-      if (inside) {
-        const double tau = seg[x] * (double(sl.rho[v]) + sl.rho[u]);
-        if (tau > 0 && tau != last_tau[x]) {
-          last_tau[x] = tau;
-          last_exp[x] = std::exp(-tau);
-        }
-        tv = tau > 0 ? float(t[u] * last_exp[x]) : t[u];
-      } else if (sl.rho[v] > 0) {
-        // The last voxel before leaving the lattice: half a segment of its own density.
-        tv = float(std::exp(-seg[x] * sl.rho[v]));
+// exp(-seg x rho[v]) for every voxel: half a segment's transmittance from the voxel's centre, so
+// that a whole segment between neighbours u and v is e[u] e[v], the exact trapezoid of the two.
+// A run of equal densities (a mesh's inside, empty space) reuses one exponential.
+void halfSegments(const float* rho, size_t n, double seg, float* e) {
+  const int64_t chunks = int64_t((n + kCheapIterationGrain - 1) / kCheapIterationGrain);
+  parallelFor(0, chunks, [&](int64_t c) {
+    const size_t v0 = size_t(c) * kCheapIterationGrain;
+    const size_t v1 = std::min(n, v0 + size_t(kCheapIterationGrain));
+    float last_rho = 0.f, last = 1.f;
+    for (size_t v = v0; v < v1; ++v) {
+      if (rho[v] != last_rho) {
+        last_rho = rho[v];
+        last = float(std::exp(-seg * double(rho[v])));
       }
-      t[v] = tv;
+      e[v] = last;
     }
+  });
+}
+
+// One row of voxels along x, each from its upstream neighbour x + ex in the upstream row `tu`
+// (null where that row lies outside the lattice: then every voxel is the last before leaving,
+// half a segment of its own density), and its weighted value added to the row's sums.
+CLOUDBAKE_VECTOR_CLONES void sweepRowX(const float* __restrict ev, const float* __restrict eu,
+                                       const float* __restrict tu, int nx, int ex, double w,
+                                       float* __restrict tv, double* __restrict sum) {
+  int lo = 0, hi = nx;  // voxels whose upstream neighbour is in the row
+  if (!tu) {
+    hi = 0;
+  } else if (ex > 0) {
+    hi = nx - 1;
+  } else if (ex < 0) {
+    lo = 1;
+  }
+  for (int i = 0; i < lo; ++i) tv[i] = ev[i];
+  for (int i = lo; i < hi; ++i) tv[i] = tu[i + ex] * (ev[i] * eu[i + ex]);
+  for (int i = std::max(hi, lo); i < nx; ++i) tv[i] = ev[i];
+  for (int i = 0; i < nx; ++i) sum[i] += w * double(tv[i]);
+}
+
+// Direction (+-1, 0, 0): the row's own voxels are upstream of each other, so it runs in order.
+void sweepAlongX(const float* ev, int nx, int ex, double w, float* tv, double* sum) {
+  const int first = ex > 0 ? nx - 1 : 0;
+  tv[first] = ev[first];
+  for (int n = 1; n < nx; ++n) {
+    const int i = ex > 0 ? nx - 1 - n : n, u = i + ex;
+    tv[i] = tv[u] * (ev[i] * ev[u]);
+  }
+  for (int i = 0; i < nx; ++i) sum[i] += w * double(tv[i]);
+}
+
+// One direction's sweep for one extinction: t over the lattice and w t added to `sum`. Slices
+// along the slowest axis with a non-zero step are swept upstream first (towards +e); a slice's
+// rows along x depend only on the previous slice, so they run in parallel.
+void sweepDirection(const BakeGrid& g, const LatticeDirection& d, const float* e, float* t,
+                    double* sum) {
+  const int nx = g.nx, ny = g.ny, nz = g.nz;
+  if (!d.dy && !d.dz) {
+    parallelFor(0, int64_t(ny) * nz, [&](int64_t r) {
+      const size_t v = size_t(r) * size_t(nx);
+      sweepAlongX(e + v, nx, d.dx, d.weight, t + v, sum + v);
+    });
+    return;
+  }
+  const bool by_z = d.dz != 0;  // slices along z (rows indexed by y), else along y (by z)
+  const int slices = by_z ? nz : ny, rows = by_z ? ny : nz, step = by_z ? d.dz : d.dy;
+  for (int s = 0; s < slices; ++s) {
+    const int ia = step > 0 ? slices - 1 - s : s;
+    parallelFor(0, rows, [&](int ib) {
+      const int j = by_z ? ib : ia, k = by_z ? ia : ib;
+      const int uj = j + d.dy, uk = k + d.dz;
+      const bool inside = uj >= 0 && uk >= 0 && uj < ny && uk < nz;
+      const size_t v = g.index(0, j, k), u = inside ? g.index(0, uj, uk) : 0;
+      sweepRowX(e + v, e + u, inside ? t + u : nullptr, nx, d.dx, d.weight, t + v, sum + v);
+    });
   }
 }
 
@@ -137,46 +158,25 @@ std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* 
                         std::to_string(extinctions.size()));
   }
   const size_t n = g.voxelCount(), k = extinctions.size();
-  std::vector<std::vector<double>> sum(k, std::vector<double>(n, 0.0));
-  std::vector<std::vector<float>> t(k, std::vector<float>(n, 1.f));
-  std::vector<double> seg(k);
-  const LatticeDirection* dirs = latticeDirections();
-  const int dims[3] = {g.nx, g.ny, g.nz};
-  for (int d = 0; d < 26; ++d) {
-    const int e[3] = {dirs[d].dx, dirs[d].dy, dirs[d].dz};
-    for (size_t x = 0; x < k; ++x) {
-      seg[x] = extinctions[x] * g.voxel_size *
-               std::sqrt(double(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])) * 0.5;
-    }
-    // The slowest axis with a non-zero step is swept in order (upstream slice first); voxels of
-    // one slice depend only on the previous slice, so a slice is done in parallel, in any order:
-    // rows along x where the slice has them (c, the inner loop, is the contiguous axis).
-    const int a = e[2] ? 2 : (e[1] ? 1 : 0);
-    const int c = a == 0 ? 1 : 0, b = 3 - a - c;
-    const SweepSlice slice{g, rho, e, a, b, c, seg, t};
-    for (int s = 0; s < dims[a]; ++s) {
-      const int ia = e[a] > 0 ? dims[a] - 1 - s : s;  // upstream (towards +e) first
-      parallelFor(0, dims[b], [&](int ib) {
-        if (k == 1) {
-          sweepRow<1>(slice, ia, ib);
-        } else {
-          sweepRow<2>(slice, ia, ib);
-        }
-      });
-    }
-    const double w = dirs[d].weight;
-    for (size_t x = 0; x < k; ++x) {
-      double* sx = sum[x].data();
-      const float* tx = t[x].data();
-      parallelFor(0, int64_t(n), [&](size_t v) { sx[v] += w * tx[v]; }, {kCheapIterationGrain});
-    }
-    if (progress && !progress((d + 1) / 26.0, "sky visibility")) {
-      throw Cancelled("bake cancelled while computing the sky visibility");
-    }
-  }
+  std::vector<double> sum(n);
+  std::vector<float> t(n), e(n);
   std::vector<std::vector<float>> out(k, std::vector<float>(n));
+  const LatticeDirection* dirs = latticeDirections();
+  int done = 0;
   for (size_t x = 0; x < k; ++x) {
-    for (size_t v = 0; v < n; ++v) out[x][v] = float(std::min(1.0, std::max(0.0, sum[x][v])));
+    std::fill(sum.begin(), sum.end(), 0.0);
+    // By segment length (axes, face diagonals, body diagonals): one set of half segments each.
+    for (int cls = 1; cls <= 3; ++cls) {
+      halfSegments(rho, n, extinctions[x] * g.voxel_size * std::sqrt(double(cls)) * 0.5, e.data());
+      for (int d = 0; d < 26; ++d) {
+        if (std::abs(dirs[d].dx) + std::abs(dirs[d].dy) + std::abs(dirs[d].dz) != cls) continue;
+        sweepDirection(g, dirs[d], e.data(), t.data(), sum.data());
+        if (progress && !progress(double(++done) / (26.0 * double(k)), "sky visibility")) {
+          throw Cancelled("bake cancelled while computing the sky visibility");
+        }
+      }
+    }
+    for (size_t v = 0; v < n; ++v) out[x][v] = float(std::min(1.0, std::max(0.0, sum[v])));
   }
   return out;
 }

@@ -16,9 +16,10 @@ namespace cloudbake {
 /// sweep with no interpolation. Deterministic. Throws Cancelled when progress returns false.
 void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgressFn& progress = {});
 
-/// The same visibility for one or two extinctions (InternalError otherwise) in one sweep of the
-/// lattice `g` with density `rho`: each the values computeSkyVisibility gives, bit for bit, for
-/// about 1.3x the time of one (the sweeps share their reads and indexing).
+/// The same visibility for one or two extinctions (InternalError otherwise) of the lattice `g`
+/// with density `rho`: each the values computeSkyVisibility gives, bit for bit. Each direction's
+/// sweep multiplies precomputed half-segment transmittances, exp(-extinction x half the segment
+/// x density) of each voxel, in rows along x that the compiler vectorises.
 std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* rho,
                                                 const std::vector<double>& extinctions,
                                                 const BakeProgressFn& progress = {});

@@ -69,6 +69,41 @@ TEST(BakedLight, TrimKeepsTheNeighboursOfDensityOnly) {
 
 // The checks scan chunks of voxels in parallel, yet name the first bad voxel, as a scan in
 // order does, and its first problem; trimming with a given support equals trimming.
+// The support is every voxel with density > 0 among its 27 neighbours, counted one by one here,
+// on a sparse random lattice whose density touches every face and edge.
+TEST(BakedLight, SupportIsTheDilationOfTheDensityByOneVoxel) {
+  BakeGrid g;
+  g.nx = 13;
+  g.ny = 7;
+  g.nz = 9;
+  std::vector<float> d(g.voxelCount(), 0.f);
+  uint32_t state = 7;
+  for (float& v : d) {
+    state = state * 1664525u + 1013904223u;
+    if ((state >> 24) < 12) v = (state >> 24) < 2 ? -1.f : 0.5f;  // some negative: not support
+  }
+  d[g.index(0, 0, 0)] = d[g.index(g.nx - 1, g.ny - 1, g.nz - 1)] = 1.f;
+  const std::vector<uint8_t> support = densitySupport(g, d);
+  ASSERT_EQ(support.size(), g.voxelCount());
+  int in = 0;
+  for (int k = 0; k < g.nz; ++k)
+    for (int j = 0; j < g.ny; ++j)
+      for (int i = 0; i < g.nx; ++i) {
+        bool any = false;
+        for (int c = -1; c <= 1; ++c)
+          for (int b = -1; b <= 1; ++b)
+            for (int a = -1; a <= 1; ++a) {
+              const int x = i + a, y = j + b, z = k + c;
+              if (x < 0 || y < 0 || z < 0 || x >= g.nx || y >= g.ny || z >= g.nz) continue;
+              any = any || d[g.index(x, y, z)] > 0;
+            }
+        EXPECT_EQ(support[g.index(i, j, k)], any ? 1 : 0) << i << " " << j << " " << k;
+        in += any;
+      }
+  EXPECT_GT(in, 100);
+  EXPECT_LT(in, int(g.voxelCount()));
+}
+
 TEST(BakedLight, ValidateNamesTheFirstBadVoxelOfALargeGrid) {
   BakedLight b;
   b.grid.voxel_size = 0.1;
