@@ -47,6 +47,29 @@ class PointGrid {
     }
   }
 
+  /// Calls f(index, position) for every point in the cells that overlap the box [lo, hi]: every
+  /// point inside it and some around it. Cells are visited column by column along x (cellX
+  /// ascending), so a caller can find which points a narrower x range can hold.
+  template <class F>
+  void forEachInCells(const Vec3& lo, const Vec3& hi, F&& f) const {
+    const Vec3 a = (lo - origin_) / cell_, b = (hi - origin_) / cell_;
+    const int i0 = clampCell(a.x, nx_), i1 = clampCell(b.x, nx_);
+    const int j0 = clampCell(a.y, ny_), j1 = clampCell(b.y, ny_);
+    const int k0 = clampCell(a.z, nz_), k1 = clampCell(b.z, nz_);
+    for (int i = i0; i <= i1; ++i) {
+      for (int k = k0; k <= k1; ++k) {
+        for (int j = j0; j <= j1; ++j) {
+          const size_t cell = (size_t(k) * size_t(ny_) + size_t(j)) * size_t(nx_) + size_t(i);
+          const uint32_t e = start_[cell + 1];
+          for (uint32_t s = start_[cell]; s < e; ++s) f(order_[s], sorted_[s]);
+        }
+      }
+    }
+  }
+
+  /// The column of cells along x that holds world x (clamped to the grid).
+  int cellX(double x) const { return clampCell((x - origin_.x) / cell_, nx_); }
+
   double cellSize() const { return cell_; }
 
  private:

@@ -28,6 +28,120 @@ std::vector<Rgb> skyFractions(const BakeGrid& g, const float* vis, const PointCl
   return f;
 }
 
+// The points that can reach the voxels a..b of row (j, k): those within rs of the row's axis
+// (yz2, their squared distance from it), by column of cells along x, so that each voxel's points
+// within rs lie in a window of columns that slides along the row. Per voxel that tests about
+// twice the points it takes, where a query per voxel tested the 2-3 cells of rs per axis around
+// it, about 4x.
+struct RowCandidate {
+  double x, yz2;
+  uint32_t p;
+  int column;  // PointGrid::cellX(x)
+};
+
+void rowCandidates(const PointGrid& grid, const BakeGrid& g, int a, int b, int j, int k, double rs,
+                   std::vector<RowCandidate>& out) {
+  out.clear();
+  const Vec3 c0 = g.center(a, j, k), c1 = g.center(b, j, k);
+  const double r2 = rs * rs;
+  grid.forEachInCells(c0 - Vec3(rs), c1 + Vec3(rs), [&](uint32_t p, const Vec3& q) {
+    const double dy = q.y - c0.y, dz = q.z - c0.z, yz2 = dy * dy + dz * dz;
+    if (yz2 <= r2) out.push_back({q.x, yz2, p, grid.cellX(q.x)});
+  });
+}
+
+// A voxel's weighted sums over its points.
+struct SplatSums {
+  double w = 0, r = 0;
+  Rgb co{0.0}, sky{0.0};
+  Vec3 l{0.0};
+};
+
+// What splatPoints reads and writes.
+struct SplatTarget {
+  const PointCloudResult& result;
+  const std::vector<Rgb>& sky_fraction;  // per point, when there is a sky visibility
+  const float* vis;                      // sky visibility per voxel, or null
+  bool sky;
+  float *co, *ld, *mr, *cs;
+
+  void add(SplatSums& s, uint32_t p, double w) const {
+    s.w += w;
+    s.co += result.co[p] * w;
+    if (sky) s.sky += (vis ? sky_fraction[p] : result.co_sky[p]) * w;
+    s.l += result.light_dir[p] * w;
+    s.r += double(result.mie_ratio[p]) * w;
+  }
+
+  void write(size_t v, const SplatSums& s) const {
+    const Rgb cv = s.co / s.w;
+    co[3 * v] = float(cv.x);
+    co[3 * v + 1] = float(cv.y);
+    co[3 * v + 2] = float(cv.z);
+    if (sky) {
+      const Rgb sv = s.sky / s.w * (vis ? 4 * kPi * (1.0 - vis[v]) : 1.0);
+      cs[3 * v] = float(sv.x);
+      cs[3 * v + 1] = float(sv.y);
+      cs[3 * v + 2] = float(sv.z);
+    }
+    const double len = length(s.l);
+    if (len > 1e-12 * s.w) {
+      const Vec3 l = s.l / len;
+      ld[3 * v] = float(l.x);
+      ld[3 * v + 1] = float(l.y);
+      ld[3 * v + 2] = float(l.z);
+    }
+    mr[v] = float(std::clamp(s.r / s.w, 0.0, 1.0));
+  }
+};
+
+// A voxel with no point within rs copies the nearest within 3 rs; false when there is none.
+bool nearestPoint(const PointGrid& grid, const SplatTarget& t, const Vec3& c, double rs,
+                  SplatSums* s) {
+  double best = std::numeric_limits<double>::infinity();
+  uint32_t nearest = 0;
+  grid.forEachWithin(c, 3 * rs, [&](uint32_t p, double d2) {
+    if (d2 < best) {
+      best = d2;
+      nearest = p;
+    }
+  });
+  if (!std::isfinite(best)) return false;
+  t.add(*s, nearest, 1.0);
+  return true;
+}
+
+// Splats row (j, k): the voxels of the support take the Shepard average of their points.
+void splatRow(const BakeGrid& g, const uint8_t* support, const PointGrid& grid,
+              const SplatTarget& t, double rs, int j, int k, std::vector<RowCandidate>& cand) {
+  const uint8_t* in = support + g.index(0, j, k);
+  int a = 0, b = g.nx - 1;
+  while (a <= b && !in[a]) ++a;
+  while (b >= a && !in[b]) --b;
+  if (a > b) return;
+  rowCandidates(grid, g, a, b, j, k, rs, cand);
+  const double r2 = rs * rs;
+  size_t lo = 0, hi = 0;
+  for (int i = a; i <= b; ++i) {
+    if (!in[i]) continue;
+    const Vec3 c = g.center(i, j, k);
+    // Columns behind the window are too far for this voxel and every later one.
+    const int first = grid.cellX(c.x - rs), last = grid.cellX(c.x + rs);
+    while (lo < cand.size() && cand[lo].column < first) ++lo;
+    hi = std::max(hi, lo);
+    while (hi < cand.size() && cand[hi].column <= last) ++hi;
+    SplatSums s;
+    for (size_t q = lo; q < hi; ++q) {
+      const double dx = cand[q].x - c.x, d2 = dx * dx + cand[q].yz2;
+      if (d2 > r2) continue;
+      const double u = 1 - std::sqrt(d2) / rs;
+      t.add(s, cand[q].p, u * u);
+    }
+    if (!(s.w > 0) && !nearestPoint(grid, t, c, rs, &s)) continue;
+    t.write(g.index(i, j, k), s);
+  }
+}
+
 }  // namespace
 
 double splatPoints(BakedLight& bake, const PointCloudResult& result,
@@ -35,8 +149,7 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
   const BakeGrid& g = bake.grid;
   const double rs = std::max(2 * result.cloud.spacing, g.voxel_size);
   const std::vector<uint8_t> support = densitySupport(g, bake.density);
-  const std::vector<Vec3>& pos = result.cloud.position;
-  const PointGrid grid(pos, rs);
+  const PointGrid grid(result.cloud.position, rs);
   float* co = bake.add(bake_grids::kMultipleFluence, 3).data.data();
   float* ld = bake.add(bake_grids::kLightDir, 3).data.data();
   float* mr = bake.add(bake_grids::kMieRatio, 1).data.data();
@@ -45,66 +158,16 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
   const BakeChannel* vis_channel = sky ? bake.find(bake_grids::kSkyVisibility) : nullptr;
   const float* vis = vis_channel ? vis_channel->data.data() : nullptr;
   const std::vector<Rgb> sky_fraction = vis ? skyFractions(g, vis, result) : std::vector<Rgb>();
-  ParallelOptions rows;
-  rows.grain = g.ny;  // a z slice of rows between cancellation polls
-  rows.cancelled = cancelled;
+  const SplatTarget target{result, sky_fraction, vis, sky, co, ld, mr, cs};
+  ParallelOptions slices;  // a z slice of rows between cancellation polls
+  slices.cancelled = cancelled;
   parallelFor(
-      0, int64_t(g.nz) * g.ny,
-      [&](int64_t row) {
-        const int k = int(row / g.ny), j = int(row % g.ny);
-        for (int i = 0; i < g.nx; ++i) {
-          const size_t v = g.index(i, j, k);
-          if (!support[v]) continue;
-          const Vec3 c = g.center(i, j, k);
-          double wsum = 0, rsum = 0;
-          Rgb csum(0.0), ssum(0.0);
-          Vec3 lsum(0.0);
-          grid.forEachWithin(c, rs, [&](uint32_t p, double d2) {
-            const double t = 1 - std::sqrt(d2) / rs;
-            const double w = t * t;
-            wsum += w;
-            csum += result.co[p] * w;
-            if (sky) ssum += (vis ? sky_fraction[p] : result.co_sky[p]) * w;
-            lsum += result.light_dir[p] * w;
-            rsum += double(result.mie_ratio[p]) * w;
-          });
-          if (!(wsum > 0)) {
-            double best = std::numeric_limits<double>::infinity();
-            uint32_t nearest = 0;
-            grid.forEachWithin(c, 3 * rs, [&](uint32_t p, double d2) {
-              if (d2 < best) {
-                best = d2;
-                nearest = p;
-              }
-            });
-            if (!std::isfinite(best)) continue;
-            wsum = 1;
-            csum = result.co[nearest];
-            if (sky) ssum = vis ? sky_fraction[nearest] : result.co_sky[nearest];
-            lsum = result.light_dir[nearest];
-            rsum = result.mie_ratio[nearest];
-          }
-          const Rgb cv = csum / wsum;
-          co[3 * v] = float(cv.x);
-          co[3 * v + 1] = float(cv.y);
-          co[3 * v + 2] = float(cv.z);
-          if (sky) {
-            const Rgb sv = ssum / wsum * (vis ? 4 * kPi * (1.0 - vis[v]) : 1.0);
-            cs[3 * v] = float(sv.x);
-            cs[3 * v + 1] = float(sv.y);
-            cs[3 * v + 2] = float(sv.z);
-          }
-          const double len = length(lsum);
-          if (len > 1e-12 * wsum) {
-            const Vec3 l = lsum / len;
-            ld[3 * v] = float(l.x);
-            ld[3 * v + 1] = float(l.y);
-            ld[3 * v + 2] = float(l.z);
-          }
-          mr[v] = float(std::clamp(rsum / wsum, 0.0, 1.0));
-        }
+      0, g.nz,
+      [&](int k) {
+        std::vector<RowCandidate> cand;
+        for (int j = 0; j < g.ny; ++j) splatRow(g, support.data(), grid, target, rs, j, k, cand);
       },
-      rows);
+      slices);
   return rs;
 }
 

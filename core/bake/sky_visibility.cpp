@@ -121,9 +121,11 @@ void sweepAlongX(const float* ev, int nx, int ex, double w, float* tv, double* s
   for (int i = 0; i < nx; ++i) sum[i] += w * double(tv[i]);
 }
 
-// One direction's sweep for one extinction: t over the lattice and w t added to `sum`. Slices
-// along the slowest axis with a non-zero step are swept upstream first (towards +e); a slice's
-// rows along x depend only on the previous slice, so they run in parallel.
+// One direction's sweep for one extinction: t over the lattice and w t added to `sum`. A row
+// along x depends only on its upstream row, one slice further along the slowest axis with a
+// non-zero step, so the rows form independent chains: each starts at a row whose upstream lies
+// outside the lattice and runs downstream. One task per chain: no wait between slices, which
+// cost the sweep half its scaling to two threads.
 void sweepDirection(const BakeGrid& g, const LatticeDirection& d, const float* e, float* t,
                     double* sum) {
   const int nx = g.nx, ny = g.ny, nz = g.nz;
@@ -134,18 +136,25 @@ void sweepDirection(const BakeGrid& g, const LatticeDirection& d, const float* e
     });
     return;
   }
-  const bool by_z = d.dz != 0;  // slices along z (rows indexed by y), else along y (by z)
-  const int slices = by_z ? nz : ny, rows = by_z ? ny : nz, step = by_z ? d.dz : d.dy;
-  for (int s = 0; s < slices; ++s) {
-    const int ia = step > 0 ? slices - 1 - s : s;
-    parallelFor(0, rows, [&](int ib) {
-      const int j = by_z ? ib : ia, k = by_z ? ia : ib;
-      const int uj = j + d.dy, uk = k + d.dz;
-      const bool inside = uj >= 0 && uk >= 0 && uj < ny && uk < nz;
-      const size_t v = g.index(0, j, k), u = inside ? g.index(0, uj, uk) : 0;
+  // Rows (ia, ib): ia along the swept axis (z, else y), ib along the other of y and z.
+  const bool by_z = d.dz != 0;
+  const int na = by_z ? nz : ny, nb = by_z ? ny : nz;
+  const int ea = by_z ? d.dz : d.dy, eb = by_z ? d.dy : 0;
+  auto row = [&](int ia, int ib) { return by_z ? g.index(0, ib, ia) : g.index(0, ia, ib); };
+  // Chain c < nb starts in the most upstream slice at ib = c; chain nb + m starts in the m-th
+  // slice downstream of it, at the b edge that its upstream row falls off (when eb != 0).
+  const int chains = nb + (eb != 0 ? na - 1 : 0);
+  parallelFor(0, chains, [&](int c) {
+    int s = c < nb ? 0 : c - nb + 1;
+    int ib = c < nb ? c : (eb > 0 ? nb - 1 : 0);
+    for (; s < na && ib >= 0 && ib < nb; ++s, ib -= eb) {
+      const int ia = ea > 0 ? na - 1 - s : s;
+      const int ua = ia + ea, ub = ib + eb;
+      const bool inside = ua >= 0 && ua < na && ub >= 0 && ub < nb;
+      const size_t v = row(ia, ib), u = inside ? row(ua, ub) : 0;
       sweepRowX(e + v, e + u, inside ? t + u : nullptr, nx, d.dx, d.weight, t + v, sum + v);
-    });
-  }
+    }
+  });
 }
 
 }  // namespace

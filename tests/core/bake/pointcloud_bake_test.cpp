@@ -19,6 +19,7 @@
 #include "core/bake/bake_grid.h"
 #include "core/bake/neighbour_grid.h"
 #include "core/bake/point_cloud.h"
+#include "core/bake/point_splat.h"
 #include "core/bake/scattering_passes.h"
 #include "core/bake/sky_visibility.h"
 #include "core/error.h"
@@ -27,6 +28,7 @@
 #include "core/phase/isotropic.h"
 #include "core/volume/analytic.h"
 #include "core/volume/sources.h"
+#include "tests/core/bake/bake_test_util.h"
 
 namespace cloudbake {
 namespace {
@@ -148,6 +150,99 @@ TEST(NeighbourGrid, FindsExactlyThePointsWithinTheRadius) {
       EXPECT_EQ(found, expected) << "radius " << radius;
     }
   }
+}
+
+// The box query visits every point inside the box, column by column along x.
+TEST(NeighbourGrid, CellsOfABoxHoldItsPointsInColumnOrder) {
+  Rng rng(5);
+  std::vector<Vec3> pts(2000);
+  for (Vec3& p : pts) p = Vec3(rng.uniform(), rng.uniform(), 2 * rng.uniform());
+  const PointGrid grid(pts, 0.1);
+  const Vec3 lo(0.2, 0.3, 0.5), hi(0.75, 0.42, 1.1);
+  std::set<uint32_t> visited;
+  int column = -1;
+  grid.forEachInCells(lo, hi, [&](uint32_t i, const Vec3& q) {
+    EXPECT_EQ(q, pts[i]);
+    EXPECT_GE(grid.cellX(q.x), column);
+    column = grid.cellX(q.x);
+    EXPECT_TRUE(visited.insert(i).second) << "twice: " << i;
+  });
+  size_t inside = 0;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    const Vec3& q = pts[i];
+    if (q.x < lo.x || q.y < lo.y || q.z < lo.z || q.x > hi.x || q.y > hi.y || q.z > hi.z) continue;
+    EXPECT_EQ(visited.count(uint32_t(i)), 1u) << i;
+    ++inside;
+  }
+  EXPECT_GT(inside, 20u);
+}
+
+// Every voxel of the support is the Shepard average of the points within rs of its centre,
+// weights (1 - d / rs)^2, summed here point by point over the whole cloud; a voxel with none
+// that close copies the nearest point within 3 rs, and one with none there stays 0.
+TEST(PointSplat, IsTheShepardAverageOfThePointsWithinTheRadius) {
+  BakedLight b = emptyBake(Vec3(0.0), 0.05, 40, 24, 30);
+  const BakeGrid& g = b.grid;
+  for (int k = 1; k < g.nz - 1; ++k)
+    for (int j = 1; j < g.ny - 1; ++j)
+      for (int i = 1; i < g.nx - 1; ++i) b.density[g.index(i, j, k)] = 1.f;
+  PointCloudResult r;
+  Rng rng(11);
+  // Points fill only x < 1 of the 2-wide box: voxels beyond reach fall back, then stay 0.
+  for (int p = 0; p < 3000; ++p) {
+    r.cloud.position.push_back(Vec3(rng.uniform(), 1.2 * rng.uniform(), 1.5 * rng.uniform()));
+    r.co.push_back(Rgb(rng.uniform(), rng.uniform(), 2 * rng.uniform()));
+    r.light_dir.push_back(normalize(Vec3(rng.uniform() - 0.5, rng.uniform() - 0.5, 1)));
+    r.mie_ratio.push_back(float(rng.uniform()));
+  }
+  r.cloud.spacing = 0.04;
+  const double rs = splatPoints(b, r);
+  EXPECT_DOUBLE_EQ(rs, 0.08);
+  const std::vector<float>& co = b.find(bake_grids::kMultipleFluence)->data;
+  const std::vector<float>& mr = b.find(bake_grids::kMieRatio)->data;
+  const std::vector<uint8_t> support = densitySupport(g, b.density);
+  int averaged = 0, copied = 0, empty = 0;
+  for (int k = 0; k < g.nz; k += 3)
+    for (int j = 0; j < g.ny; j += 2)
+      for (int i = 0; i < g.nx; ++i) {
+        const size_t v = g.index(i, j, k);
+        const Vec3 c = g.center(i, j, k);
+        double w = 0, sum_r = 0, best = 1e300;
+        Rgb sum_co(0.0);
+        size_t nearest = 0;
+        for (size_t p = 0; p < r.cloud.position.size(); ++p) {
+          const double d = length(r.cloud.position[p] - c);
+          if (d < best) {
+            best = d;
+            nearest = p;
+          }
+          if (d > rs) continue;
+          const double u = (1 - d / rs) * (1 - d / rs);
+          w += u;
+          sum_co += r.co[p] * u;
+          sum_r += r.mie_ratio[p] * u;
+        }
+        Rgb want(0.0);
+        double want_r = 0;
+        if (!support[v]) {
+        } else if (w > 0) {
+          want = sum_co / w;
+          want_r = sum_r / w;
+          ++averaged;
+        } else if (best <= 3 * rs) {
+          want = r.co[nearest];
+          want_r = r.mie_ratio[nearest];
+          ++copied;
+        } else {
+          ++empty;
+        }
+        EXPECT_NEAR(co[3 * v], want.x, 1e-5 * (1 + want.x)) << i << " " << j << " " << k;
+        EXPECT_NEAR(co[3 * v + 2], want.z, 1e-5 * (1 + want.z)) << i << " " << j << " " << k;
+        EXPECT_NEAR(mr[v], want_r, 1e-5) << i << " " << j << " " << k;
+      }
+  EXPECT_GT(averaged, 1000);
+  EXPECT_GT(copied, 20);
+  EXPECT_GT(empty, 100);
 }
 
 /// Distance from x (inside) to the surface of the sphere of radius a at the origin along unit w.

@@ -95,14 +95,8 @@ TEST(SunTransmittance, MatchesBeerLambertInsideABox) {
 // lattice (every cell a different trilinear patch), for suns along and between the axes; voxels
 // off the support stay 0, and a clear medium reads 1 on it.
 TEST(SunTransmittance, ConvergesToAFineMarchOnAnUnevenLattice) {
-  BakedLight b;
-  b.grid.origin = Vec3(-1.0, 0.5, 2.0);
-  b.grid.voxel_size = 0.1;
-  b.grid.nx = 23;
-  b.grid.ny = 17;
-  b.grid.nz = 29;
+  BakedLight b = emptyBake(Vec3(-1.0, 0.5, 2.0), 0.1, 23, 17, 29);
   const BakeGrid& g = b.grid;
-  b.density.assign(g.voxelCount(), 0.f);
   uint32_t state = 12345;
   for (int k = 2; k < g.nz - 2; ++k)  // two empty voxels on every face, the rest uneven
     for (int j = 2; j < g.ny - 2; ++j)
