@@ -45,6 +45,15 @@ std::vector<uint8_t> densitySupport(const BakeGrid& g, const std::vector<float>&
   return support;
 }
 
+bool supportSpan(const uint8_t* row, int n, int* first, int* last) {
+  int a = 0, b = n - 1;
+  while (a <= b && !row[a]) ++a;
+  while (b >= a && !row[b]) --b;
+  *first = a;
+  *last = b;
+  return a <= b;
+}
+
 const BakeChannel* BakedLight::find(const std::string& name) const {
   auto it = channels.find(name);
   return it == channels.end() ? nullptr : &it->second;

@@ -47,6 +47,10 @@ constexpr const char* kCd = "Cd";
 /// density; 0 elsewhere. `density` holds grid.voxelCount() values. Parallel, deterministic.
 std::vector<uint8_t> densitySupport(const BakeGrid& grid, const std::vector<float>& density);
 
+/// The first and last voxels of the support within one lattice row of n voxels (`row`, from
+/// densitySupport): what a per-row loop needs to visit. False when the row has none.
+bool supportSpan(const uint8_t* row, int n, int* first, int* last);
+
 /// One grid of a bake: `components` floats per voxel (1 or 3), interleaved, in BakeGrid order.
 struct BakeChannel {
   int components = 1;

@@ -115,10 +115,8 @@ bool nearestPoint(const PointGrid& grid, const SplatTarget& t, const Vec3& c, do
 void splatRow(const BakeGrid& g, const uint8_t* support, const PointGrid& grid,
               const SplatTarget& t, double rs, int j, int k, std::vector<RowCandidate>& cand) {
   const uint8_t* in = support + g.index(0, j, k);
-  int a = 0, b = g.nx - 1;
-  while (a <= b && !in[a]) ++a;
-  while (b >= a && !in[b]) --b;
-  if (a > b) return;
+  int a = 0, b = 0;
+  if (!supportSpan(in, g.nx, &a, &b)) return;
   rowCandidates(grid, g, a, b, j, k, rs, cand);
   const double r2 = rs * rs;
   size_t lo = 0, hi = 0;

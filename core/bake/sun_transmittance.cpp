@@ -129,10 +129,8 @@ void computeSunTransmittance(BakedLight& bake, const Vec3& sun_dir, double extin
         std::vector<float> sum(size_t(g.nx));
         for (int j = 0; j < g.ny; ++j) {
           const uint8_t* in = support.data() + g.index(0, j, k);
-          int a = 0, b = g.nx - 1;
-          while (a <= b && !in[a]) ++a;
-          while (b >= a && !in[b]) --b;
-          if (a > b) continue;
+          int a = 0, b = 0;
+          if (!supportSpan(in, g.nx, &a, &b)) continue;
           float* out = t.data.data() + g.index(0, j, k);
           if (!(extinction > 0)) {
             for (int x = a; x <= b; ++x) out[x] = in[x] ? 1.f : 0.f;

@@ -102,6 +102,13 @@ TEST(BakedLight, SupportIsTheDilationOfTheDensityByOneVoxel) {
       }
   EXPECT_GT(in, 100);
   EXPECT_LT(in, int(g.voxelCount()));
+  // A row's span runs from its first voxel of the support to its last; an empty row has none.
+  const std::vector<uint8_t> row = {0, 0, 1, 0, 1, 0}, none(6, 0);
+  int first = -1, last = -1;
+  EXPECT_TRUE(supportSpan(row.data(), 6, &first, &last));
+  EXPECT_EQ(first, 2);
+  EXPECT_EQ(last, 4);
+  EXPECT_FALSE(supportSpan(none.data(), 6, &first, &last));
 }
 
 TEST(BakedLight, ValidateNamesTheFirstBadVoxelOfALargeGrid) {
