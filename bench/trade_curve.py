@@ -12,20 +12,24 @@ once, and writes
   taken out in quadrature) | beauty rel. RMSE | bias of the sun, sky, single and multiple
   layers (mean / reference mean - 1) | s for 4 x 640x480;
 - the shot cost of four 640x480 views, from the measured seconds: a bake's seconds plus its
-  views' at 64x the pixels and the rays per unit image auto uses (16 rays per pixel at 80x60,
-  1 at 640x480), the path tracer's views at 64x the pixels and the same paths per pixel (the
-  error per pixel at equal rays per unit image is taken as the measured one: the assumption the
-  extrapolation rests on);
+  views' scaled to 1 ray per pixel at 640x480 (auto's rule; the measured views trace
+  --view-samples rays per pixel, so their seconds scale by 640 x 480 / (pixels x samples)), the
+  path tracer's views scaled by 640 x 480 / pixels at the same paths per pixel (the error per
+  pixel is taken as the measured one: the assumption the extrapolation rests on, nearest to
+  true where the measured views trace about a 640x480 image's rays, --res 256 --view-samples 6);
 - per scene and requested error (2, 5, 10, 30 %): the fastest configuration that reaches it, and
   its speedup over the path tracer (whose seconds for any error follow from its measured noise,
   which falls as 1 / sqrt(spp));
-- with --plot-dir, one PNG per scene: rel. RMSE against seconds for four 640x480 views, log-log,
+- with --plot-dir, one PNG per scene (named --plot-prefix + scene): rel. RMSE against seconds for four 640x480 views, log-log,
   one line per method, the Pareto front dashed (python3-matplotlib, deploy/bench-packages.txt);
 - with --json-out, every point.
 
-Usage: /usr/bin/python3 bench/trade_curve.py [--build build] [--threads 2] [--res 80] [--ref-spp 8192]
+Usage: /usr/bin/python3 bench/trade_curve.py [--build build] [--threads 2] [--res 80]
+           [--ref-spp 8192 | --ref-spp disney=16384,...,8192] [--view-samples 16]
            [--scenes perlin,bunny,disney,thin,cumulus] [--work DIR] [--plot-dir docs/images]
            [--json-out FILE]
+References are cached under WORK/ref/ and reused: render them where cores are many with
+bench/photon_bench.py's names (SCENE-RES-SPP-SEED), then point --work at them.
 """
 import argparse
 import json
@@ -42,26 +46,27 @@ FULL_PIXELS = 640 * 480
 VIEWS = 4
 
 
-def configs():
-    """(method, quality, bake, output folder name); photon's names are photon_bench's."""
+def configs(samples):
+    """(method, quality, bake, output folder name); photon's names are photon_bench's. Views
+    from a bake trace `samples` rays per pixel."""
     out = []
     for spp in (4, 16, 64, 256):
         out.append(("pathtrace", "%d spp" % spp, {"method": "pathtrace", "samples": spp,
                                                   "seed": 3}, "pt-%d" % spp))
     for lattice in (64, 128, 256):
         out.append(("single", "lattice %d" % lattice,
-                    {"method": "single", "light_resolution": lattice, "samples": 16},
+                    {"method": "single", "light_resolution": lattice, "samples": samples},
                     "single-%d" % lattice))
     for points in (16384, 65536):
         out.append(("pointcloud", "%d points" % points,
-                    {"method": "pointcloud", "points": points, "samples": 16},
+                    {"method": "pointcloud", "points": points, "samples": samples},
                     "pointcloud-%d" % points))
     for photons, order, lattice, tally, zonal in pb.SWEEPS["default"]:
         out.append(("photon", "%d photons, order %d, %d/%d" % (photons, order, lattice, tally),
                     {"method": "photon", "photons": photons, "order": order,
                      "light_resolution": lattice, "tally_resolution": tally,
-                     "zonal_order": zonal, "samples": 16},
-                    "%d-%d-%d-%d-%d-%d" % (photons, order, lattice, tally, zonal, 16)))
+                     "zonal_order": zonal, "samples": samples},
+                    "%d-%d-%d-%d-%d-%d" % (photons, order, lattice, tally, zonal, samples)))
     return out
 
 
@@ -82,8 +87,9 @@ def layers_against(cloudbake, out, refs, views, alpha):
     return {k: (e[0] / e[2], e[1] / e[2]) for k, e in acc.items()}
 
 
-def shot_seconds(method, stats, res):
-    """Seconds for four 640x480 views from the measured run (see the module's docstring)."""
+def shot_seconds(method, stats, res, samples):
+    """Seconds for four 640x480 views from the measured run (see the module's docstring); a
+    bake's views traced `samples` rays per pixel."""
     views = [s["seconds"] for s in stats["steps"] if s["step"] == "view"]
     view_s = sum(views) / max(1, len(views))
     scale = FULL_PIXELS / float(res * (res * 3 // 4))
@@ -91,7 +97,7 @@ def shot_seconds(method, stats, res):
         return VIEWS * view_s * scale, 0.0, view_s
     bake_s = sum(s["seconds"] for s in stats["steps"]
                  if s["step"] in ("bake", "precompute", "light", "volume"))
-    rays_ratio = 1.0 / 16.0  # 16 rays per pixel at 80x60 -> 1 at 640x480 (auto's rule)
+    rays_ratio = 1.0 / samples  # -> 1 ray per pixel at 640x480 (auto's rule)
     return bake_s + VIEWS * view_s * scale * rays_ratio, bake_s, view_s
 
 
@@ -105,7 +111,7 @@ def pareto(points):
     return front
 
 
-def plot(scene, points, path):
+def plot(scene, points, path, res):
     try:
         import matplotlib
     except ImportError:
@@ -127,7 +133,7 @@ def plot(scene, points, path):
     ax.set_yscale("log")
     ax.set_xlabel("seconds for four 640x480 views (2 cores, from the measured runs)")
     ax.set_ylabel("rel. RMSE of the cloud's own light")
-    ax.set_title("%s: error against cost" % scene)
+    ax.set_title("%s (%dx%d): error against cost" % (scene, res, res * 3 // 4))
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
@@ -144,22 +150,46 @@ def fastest(points, pt_noise_1spp, pt_s_per_spp, target):
     return name, s, pt_s / s
 
 
+def ref_spp(spec, scene):
+    """The reference's paths per pixel for `scene` from --ref-spp: "N" for every scene, or
+    "scene=N,...,N" with the bare N for the scenes not named."""
+    spp = {}
+    for part in spec.split(","):
+        name, _, value = part.rpartition("=")
+        try:
+            spp[name] = int(value)
+        except ValueError:
+            sys.exit("--ref-spp: %r is not N or scene=N" % part)
+        if spp[name] < 1:
+            sys.exit("--ref-spp: %r must be at least 1" % part)
+    if scene not in spp and "" not in spp:
+        sys.exit("--ref-spp: no value for scene %s (add a bare N for the others)" % scene)
+    return spp.get(scene, spp.get(""))
+
+
 def measure_scene(cloudbake, scene, args):
     shot = pb.load_scene(scene, args.res)
     if shot is None:
         return None
     views = [v["name"] for v in shot["views"]]
-    refs, _, diffs = pb.references(cloudbake, shot, scene, args)
+    ref_args = argparse.Namespace(**vars(args))
+    ref_args.ref_spp = ref_spp(args.ref_spp, scene)
+    refs, ref_stats, diffs = pb.references(cloudbake, shot, scene, ref_args)
     ref_noise = sum(diffs) / len(diffs) / math.sqrt(2)  # one render's noise
+    if args.references_only:
+        print("%s: %d spp, reference noise %.4f per render, %.1f s per render" % (
+            scene, ref_args.ref_spp, ref_noise, sum(st["seconds"] for st in ref_stats) / 2),
+            flush=True)
+        return None
     points = []
-    for method, quality, bake, name in configs():
+    for method, quality, bake, name in configs(args.view_samples):
         s = json.loads(json.dumps(shot))
         s["bake"] = bake
         out = os.path.join(args.work, scene, name)
         stats = pb.render(cloudbake, s, out, args.threads)
         layers = layers_against(cloudbake, out, refs, views, args.cloud_alpha)
         raw = layers["scattered"][0]
-        shot_s, bake_s, view_s = shot_seconds(method, stats, args.res)
+        shot_s, bake_s, view_s = shot_seconds(method, stats, args.res, args.view_samples)
         points.append({
             "scene": scene, "method": method, "quality": quality, "bake_s": bake_s,
             "view_s": view_s, "peak_mib": stats["peak_rss_mib"], "shot_s": shot_s,
@@ -175,19 +205,28 @@ def main():
     ap.add_argument("--build", default=os.path.join(pb.ROOT, "build"))
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--res", type=int, default=80)
-    ap.add_argument("--ref-spp", type=int, default=8192)
+    ap.add_argument("--ref-spp", default="8192",
+                    help="paths per pixel of each reference: N, or scene=N,...,N")
+    # 16 at 80x60 (the rays of a quarter of a 640x480 image at 1 per pixel); 6 at 256x192 trace
+    # about the rays of a 640x480 image.
+    ap.add_argument("--view-samples", type=int, default=16,
+                    help="rays per pixel of the views from a bake")
     ap.add_argument("--cloud-alpha", type=float, default=0.05)
-    ap.add_argument("--scenes", default=",".join(pb.SCENES))
+    ap.add_argument("--scenes", default="perlin,bunny,disney,thin,cumulus")
     ap.add_argument("--work", default=None)
+    ap.add_argument("--references-only", action="store_true",
+                    help="render (or find) the references, print their noise and stop")
     ap.add_argument("--plot-dir", default=None)
+    ap.add_argument("--plot-prefix", default="trade_", help="PNG names: PREFIX + scene + .png")
     ap.add_argument("--json-out", default=None)
     args = ap.parse_args()
     args.work = args.work or tempfile.mkdtemp(prefix="trade_curve.")
     cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
                                                             "cloudbake")
-    print("| scene | method | quality | bake s | s/view | peak MiB | rel. RMSE | beauty | "
-          "bias sun/sky/single/multiple | s, 4 x 640x480 |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    if not args.references_only:
+        print("| scene | method | quality | bake s | s/view | peak MiB | rel. RMSE | beauty | "
+              "bias sun/sky/single/multiple | s, 4 x 640x480 |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
     all_points, summary = [], []
     for scene in args.scenes.split(","):
         measured = measure_scene(cloudbake, scene, args)
@@ -212,7 +251,10 @@ def main():
         print("%s: reference noise %.4f per render" % (scene, ref_noise), file=sys.stderr)
         if args.plot_dir:
             os.makedirs(args.plot_dir, exist_ok=True)
-            plot(scene, points, os.path.join(args.plot_dir, "trade_%s.png" % scene))
+            plot(scene, points, os.path.join(args.plot_dir, "%s%s.png" % (args.plot_prefix, scene)),
+                 args.res)
+    if args.references_only:
+        return
     print("\n| scene | requested error | fastest | s, 4 x 640x480 | x faster than pathtrace |")
     print("|---|---|---|---|---|")
     for scene, t, name, s, speedup in summary:
