@@ -202,35 +202,54 @@ void framePart(const Args& a) {
   });
 }
 
+// One pointcloud bake at `threads`: its total and stage seconds (total, lattice + sun + sky,
+// points, neighbours, passes, splat); prints its pair rate.
+std::vector<double> pointcloudStages(const ShotSpec& shot, const Scene& scene, int threads) {
+  PointcloudStats st;
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+  BakedLight bake;
+  const double total = seconds([&] {
+    bake = bakePointcloud(scene.medium, sunDirection(shot), pointcloudOptions(shot), {}, &st);
+  });
+  std::printf("  at %2d threads: %llu pair interactions, %.3g pairs/s in passes;", threads,
+              static_cast<unsigned long long>(st.pair_interactions),
+              double(st.pair_interactions) / st.seconds_passes);
+  for (const auto& [key, value] : bake.metadata) {
+    const std::string prefix = "cloudbake:seconds_";
+    if (key.rfind(prefix, 0) == 0) {
+      std::printf(" %s %.3f", key.c_str() + prefix.size(), std::stod(value));
+    }
+  }
+  std::printf("\n");
+  return {total,
+          total - st.seconds_points - st.seconds_neighbours - st.seconds_passes - st.seconds_splat,
+          st.seconds_points,
+          st.seconds_neighbours,
+          st.seconds_passes,
+          st.seconds_splat};
+}
+
 void bakePart(const Args& a) {
   const ShotSpec shot = parseShotFile(a.bake_shot);
   const Scene scene = buildScene(shot, a.bake_shot);
   const std::string m = shot.bake.method;
   timeAtThreads(a, "bake " + m + " '" + shot.name + "'", [&](int) { bakeFor(m, shot, scene); });
   if (m == "pointcloud") {
-    PointcloudStats st;
-    tbb::global_control limit(tbb::global_control::max_allowed_parallelism,
-                              size_t(a.threads.back()));
-    BakedLight bake;
-    const double total = seconds([&] {
-      bake = bakePointcloud(scene.medium, sunDirection(shot), pointcloudOptions(shot), {}, &st);
-    });
-    for (const auto& [key, value] : bake.metadata) {
-      if (key.find("seconds") != std::string::npos) {
-        std::printf("  %s = %s\n", key.c_str(), value.c_str());
-      }
+    // The stages at every thread count, each with its scaling over the first: which stage stops
+    // scaling shows on a machine of many cores.
+    std::vector<double> first;
+    for (const int threads : a.threads) {
+      const std::vector<double> stages = pointcloudStages(shot, scene, threads);
+      if (first.empty()) first = stages;
+      auto x = [&](size_t i) { return stages[i] > 0 ? first[i] / stages[i] : 0.0; };
+      std::printf(
+          "  at %2d threads: total %.3f s = lattice, sun and sky %.3f (%.2fx) + points %.3f "
+          "(%.2fx) + neighbours %.3f (%.2fx) + passes %.3f (%.2fx) + splat %.3f (%.2fx)\n",
+          threads, stages[0], stages[1], x(1), stages[2], x(2), stages[3], x(3), stages[4], x(4),
+          stages[5], x(5));
     }
-    std::printf(
-        "  at %d threads: total %.3f s = lattice, sun and sky %.3f + points %.3f + neighbours "
-        "%.3f + passes %.3f + splat %.3f; %llu pair interactions, %.3g pairs/s in passes\n",
-        a.threads.back(), total,
-        total - st.seconds_points - st.seconds_neighbours - st.seconds_passes - st.seconds_splat,
-        st.seconds_points, st.seconds_neighbours, st.seconds_passes, st.seconds_splat,
-        static_cast<unsigned long long>(st.pair_interactions),
-        double(st.pair_interactions) / st.seconds_passes);
   }
 }
-
 }  // namespace
 }  // namespace cloudbake
 

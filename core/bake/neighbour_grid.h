@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
+#include <utility>
 #include <vector>
 
 #include "core/error.h"
@@ -94,13 +96,35 @@ double estimateMeanNeighbours(const PointGrid& grid, const std::vector<Vec3>& po
                               int samples = 256,
                               double stop_above = std::numeric_limits<double>::infinity());
 
+/// std::allocator whose value-initialising resize leaves plain values uninitialised: the pair
+/// arrays grow by a chunk of destinations at a time and are filled in parallel right after, so
+/// zeroing them first would be a serial pass over every pair.
+template <class T>
+struct UninitialisedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitialisedAllocator<U>;
+  };
+  UninitialisedAllocator() = default;
+  template <class U>
+  UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+
 /// Every (destination, source) pair within the cut-off with a non-negligible transfer weight,
 /// as compressed rows: the sources of destination j are source[offset[j] .. offset[j + 1]).
 /// Computed once, read by every pass.
 struct NeighbourPairs {
   std::vector<uint64_t> offset;  ///< n + 1 entries
-  std::vector<uint32_t> source;
-  std::vector<float> weight;   ///< geometric transfer weight (rule-specific)
+  std::vector<uint32_t, UninitialisedAllocator<uint32_t>> source;
+  std::vector<float, UninitialisedAllocator<float>> weight;  ///< geometric weight (rule-specific)
   uint64_t within_radius = 0;  ///< pairs within the cut-off, negligible ones included
 
   uint64_t size() const { return source.size(); }
@@ -162,16 +186,28 @@ NeighbourPairs buildNeighbourPairs(const PointGrid& grid, const std::vector<Vec3
           }
         },
         per_block);
+    // The chunk's rows, then its blocks copied into place in parallel: appended one after
+    // another they left every other thread idle.
+    std::vector<uint64_t> block_start(nblocks);
     for (size_t b = 0; b < nblocks; ++b) {
       const Block& blk = blocks[b];
       const size_t d0 = chunk + b * kBlock;
+      block_start[b] = pairs.offset[d0];
       for (size_t t = 0; t < blk.count.size(); ++t) {
         pairs.offset[d0 + t + 1] = pairs.offset[d0 + t] + blk.count[t];
       }
-      pairs.source.insert(pairs.source.end(), blk.source.begin(), blk.source.end());
-      pairs.weight.insert(pairs.weight.end(), blk.weight.begin(), blk.weight.end());
       pairs.within_radius += blk.within;
     }
+    const size_t end = size_t(pairs.offset[chunk_end]);
+    pairs.source.resize(end);
+    pairs.weight.resize(end);
+    parallelFor(0, int64_t(nblocks), [&](int64_t b) {
+      const Block& blk = blocks[size_t(b)];
+      std::copy(blk.source.begin(), blk.source.end(),
+                pairs.source.begin() + int64_t(block_start[size_t(b)]));
+      std::copy(blk.weight.begin(), blk.weight.end(),
+                pairs.weight.begin() + int64_t(block_start[size_t(b)]));
+    });
   }
   return pairs;
 }

@@ -179,6 +179,57 @@ TEST(NeighbourGrid, CellsOfABoxHoldItsPointsInColumnOrder) {
 
 // Every voxel of the support is the Shepard average of the points within rs of its centre,
 // weights (1 - d / rs)^2, summed here point by point over the whole cloud; a voxel with none
+
+// The pair rows are every other point within the radius whose weight is positive, in the grid's
+// visiting order, the same on one thread and two, across the build's chunks of destinations
+// (over 16384 points) and with rows that drop every pair.
+TEST(NeighbourGrid, PairRowsHoldThePositiveWeightsWithinTheRadius) {
+  Rng rng(9);
+  std::vector<Vec3> pts(40000);
+  for (Vec3& p : pts) p = Vec3(rng.uniform(), rng.uniform(), 0.25 * rng.uniform());
+  const double radius = 0.02;
+  const PointGrid grid(pts, radius);
+  // Drops pairs by a rule of both ends, and every pair of destinations divisible by 97.
+  auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
+    if (dst % 97 == 0 || (dst + src) % 5 == 0) return 0.f;
+    return float(1 + dst % 7 + d);
+  };
+  auto build = [&](int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+    return buildNeighbourPairs(grid, pts, radius, weight, 1000, {});
+  };
+  const NeighbourPairs one = build(1), two = build(2);
+  ASSERT_EQ(one.offset.size(), pts.size() + 1);
+  EXPECT_EQ(one.offset, two.offset);
+  EXPECT_TRUE(
+      std::equal(one.source.begin(), one.source.end(), two.source.begin(), two.source.end()));
+  EXPECT_TRUE(
+      std::equal(one.weight.begin(), one.weight.end(), two.weight.begin(), two.weight.end()));
+  EXPECT_EQ(one.within_radius, two.within_radius);
+  uint64_t within = 0;
+  for (uint32_t dst = 0; dst < pts.size(); dst += 7) {
+    std::vector<uint32_t> expected;
+    std::vector<float> expected_w;
+    grid.forEachWithin(pts[dst], radius, [&](uint32_t src, double d2) {
+      if (src == dst) return;
+      ++within;
+      const float w = weight(dst, src, std::sqrt(d2));
+      if (w > 0) {
+        expected.push_back(src);
+        expected_w.push_back(w);
+      }
+    });
+    const auto b = one.offset[dst], e = one.offset[dst + 1];
+    ASSERT_EQ(e - b, expected.size()) << "destination " << dst;
+    for (size_t k = 0; k < expected.size(); ++k) {
+      EXPECT_EQ(one.source[b + k], expected[k]);
+      EXPECT_EQ(one.weight[b + k], expected_w[k]);
+    }
+  }
+  EXPECT_GT(within, 10000u);
+  EXPECT_EQ(one.size(), one.offset.back());
+  EXPECT_EQ(one.offset[97 + 1] - one.offset[97], 0u);
+}
 // that close copies the nearest point within 3 rs, and one with none there stays 0.
 TEST(PointSplat, IsTheShepardAverageOfThePointsWithinTheRadius) {
   BakedLight b = emptyBake(Vec3(0.0), 0.05, 40, 24, 30);
