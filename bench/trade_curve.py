@@ -20,8 +20,9 @@ once, and writes
 - per scene and requested error (2, 5, 10, 30 %): the fastest configuration that reaches it, and
   its speedup over the path tracer (whose seconds for any error follow from its measured noise,
   which falls as 1 / sqrt(spp));
-- with --plot-dir, one PNG per scene (named --plot-prefix + scene): rel. RMSE against seconds for four 640x480 views, log-log,
-  one line per method, the Pareto front dashed (python3-matplotlib, deploy/bench-packages.txt);
+- with --plot-dir, one PNG per scene (named --plot-prefix + scene): rel. RMSE against seconds
+  for four 640x480 views, log-log, one line per method, the Pareto front dashed
+  (python3-matplotlib, deploy/bench-packages.txt);
 - with --json-out, every point.
 
 Usage: /usr/bin/python3 bench/trade_curve.py [--build build] [--threads 2] [--res 80]
@@ -162,6 +163,8 @@ def ref_spp(spec, scene):
             sys.exit("--ref-spp: %r is not N or scene=N" % part)
         if spp[name] < 1:
             sys.exit("--ref-spp: %r must be at least 1" % part)
+        if name and name not in pb.SCENES:
+            sys.exit("--ref-spp: %r names no scene (%s)" % (part, ", ".join(pb.SCENES)))
     if scene not in spp and "" not in spp:
         sys.exit("--ref-spp: no value for scene %s (add a bare N for the others)" % scene)
     return spp.get(scene, spp.get(""))
@@ -220,6 +223,8 @@ def main():
     ap.add_argument("--plot-prefix", default="trade_", help="PNG names: PREFIX + scene + .png")
     ap.add_argument("--json-out", default=None)
     args = ap.parse_args()
+    if args.view_samples < 1:
+        ap.error("--view-samples must be at least 1")
     args.work = args.work or tempfile.mkdtemp(prefix="trade_curve.")
     cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
                                                             "cloudbake")
