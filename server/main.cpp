@@ -18,6 +18,7 @@
 
 #include "common/exit_codes.h"
 #include "core/error.h"
+#include "core/io/exr_io.h"
 #include "core/job/file_util.h"
 #include "core/job/job_record.h"
 #include "core/volume/vdb_transcode.h"
@@ -160,7 +161,8 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
       ->envname("CLOUDBAKE_CACHE_SIZE")
       ->transform(CLI::AsSizeValue(false))
       ->capture_default_str();
-  app.add_option("--threads", o.worker_threads, "threads of each job's TBB arena (0: all cores)")
+  app.add_option("--threads", o.worker_threads,
+                 "threads of each job's TBB arena, and of OpenEXR's compression (0: all cores)")
       ->envname("CLOUDBAKE_THREADS")
       ->check(CLI::Range(0u, 4096u))
       ->capture_default_str();
@@ -358,10 +360,21 @@ int transcodeVdbChild(const char* in, const char* out) {
 }
 
 /// Opens the state folder, serves until SIGINT/SIGTERM; returns the exit code.
-int serve(const ServerFlags& f) {
+// Jobs write their EXRs after rendering, so OpenEXR's compression threads take the cores the
+// job's arena has finished with.
+bool startExrThreads(unsigned worker_threads) {
+  try {
+    cloudbake::setExrThreads(static_cast<int>(worker_threads));
+    return true;
+  } catch (const std::exception& e) {
+    spdlog::error("cannot start OpenEXR's threads: {}", e.what());
+    return false;
+  }
+}
+
+// The job manager's options from the flags, with the paths of this executable's own helpers.
+cloudbake::JobManagerOptions jobOptionsFor(const ServerFlags& f) {
   cloudbake::JobManagerOptions o = f.jobs;
-  cloudbake::server::ServerMetrics metrics;
-  o.on_job_finished = [&metrics](const cloudbake::JobFinished& job) { metrics.observe(job); };
   if (!f.vdb_in_process) {
     std::error_code ec;
     o.vdb_reader.command = {std::filesystem::read_symlink("/proc/self/exe", ec).string(),
@@ -373,6 +386,14 @@ int serve(const ServerFlags& f) {
     o.slurm.cloudbake =
         (std::filesystem::read_symlink("/proc/self/exe", ec).parent_path() / "cloudbake").string();
   }
+  return o;
+}
+
+int serve(const ServerFlags& f) {
+  cloudbake::JobManagerOptions o = jobOptionsFor(f);
+  cloudbake::server::ServerMetrics metrics;
+  o.on_job_finished = [&metrics](const cloudbake::JobFinished& job) { metrics.observe(job); };
+  if (!startExrThreads(o.worker_threads)) return cloudbake::kFailure;
   std::unique_ptr<cloudbake::JobManager> jobs;
   try {
     jobs = std::make_unique<cloudbake::JobManager>(o);

@@ -9,7 +9,9 @@
 #include <ImfStdIO.h>
 #include <ImfStringAttribute.h>
 #include <ImfTestFile.h>
+#include <ImfThreading.h>
 #include <openexr.h>
+#include <tbb/info.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -281,6 +283,13 @@ void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
     std::remove(tmp.c_str());
     throw InputError(path + ": cannot move the finished EXR into place");
   }
+}
+
+void setExrThreads(int threads) {
+  if (threads < 0 || threads > 4096) {
+    throw InputError("EXR threads: must be in [0, 4096], got " + std::to_string(threads));
+  }
+  Imf::setGlobalThreadCount(threads > 0 ? threads : tbb::info::default_concurrency());
 }
 
 ExrContents readExr(const std::string& path) {

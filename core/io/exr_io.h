@@ -46,6 +46,13 @@ void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
               const std::map<std::string, std::string>& attributes = {},
               const std::map<std::string, ExrMatrix>& matrices = {});
 
+/// Sets the threads OpenEXR compresses and decompresses an image's line blocks on; 0 means
+/// all cores (TBB's default concurrency), as `--threads 0` does. Without a call OpenEXR does
+/// it on the calling thread alone: a quarter of a 640x480 view's run. The pool is OpenEXR's and
+/// process-wide, so only an executable's main or command calls this, never a library; the bytes
+/// written do not depend on it. Throws InputError for a count outside [0, 4096].
+void setExrThreads(int threads);
+
 /// Reads every channel of an EXR (any pixel type, converted to float; the data window is read
 /// as a whole, top row first). Throws InputError naming `path` for a missing, truncated or
 /// corrupt file, or an image larger than 2^28 pixels.

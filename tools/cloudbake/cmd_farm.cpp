@@ -12,6 +12,7 @@
 
 #include "core/error.h"
 #include "core/format.h"
+#include "core/io/exr_io.h"
 #include "core/job/bake_cache.h"
 #include "core/job/file_util.h"
 #include "core/job/task_plan.h"
@@ -45,6 +46,7 @@ std::unique_ptr<tbb::global_control> limitThreads(int threads) {
                      std::to_string(threads));
   }
   if (threads == 0) return nullptr;
+  setExrThreads(threads);
   return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                size_t(threads));
 }

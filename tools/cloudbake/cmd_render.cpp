@@ -19,6 +19,7 @@
 
 #include "core/error.h"
 #include "core/format.h"
+#include "core/io/exr_io.h"
 #include "core/job/run_shot.h"
 #include "core/methods/registry.h"
 #include "core/shot/shot_parser.h"
@@ -154,6 +155,7 @@ std::vector<std::string> render(const RenderOptions& opt) {
   if (opt.threads > 0) {
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                   static_cast<size_t>(opt.threads));
+    setExrThreads(opt.threads);
   }
   const ShotSpec shot = parseShotFile(opt.shot);
   checkRunnable(shot, opt.shot);

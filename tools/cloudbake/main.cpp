@@ -7,6 +7,7 @@
 
 #include "common/cli_suggest.h"
 #include "common/exit_codes.h"
+#include "core/io/exr_io.h"
 #include "tools/cloudbake/commands.h"
 
 namespace {
@@ -44,6 +45,9 @@ int main(int argc, char** argv) {
   addTranscodeCommand(app, &exit_code);
 
   try {
+    // Every command that writes or reads an EXR compresses its line blocks on all cores;
+    // `render` and `farm run-task` narrow this to their --threads.
+    cloudbake::setExrThreads(0);
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     std::vector<std::string> commands;

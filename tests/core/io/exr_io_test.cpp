@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "core/error.h"
@@ -70,6 +71,38 @@ TEST(ExrIo, OverwriteIsAtomicAndLeavesNoTempFiles) {
     EXPECT_EQ(entry.path().string().find(path + ".tmp"), std::string::npos) << entry.path();
   }
   std::remove(path.c_str());
+}
+
+std::string fileBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// OpenEXR compresses the line blocks on its pool and writes them in order: the file must not
+// depend on how many threads did it (a cache key hashes outputs, and users diff them).
+TEST(ExrIo, SameBytesWhateverTheCompressionThreads) {
+  const Image beauty = pattern(97, 83, 4, 0.f);  // 6 blocks of 16 lines, the last one short
+  const Image sun = pattern(97, 83, 3, 50.f);
+  std::string bytes[3];
+  const int threads[3] = {1, 4, 0};
+  for (int i = 0; i < 3; ++i) {
+    setExrThreads(threads[i]);
+    const std::string path = tempPath("threads" + std::to_string(i) + ".exr");
+    writeExr(path, {{"", beauty}, {"sun", sun}});
+    bytes[i] = fileBytes(path);
+    const ExrContents in = readExr(path);
+    EXPECT_EQ(in.layers.at("sun").data, sun.data) << threads[i] << " threads";
+    std::remove(path.c_str());
+  }
+  setExrThreads(1);
+  ASSERT_GT(bytes[0].size(), 1000u);
+  EXPECT_EQ(bytes[1], bytes[0]);
+  EXPECT_EQ(bytes[2], bytes[0]);
+}
+
+TEST(ExrIo, ThreadCountOutsideItsRangeIsAnInputError) {
+  EXPECT_THROW(setExrThreads(-1), InputError);
+  EXPECT_THROW(setExrThreads(4097), InputError);
 }
 
 TEST(ExrIo, GreyImageReadsAsRgb) {
