@@ -196,12 +196,17 @@ class PathtraceMethod final : public BakeMethod {
                                                ? cachedView(run, i, render, &from_cache)
                                                : renderLayersToExr(render(run.scene().sun));
       if (!run.hasCache()) ++run.result().views_rendered;
+      const auto t_write = std::chrono::steady_clock::now();
       run.writeView(camera.name, camera, layers,
                     {{"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
                      {"cloudbake:seed", std::to_string(pt.seed)}});
+      const double write_s = secondsSince(t_write);
       RunResult& r = run.result();
-      r.steps.push_back(
-          {"view", camera.name, -1, secondsSince(t0), {{"cached", from_cache ? 1.0 : 0.0}}});
+      r.steps.push_back({"view",
+                         camera.name,
+                         -1,
+                         secondsSince(t0),
+                         {{"cached", from_cache ? 1.0 : 0.0}, {"write", write_s}}});
       const std::string how = !from_cache ? ": rendered in "
                               : r.views_reused_direction > 0
                                   ? ": from the cached bake of a sun direction " +

@@ -188,6 +188,10 @@ TEST_F(RenderCli, StatsJsonHasCountersStepsAndPeakMemory) {
     kinds.insert(step.at("step").get<std::string>());
     EXPECT_GE(step.at("seconds").get<double>(), 0.0);
     sum += step.at("seconds").get<double>();
+    if (step.at("step") == "view") {  // writing the EXR is a part of the view's seconds
+      EXPECT_GT(step.at("write").get<double>(), 0.0);
+      EXPECT_LE(step.at("write").get<double>(), step.at("seconds").get<double>());
+    }
   }
   EXPECT_EQ(kinds, (std::set<std::string>{"volume", "bake", "view"}));
   EXPECT_LE(sum, s.at("seconds").get<double>() + 1e-6);  // steps are parts of the run
