@@ -359,7 +359,6 @@ int transcodeVdbChild(const char* in, const char* out) {
   }
 }
 
-/// Opens the state folder, serves until SIGINT/SIGTERM; returns the exit code.
 // Jobs write their EXRs after rendering, so OpenEXR's compression threads take the cores the
 // job's arena has finished with.
 bool startExrThreads(unsigned worker_threads) {
@@ -389,6 +388,7 @@ cloudbake::JobManagerOptions jobOptionsFor(const ServerFlags& f) {
   return o;
 }
 
+/// Opens the state folder, serves until SIGINT/SIGTERM; returns the exit code.
 int serve(const ServerFlags& f) {
   cloudbake::JobManagerOptions o = jobOptionsFor(f);
   cloudbake::server::ServerMetrics metrics;

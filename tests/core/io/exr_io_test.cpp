@@ -79,7 +79,7 @@ std::string fileBytes(const std::string& path) {
 }
 
 // OpenEXR compresses the line blocks on its pool and writes them in order: the file must not
-// depend on how many threads did it (a cache key hashes outputs, and users diff them).
+// depend on how many threads did it, so a shot gives the same bytes on any machine.
 TEST(ExrIo, SameBytesWhateverTheCompressionThreads) {
   const Image beauty = pattern(97, 83, 4, 0.f);  // 6 blocks of 16 lines, the last one short
   const Image sun = pattern(97, 83, 3, 50.f);
