@@ -162,8 +162,9 @@ class ShotRun final : public MethodRun {
     return cloudbake::viewKeyAt(keys_, size_t(view), d);
   }
 
-  void writeView(const std::string& stem, const Camera& camera, const std::vector<ExrLayer>& layers,
-                 const std::map<std::string, std::string>& attributes) override;
+  double writeView(const std::string& stem, const Camera& camera,
+                   const std::vector<ExrLayer>& layers,
+                   const std::map<std::string, std::string>& attributes) override;
   void writeOutput(const std::string& name,
                    const std::function<void(const std::string& path)>& write) override {
     write((fs::path(opt_.out_dir) / name).string());
@@ -310,9 +311,10 @@ std::string ShotRun::cached(const std::string& key,
       [&] { return opt_.progress && !opt_.progress(at); });
 }
 
-void ShotRun::writeView(const std::string& stem, const Camera& camera,
-                        const std::vector<ExrLayer>& layers,
-                        const std::map<std::string, std::string>& attributes) {
+double ShotRun::writeView(const std::string& stem, const Camera& camera,
+                          const std::vector<ExrLayer>& layers,
+                          const std::map<std::string, std::string>& attributes) {
+  const auto t0 = std::chrono::steady_clock::now();
   std::map<std::string, std::string> header = {
       {"cloudbake:shot", shot_.name},
       {"cloudbake:view", camera.name},
@@ -340,6 +342,7 @@ void ShotRun::writeView(const std::string& stem, const Camera& camera,
   writeExr(path, layers, header, matrices);
   result_.files.push_back(describeOutput(opt_.out_dir, name));
   if (opt_.png) addPreview(opt_, stem, path, result_);
+  return secondsSince(t0);
 }
 
 }  // namespace

@@ -268,13 +268,12 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
     const auto t0 = std::chrono::steady_clock::now();
     RenderLayers layers = renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
                                          [&](double f) { return run.poll(v0 + (v1 - v0) * f, f); });
-    const auto t_write = std::chrono::steady_clock::now();
-    run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)),
-                  {{"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
-                   {"cloudbake:seed", std::to_string(ro.seed)}});
+    const double write_s =
+        run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)),
+                      {{"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
+                       {"cloudbake:seed", std::to_string(ro.seed)}});
     ++run.result().views_from_bake;
-    run.result().steps.push_back(
-        {"view", camera.name, -1, secondsSince(t0), {{"write", secondsSince(t_write)}}});
+    run.result().steps.push_back({"view", camera.name, -1, secondsSince(t0), {{"write", write_s}}});
     run.poll(v1, 1);
     run.report("render", v1, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s",
                camera.name);

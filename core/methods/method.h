@@ -104,10 +104,10 @@ class MethodRun {
   virtual std::string viewKeyAt(int view, const Vec3& direction) = 0;
 
   /// Writes DIR/<stem>.exr with the run's common header attributes plus `attributes`, and its
-  /// PNG preview when asked.
-  virtual void writeView(const std::string& stem, const Camera& camera,
-                         const std::vector<ExrLayer>& layers,
-                         const std::map<std::string, std::string>& attributes) = 0;
+  /// PNG preview when asked. Returns the seconds it took: a view's `write` in the run's steps.
+  virtual double writeView(const std::string& stem, const Camera& camera,
+                           const std::vector<ExrLayer>& layers,
+                           const std::map<std::string, std::string>& attributes) = 0;
   /// DIR/<name> written by `write(path)`, or copied from `from` (a cache entry's file).
   virtual void writeOutput(const std::string& name,
                            const std::function<void(const std::string& path)>& write) = 0;

@@ -196,11 +196,10 @@ class PathtraceMethod final : public BakeMethod {
                                                ? cachedView(run, i, render, &from_cache)
                                                : renderLayersToExr(render(run.scene().sun));
       if (!run.hasCache()) ++run.result().views_rendered;
-      const auto t_write = std::chrono::steady_clock::now();
-      run.writeView(camera.name, camera, layers,
-                    {{"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
-                     {"cloudbake:seed", std::to_string(pt.seed)}});
-      const double write_s = secondsSince(t_write);
+      const double write_s =
+          run.writeView(camera.name, camera, layers,
+                        {{"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
+                         {"cloudbake:seed", std::to_string(pt.seed)}});
       RunResult& r = run.result();
       r.steps.push_back({"view",
                          camera.name,

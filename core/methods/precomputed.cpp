@@ -286,16 +286,16 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
     RenderLayers layers =
         renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
                        [&](double fr) { return run.poll(progress.at(f, 1 + i + fr), fr); });
-    const auto t_write = std::chrono::steady_clock::now();
-    run.writeView(frameStem(camera.name, f), camera, renderLayersToExr(std::move(layers)),
-                  {{"cloudbake:frame", std::to_string(f)},
-                   {"cloudbake:blend",
-                    std::to_string(bf.a) + " " + std::to_string(bf.b) + " " + std::to_string(bf.w)},
-                   {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
-                   {"cloudbake:seed", std::to_string(ro.seed)}});
+    const double write_s =
+        run.writeView(frameStem(camera.name, f), camera, renderLayersToExr(std::move(layers)),
+                      {{"cloudbake:frame", std::to_string(f)},
+                       {"cloudbake:blend", std::to_string(bf.a) + " " + std::to_string(bf.b) + " " +
+                                               std::to_string(bf.w)},
+                       {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
+                       {"cloudbake:seed", std::to_string(ro.seed)}});
     ++run.result().views_from_bake;
     run.result().steps.push_back(
-        {"view", camera.name, f, secondsSince(t_view), {{"write", secondsSince(t_write)}}});
+        {"view", camera.name, f, secondsSince(t_view), {{"write", write_s}}});
     run.report("render", progress.at(f, 2 + i),
                "frame " + std::to_string(f) + ", view '" + camera.name + "' " +
                    std::to_string(camera.width_px) + "x" + std::to_string(camera.height_px) +
