@@ -16,6 +16,7 @@
 #include "core/format.h"
 #include "core/math/parallel.h"
 #include "core/math/rng.h"
+#include "core/math/rounding.h"
 #include "core/math/sampling.h"
 #include "core/math/sh_basis.h"
 #include "core/math/spherical_harmonics.h"
@@ -132,7 +133,7 @@ class PhotonTally {
   void add(size_t v, const double* sums) {
     int64_t* out = &counts_[v * size_t(ncoef_) * size_t(channels_)];
     for (int k = 0; k < ncoef_ * channels_; ++k) {
-      const int64_t q = std::llround(std::clamp(sums[k] * kFixedScale, -4e18, 4e18));
+      const int64_t q = roundHalfAway(std::clamp(sums[k] * kFixedScale, -4e18, 4e18));
       if (q != 0) __atomic_fetch_add(&out[k], q, __ATOMIC_RELAXED);
     }
   }
