@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <optional>
 
 #include "core/bake/bake_lattice.h"
@@ -131,11 +133,28 @@ class PhotonTally {
   /// of length x Y_i) to voxel v, rounded to the fixed point: integer sums are exact, so their
   /// order (the thread schedule) is moot.
   void add(size_t v, const double* sums) {
-    int64_t* out = &counts_[v * size_t(ncoef_) * size_t(channels_)];
-    for (int k = 0; k < ncoef_ * channels_; ++k) {
-      const int64_t q = roundHalfAway(std::clamp(sums[k] * kFixedScale, -4e18, 4e18));
-      if (q != 0) __atomic_fetch_add(&out[k], q, __ATOMIC_RELAXED);
+    const int width = ncoef_ * channels_;
+    int64_t q[kMaxWidth];
+    bool any = false;
+    for (int k = 0; k < width; ++k) {
+      q[k] = roundHalfAway(std::clamp(sums[k] * kFixedScale, -4e18, 4e18));
+      any |= q[k] != 0;
     }
+    if (!any) return;
+    // One lock per voxel's record, not one atomic add per value: the locked adds were three
+    // quarters of a sky photon's tracing (`perf annotate`, issue 18). The sums are the same.
+    int64_t* out = &counts_[v * size_t(width)];
+    std::lock_guard<std::mutex> hold(locks_[v % kLocks]);
+    for (int k = 0; k < width; ++k) out[k] += q[k];
+  }
+
+  /// Asks for voxel v's record ahead of add(v): the tally is tens of MB read at random, and a
+  /// record's cache misses were most of add's time (`perf annotate`, issue 18).
+  void prefetch(size_t v) const {
+    const size_t width = size_t(ncoef_) * size_t(channels_);
+    const char* first = reinterpret_cast<const char*>(&counts_[v * width]);
+    const char* end = first + width * sizeof(int64_t);
+    for (const char* p = first; p < end; p += 64) __builtin_prefetch(p, 1);
   }
 
   /// Writes the radiance coefficients (sum of weight x length x Y_i / voxel volume / photons'
@@ -203,6 +222,10 @@ class PhotonTally {
   Vec3 axis_;
   double photon_weight_;
   std::vector<int64_t> counts_;
+  // Voxel v's record is written under locks_[v % kLocks]: enough locks that threads rarely meet.
+  static constexpr size_t kLocks = 1024;
+  static constexpr int kMaxWidth = (shCount(kMaxShDegree) + kMaxZonalDegree) * 3;
+  std::unique_ptr<std::mutex[]> locks_{new std::mutex[kLocks]};
 };
 
 /// One photon's segments added to a PhotonTally: summed in doubles per voxel, a few voxels at a
@@ -256,6 +279,7 @@ class TallyWriter {
       if (voxel_[k] != kEmpty) tally_->add(voxel_[k], s);
       std::fill(s, s + width_, 0.0);
       voxel_[k] = voxel;
+      tally_->prefetch(voxel);
     }
     return s;
   }
