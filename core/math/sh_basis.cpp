@@ -53,6 +53,9 @@ void shBasisUpTo(int degree, const Vec3& w, double* y) {
   double pmm = 1;
   for (int m = 0; m <= degree; ++m) {
     if (m > 0) pmm *= (2 * m - 1) * s;
+    // Once per order m, not per degree: libm's sincos was 4-8 % of a photon bake (`perf`).
+    const double cos_m = m > 0 ? std::cos(m * phi) : 1.0;
+    const double sin_m = m > 0 ? std::sin(m * phi) : 0.0;
     double p_prev = 0, p = pmm;
     for (int l = m; l <= degree; ++l) {
       if (l == m + 1) {
@@ -67,8 +70,8 @@ void shBasisUpTo(int degree, const Vec3& w, double* y) {
       if (m == 0) {
         y[l * l + l] = k * p;
       } else {
-        y[l * l + l + m] = std::sqrt(2.0) * k * std::cos(m * phi) * p;
-        y[l * l + l - m] = std::sqrt(2.0) * k * std::sin(m * phi) * p;
+        y[l * l + l + m] = std::sqrt(2.0) * k * cos_m * p;
+        y[l * l + l - m] = std::sqrt(2.0) * k * sin_m * p;
       }
     }
   }
