@@ -102,7 +102,13 @@ class PhotonTally {
         channels_(channels),
         axis_(axis),
         photon_weight_(photon_weight),
-        counts_(grid.voxelCount() * size_t(ncoef_) * size_t(channels), 0) {}
+        counts_(grid.voxelCount() * size_t(ncoef_) * size_t(channels), 0) {
+    // add() rounds a record on the stack; validate() keeps order and zonal_order within it.
+    if (ncoef_ * channels_ > kMaxWidth) {
+      throw InputError("photon tally: " + str(ncoef_) + " coefficients x " + str(channels_) +
+                       " channels exceed " + str(kMaxWidth));
+    }
+  }
 
   const BakeGrid& grid() const { return grid_; }
   int order() const { return order_; }
