@@ -24,12 +24,19 @@ constexpr double kHeavyTailMargin = 1.75;
 constexpr double kModelMargin = 1.25;
 constexpr double kPhotonMargin = 1.1;
 constexpr double kPhotonWorstFactor = 2.25;
-// Seconds per ray of a view rendered from a bake per coefficient it reads: bench/photon_bench.py's
-// views took 3-6.5 us per ray with 37 coefficients (order 3, zonal 24) on two cores.
-constexpr double kViewSecondsPerCoefficient = 2.4e-6 / 16.0;
-// Seconds of one photon over those of one pilot path through the cloud: 0.6-1.6 on the five
-// bench scenes (bench/photon_bench.py's bake times at 4M photons against their pilots).
-constexpr double kPhotonPerPath = 1.2;
+// Seconds per ray of a view rendered from a bake per coefficient it reads: bench/trade_curve.py's
+// photon views at 256x192 took 0.031-0.091 us per ray and coefficient (1.3-4.1 us per ray with
+// 37-45 coefficients) on two cores, their writing apart.
+constexpr double kViewSecondsPerCoefficient = 6e-8;
+// Seconds per pixel of writing a view's EXR (22 float channels, ZIP, on every core), whatever
+// made it: 0.64-1.48 us measured at 256x192 and 0.75-0.8 at 640x480 on two cores.
+constexpr double kWriteSecondsPerPixel = 0.8e-6;
+// Seconds of one photon over those of one pilot path through the cloud: 0.16-0.68 on the five
+// bench scenes at 524288 and 2M photons (bench/auto_cost_fit.py; the thin layer, whose paths are
+// short, the highest), median 0.33; their upper quartile, so that a plan more often overstates
+// a bake's time than understates it. 1.2 before photon's bake stopped adding its tallies
+// atomically (issue 18), against 0.6-1.6 measured then.
+constexpr double kPhotonPerPath = 0.43;
 // Phase functions peakier than this (HG 0.85 is 21) and not split by photon (HG 0.9 is not,
 // droplets are) are outside what photon's error was measured on.
 constexpr double kPhotonMaxSpikiness = 50;
@@ -64,8 +71,8 @@ AutoCandidate singleCandidate(const SceneTraits& traits, const PilotMeasure& pil
   // its two views, 2.9 on the one against the sun).
   const double missing = std::max(pilot.multiple_fraction, pilot.multiple_rms);
   c.error = kModelMargin * std::hypot(missing, bias);
-  c.seconds =
-      latticeSeconds(resolution) * (traits.sky ? 2.0 : 1.0) + traits.pixels * c.samples * 1.5e-6;
+  c.seconds = latticeSeconds(resolution) * (traits.sky ? 2.0 : 1.0) +
+              traits.pixels * (c.samples * 1.5e-6 + kWriteSecondsPerPixel);
   c.why = "multiple scattering carries " + fixed(100 * pilot.multiple_fraction, 1) +
           " % of the cloud's light in the pilot (" + fixed(100 * missing, 1) +
           " % as an RMS); the lattice's bias " + fixed(100 * bias, 1) + " %";
@@ -90,8 +97,9 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   c.seconds = latticeSeconds(rung.light_resolution) * (traits.sky ? 2.0 : 1.0) +
               photon_seconds * double(rung.photons) *
                   ((traits.sky ? 1.0 : 0.0) + (traits.sun ? 1.0 : 0.0)) +
-              traits.pixels * c.samples * kViewSecondsPerCoefficient *
-                  double(shCount(rung.order) + kZonalOrder - rung.order);
+              traits.pixels * (c.samples * kViewSecondsPerCoefficient *
+                                   double(shCount(rung.order) + kZonalOrder - rung.order) +
+                               kWriteSecondsPerPixel);
   c.why = "photon's error at these knobs was " + fixed(100 * rung.bunny_error, 1) +
           " % on the bunny scene and at most " + fixed(factor, 2) +
           " times that on the five bench scenes";
@@ -111,7 +119,7 @@ AutoCandidate pathtraceCandidate(const SceneTraits& traits, const PilotMeasure& 
   const int64_t spp = std::min(pathtraceSamplesFor(traits, pilot, tolerance), cap);
   c.samples = int(spp);
   c.error = pathtraceMargin(traits) * pilot.noise_1spp / std::sqrt(double(spp));
-  c.seconds = traits.pixels * double(spp) * pilot.seconds_per_sample;
+  c.seconds = traits.pixels * (double(spp) * pilot.seconds_per_sample + kWriteSecondsPerPixel);
   c.why = "the pilot's noise is " + fixed(pilot.noise_1spp, 3) + " at one path per pixel, " +
           fixed(1e6 * pilot.seconds_per_sample, 2) + " us per path";
   return c;

@@ -232,7 +232,9 @@ MethodPlan lightBakePlan(const ShotSpec& shot, const ShotCacheKeys& keys,
   return plan;
 }
 
-double latticeSeconds(int64_t resolution) { return 1.3e-6 * 0.5 * std::pow(double(resolution), 3); }
+double latticeSeconds(int64_t resolution) {
+  return 0.04 + 1.0e-7 * 0.5 * std::pow(double(resolution), 3);
+}
 
 void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& work) {
   const ShotSpec& shot = run.shot();

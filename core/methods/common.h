@@ -71,9 +71,11 @@ struct LightBakeWork {
   double view_seconds_per_ray = 1.5e-6;
 };
 
-/// The predicted seconds of a bake lattice of `resolution` voxels along the longest side: its
-/// sun transmittance and sky visibility (about 1.3 us per voxel of the lattice's box; measured
-/// on the Perlin example, which fills half of it).
+/// The predicted seconds of one pass over a bake lattice of `resolution` voxels along the longest
+/// side (the sun's transmittance; a sky's visibility is a second): 0.04 s and 0.1 us per voxel of
+/// half the lattice's cube, fitted by bench/auto_cost_fit.py to `single` bakes of the five bench
+/// scenes at 64-256 voxels on two cores (0.007-0.6 us measured; the lattice's box is half empty
+/// on them, and below a grid's own resolution the lattice is its voxels).
 double latticeSeconds(int64_t resolution);
 
 /// The run of a light-baking method: the bake from the cache (or a cached bake of a sun
