@@ -29,7 +29,7 @@ sky and a black sun). The bunny and Disney scenes need ../shared/data and are sk
 
 Usage: bench/photon_bench.py [--build build] [--threads 2] [--res 160] [--ref-spp 1024]
                              [--samples 16] [--scenes perlin,bunny,disney,thin,cumulus]
-                             [--sweep default|order|zonal|lattice|quick|far] [--work DIR]
+                             [--sweep default|order|zonal|lattice|quick|far|fine] [--work DIR]
 """
 import argparse
 import json
@@ -61,6 +61,9 @@ SWEEPS = {
     # Further along the curve, for the dense scenes (Disney, cumulus): a finer transmittance
     # lattice and tallies, then 4x the photons on them.
     "far": [(1 << 22, 4, 320, 96, 24), (1 << 24, 4, 320, 96, 24)],
+    # Towards 2 % on the scenes whose error at 4M photons is mostly the tallies' noise (the thin
+    # layer): 16M photons on the default ladder's last lattices, then on finer ones.
+    "fine": [(1 << 24, 4, 192, 48, 24), (1 << 24, 4, 256, 64, 24)],
 }
 
 

@@ -28,7 +28,8 @@ once, and writes
 
 Usage: /usr/bin/python3 bench/trade_curve.py [--build build] [--threads 2] [--res 80]
            [--ref-spp 8192 | --ref-spp disney=16384,...,8192] [--view-samples 16]
-           [--scenes perlin,bunny,disney,thin,cumulus] [--work DIR] [--plot-dir docs/images]
+           [--scenes perlin,bunny,disney,thin,cumulus] [--photon-sweep default[,fine]]
+           [--work DIR] [--plot-dir docs/images]
            [--json-out FILE]
 References are cached under WORK/ref/ and reused: render them where cores are many with
 bench/photon_bench.py's names (SCENE-RES-SPP-SEED), then point --work at them.
@@ -48,9 +49,9 @@ FULL_PIXELS = 640 * 480
 VIEWS = 4
 
 
-def configs(samples):
+def configs(samples, photon_sweeps=("default",)):
     """(method, quality, bake, output folder name); photon's names are photon_bench's. Views
-    from a bake trace `samples` rays per pixel."""
+    from a bake trace `samples` rays per pixel; photon runs photon_bench's `photon_sweeps`."""
     out = []
     for spp in (4, 16, 64, 256):
         out.append(("pathtrace", "%d spp" % spp, {"method": "pathtrace", "samples": spp,
@@ -65,7 +66,8 @@ def configs(samples):
                     {"method": "pointcloud", "points": points, "light_resolution": lattice,
                      "samples": samples},
                     "pointcloud-%d" % points + ("" if lattice == 128 else "-%d" % lattice)))
-    for photons, order, lattice, tally, zonal in pb.SWEEPS["default"]:
+    rungs = [r for name in photon_sweeps for r in pb.SWEEPS[name]]
+    for photons, order, lattice, tally, zonal in rungs:
         out.append(("photon", "%d photons, order %d, %d/%d" % (photons, order, lattice, tally),
                     {"method": "photon", "photons": photons, "order": order,
                      "light_resolution": lattice, "tally_resolution": tally,
@@ -191,7 +193,7 @@ def measure_scene(cloudbake, scene, args):
             flush=True)
         return None
     points = []
-    for method, quality, bake, name in configs(args.view_samples):
+    for method, quality, bake, name in configs(args.view_samples, args.photon_sweeps):
         s = json.loads(json.dumps(shot))
         s["bake"] = bake
         out = os.path.join(args.work, scene, name)
@@ -220,6 +222,9 @@ def main():
     # about the rays of a 640x480 image.
     ap.add_argument("--view-samples", type=int, default=16,
                     help="rays per pixel of the views from a bake")
+    ap.add_argument("--photon-sweep", default="default",
+                    help="photon's rungs: photon_bench sweeps, comma-separated (default; "
+                    "default,fine adds 16M photons for 2 %%)")
     ap.add_argument("--cloud-alpha", type=float, default=0.05)
     ap.add_argument("--scenes", default="perlin,bunny,disney,thin,cumulus")
     ap.add_argument("--work", default=None)
@@ -231,6 +236,10 @@ def main():
     args = ap.parse_args()
     if args.view_samples < 1:
         ap.error("--view-samples must be at least 1")
+    args.photon_sweeps = tuple(args.photon_sweep.split(","))
+    for name in args.photon_sweeps:
+        if name not in pb.SWEEPS:
+            ap.error("--photon-sweep: %r is not one of %s" % (name, ", ".join(sorted(pb.SWEEPS))))
     args.work = args.work or tempfile.mkdtemp(prefix="trade_curve.")
     cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
                                                             "cloudbake")
