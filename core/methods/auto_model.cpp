@@ -47,6 +47,9 @@ constexpr double kAureoleSlope = 0.03;
 // The zonal terms of the photon candidates: photon's default, which auto leaves as it is.
 const int kZonalOrder = PhotonBakeOptions{}.zonal_order;
 
+// Writing every view's EXR: the same for every candidate.
+double writeSeconds(const SceneTraits& traits) { return traits.pixels * kWriteSecondsPerPixel; }
+
 // Rays per pixel of a view from a bake. The bakes' errors were measured at 80x60 with 16 rays
 // per pixel, as the reference averages over each pixel (one ray through the centre would count
 // thin edges' aliasing as error); the same rays per unit of image keep that error at any size:
@@ -72,7 +75,7 @@ AutoCandidate singleCandidate(const SceneTraits& traits, const PilotMeasure& pil
   const double missing = std::max(pilot.multiple_fraction, pilot.multiple_rms);
   c.error = kModelMargin * std::hypot(missing, bias);
   c.seconds = latticeSeconds(resolution) * (traits.sky ? 2.0 : 1.0) +
-              traits.pixels * (c.samples * 1.5e-6 + kWriteSecondsPerPixel);
+              traits.pixels * c.samples * 1.5e-6 + writeSeconds(traits);
   c.why = "multiple scattering carries " + fixed(100 * pilot.multiple_fraction, 1) +
           " % of the cloud's light in the pilot (" + fixed(100 * missing, 1) +
           " % as an RMS); the lattice's bias " + fixed(100 * bias, 1) + " %";
@@ -97,9 +100,9 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   c.seconds = latticeSeconds(rung.light_resolution) * (traits.sky ? 2.0 : 1.0) +
               photon_seconds * double(rung.photons) *
                   ((traits.sky ? 1.0 : 0.0) + (traits.sun ? 1.0 : 0.0)) +
-              traits.pixels * (c.samples * kViewSecondsPerCoefficient *
-                                   double(shCount(rung.order) + kZonalOrder - rung.order) +
-                               kWriteSecondsPerPixel);
+              traits.pixels * c.samples * kViewSecondsPerCoefficient *
+                  double(shCount(rung.order) + kZonalOrder - rung.order) +
+              writeSeconds(traits);
   c.why = "photon's error at these knobs was " + fixed(100 * rung.bunny_error, 1) +
           " % on the bunny scene and at most " + fixed(factor, 2) +
           " times that on the five bench scenes";
@@ -119,7 +122,7 @@ AutoCandidate pathtraceCandidate(const SceneTraits& traits, const PilotMeasure& 
   const int64_t spp = std::min(pathtraceSamplesFor(traits, pilot, tolerance), cap);
   c.samples = int(spp);
   c.error = pathtraceMargin(traits) * pilot.noise_1spp / std::sqrt(double(spp));
-  c.seconds = traits.pixels * (double(spp) * pilot.seconds_per_sample + kWriteSecondsPerPixel);
+  c.seconds = traits.pixels * double(spp) * pilot.seconds_per_sample + writeSeconds(traits);
   c.why = "the pilot's noise is " + fixed(pilot.noise_1spp, 3) + " at one path per pixel, " +
           fixed(1e6 * pilot.seconds_per_sample, 2) + " us per path";
   return c;
