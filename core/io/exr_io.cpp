@@ -182,6 +182,23 @@ std::pair<int, std::string> channelOrder(const std::string& base) {
   return {5, base};
 }
 
+Imf::Compression toImf(ExrCompression c) {
+  switch (c) {
+    case ExrCompression::kNone:
+      return Imf::NO_COMPRESSION;
+    case ExrCompression::kRle:
+      return Imf::RLE_COMPRESSION;
+    case ExrCompression::kZips:
+      return Imf::ZIPS_COMPRESSION;
+    case ExrCompression::kZip:
+      return Imf::ZIP_COMPRESSION;
+    case ExrCompression::kPiz:
+      return Imf::PIZ_COMPRESSION;
+  }
+  throw InputError("EXR compression " + std::to_string(int(c)) + " is not one of " +
+                   exrCompressionNamesList());
+}
+
 // Before Imf::InputFile sizes anything from an untrusted header (the fuzzing section of
 // docs/api.md).
 void checkExrHeader(const std::string& path) {
@@ -205,7 +222,7 @@ void checkExrHeader(const std::string& path) {
 
 void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
               const std::map<std::string, std::string>& attributes,
-              const std::map<std::string, ExrMatrix>& matrices) {
+              const std::map<std::string, ExrMatrix>& matrices, ExrCompression compression) {
   if (layers.empty()) throw InputError(path + ": no layers to write");
   const int width = layers.front().image.width, height = layers.front().image.height;
   if (width <= 0 || height <= 0) throw InputError(path + ": image has zero size");
@@ -228,7 +245,7 @@ void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
   }
 
   Imf::Header header(width, height);
-  header.compression() = Imf::ZIP_COMPRESSION;
+  header.compression() = toImf(compression);
   header.insert("cloudbake:version", Imf::StringAttribute(CLOUDBAKE_VERSION));
   for (const auto& [key, value] : attributes) {
     if (key.empty()) throw InputError(path + ": empty attribute name");

@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/io/exr_compression.h"
 #include "core/io/image.h"
 
 namespace cloudbake {
@@ -36,7 +37,8 @@ struct ExrContents {
   std::map<std::string, ExrMatrix> matrices;
 };
 
-/// Writes a single-part scanline EXR with FLOAT pixels and ZIP compression. All layers must have
+/// Writes a single-part scanline EXR with FLOAT pixels, compressed losslessly with `compression`
+/// (ZIP unless given; the pixels read back the same whatever it is). All layers must have
 /// the same, non-zero size and distinct names. `attributes` are stored as string attributes, plus
 /// "cloudbake:version" (set automatically unless given). The write is atomic: the file is written
 /// next to `path` under a temporary name and renamed over `path`, so readers never see a partial
@@ -44,7 +46,8 @@ struct ExrContents {
 /// written.
 void writeExr(const std::string& path, const std::vector<ExrLayer>& layers,
               const std::map<std::string, std::string>& attributes = {},
-              const std::map<std::string, ExrMatrix>& matrices = {});
+              const std::map<std::string, ExrMatrix>& matrices = {},
+              ExrCompression compression = ExrCompression::kZip);
 
 /// Sets the threads OpenEXR compresses and decompresses an image's line blocks on; 0 means
 /// all cores (TBB's default concurrency), as `--threads 0` does. Without a call OpenEXR does

@@ -56,6 +56,18 @@ void makeOutputFolder(const std::string& dir) {
   }
 }
 
+// The shot's EXR compression. A shot built in code, not parsed, may carry any name: runShot
+// checks it before anything runs (checkRunnable), and writeView looks it up again.
+ExrCompression exrCompressionOf(const ShotSpec& shot, const std::string& source) {
+  const auto c = exrCompressionFromName(shot.outputs.exr_compression);
+  if (!c) {
+    throw InputError(source + ": /outputs/exr_compression: unknown EXR compression '" +
+                     shot.outputs.exr_compression + "' (known: " + exrCompressionNamesList() +
+                     "; lossless only)");
+  }
+  return *c;
+}
+
 // MethodRun over runShot's options: the cache, the volume cache, the direction index, the
 // output folder and the progress callback. The method's fraction of its work is the run's.
 class ShotRun final : public MethodRun {
@@ -339,7 +351,7 @@ double ShotRun::writeView(const std::string& stem, const Camera& camera,
   }
   const std::string name = stem + ".exr";
   const std::string path = (fs::path(opt_.out_dir) / name).string();
-  writeExr(path, layers, header, matrices);
+  writeExr(path, layers, header, matrices, exrCompressionOf(shot_, opt_.source));
   result_.files.push_back(describeOutput(opt_.out_dir, name));
   if (opt_.png) addPreview(opt_, stem, path, result_);
   return secondsSince(t0);
@@ -363,6 +375,7 @@ void checkRunnable(const ShotSpec& shot, const std::string& source) {
     throw InputError(source + ": /volume/sequence: animated volumes are rendered by method " +
                      "'precomputed' only, not '" + info.name + "'");
   }
+  exrCompressionOf(shot, source);
 }
 
 namespace {

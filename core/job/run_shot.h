@@ -68,8 +68,9 @@ struct RunOptions {
 /// a samples override, shared by the CLI, runShot and the server.
 void checkSamplesOverride(int samples, const std::string& field);
 
-/// Throws InputError when the shot's method or volume is not implemented by runShot yet
-/// (methods precomputed and auto; animated volumes).
+/// Throws InputError when runShot cannot run the shot as given: a method that is not runnable,
+/// an animated volume for a method that does not animate, or an EXR compression that is not
+/// one of kExrCompressionNames (a shot built in code rather than parsed).
 void checkRunnable(const ShotSpec& shot, const std::string& source = "shot.json");
 
 /// Renders every view (when outputs.exr) to out_dir/<view>.exr — beauty RGBA unprefixed plus

@@ -86,6 +86,8 @@ struct OutputSpec {
   bool exr = true;            ///< DIR/<view>.exr per view
   bool vdb = false;           ///< DIR/bake.vdb
   double vdb_voxel_size = 0;  ///< world units; required for box/sphere volumes when vdb
+  /// Lossless compression of the EXRs: a name of kExrCompressionNames (core/io).
+  std::string exr_compression = "zip";
 };
 
 /// A whole shot, validated. `views` holds the cameras with their names and pixel sizes.

@@ -13,6 +13,7 @@
 #include <system_error>
 
 #include "core/format.h"
+#include "core/io/exr_compression.h"
 #include "core/methods/registry.h"
 #include "core/shot/json_reader.h"
 #include "core/shot/shot_sections.h"
@@ -283,6 +284,15 @@ OutputSpec parseOutputs(const Object& o) {
   if (auto* v = o.find("vdb_voxel_size")) {
     out.vdb_voxel_size = r.numberIn(*v, o.path("vdb_voxel_size"), 0, 1e12, true);
   }
+  if (auto* v = o.find("exr_compression")) {
+    const std::string ptr = o.path("exr_compression");
+    out.exr_compression = r.string(*v, ptr);
+    if (!exrCompressionFromName(out.exr_compression)) {
+      r.fail(ptr, "unknown EXR compression '" + out.exr_compression +
+                      "' (known: " + exrCompressionNamesList() + "; lossless only)");
+    }
+    if (!out.exr) r.fail(ptr, "applies only when /outputs/exr is true");
+  }
   return out;
 }
 
@@ -387,7 +397,8 @@ ShotSpec parseShot(const std::string& json_text, const std::string& base_dir,
   const Json* bake = root.find("bake");
   shot.bake = parseBake(Object(r, bake ? *bake : no_bake, "/bake"));
   if (auto* v = root.find("outputs")) {
-    shot.outputs = parseOutputs(Object(r, *v, "/outputs", {"exr", "vdb", "vdb_voxel_size"}));
+    shot.outputs = parseOutputs(
+        Object(r, *v, "/outputs", {"exr", "vdb", "vdb_voxel_size", "exr_compression"}));
   }
   if (auto* v = root.find("views")) {
     if (!v->is_array())

@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
+#include <optional>
 #include <string>
 
 #include "core/error.h"
@@ -98,6 +100,46 @@ TEST(ExrIo, SameBytesWhateverTheCompressionThreads) {
   ASSERT_GT(bytes[0].size(), 1000u);
   EXPECT_EQ(bytes[1], bytes[0]);
   EXPECT_EQ(bytes[2], bytes[0]);
+}
+
+// The compression OpenEXR's header records: the value byte of the attribute named and typed
+// "compression" (OpenEXR's file layout), or -1 when absent.
+int headerCompression(const std::string& bytes) {
+  static constexpr char kTag[] = "compression\0compression\0\1\0\0\0";  // name, type, size
+  const std::string tag(kTag, sizeof(kTag) - 1);
+  const size_t at = bytes.find(tag);
+  return at == std::string::npos ? -1 : int(uint8_t(bytes[at + tag.size()]));
+}
+
+TEST(ExrIo, EveryCompressionKeepsThePixels) {
+  const Image beauty = pattern(97, 83, 4, 0.f);
+  const Image sun = pattern(97, 83, 3, 50.f);
+  // OpenEXR's numbering of these compressions (ImfCompression.h), which the file stores.
+  const std::map<ExrCompression, int> on_file = {{ExrCompression::kNone, 0},
+                                                 {ExrCompression::kRle, 1},
+                                                 {ExrCompression::kZips, 2},
+                                                 {ExrCompression::kZip, 3},
+                                                 {ExrCompression::kPiz, 4}};
+  std::map<ExrCompression, size_t> sizes;
+  for (const ExrCompressionName& c : kExrCompressionNames) {
+    SCOPED_TRACE(std::string(c.name));
+    const std::string path = tempPath("compression-" + std::string(c.name) + ".exr");
+    writeExr(path, {{"", beauty}, {"sun", sun}}, {}, {}, c.value);
+    const std::string bytes = fileBytes(path);
+    EXPECT_EQ(headerCompression(bytes), on_file.at(c.value));
+    sizes[c.value] = bytes.size();
+    const ExrContents in = readExr(path);
+    EXPECT_EQ(in.layers.at("").data, beauty.data);
+    EXPECT_EQ(in.layers.at("sun").data, sun.data);
+    std::remove(path.c_str());
+    EXPECT_EQ(exrCompressionFromName(c.name), c.value);
+    EXPECT_EQ(exrCompressionName(c.value), c.name);
+  }
+  // Uncompressed holds every float: 7 channels of 97 x 83.
+  EXPECT_GT(sizes[ExrCompression::kNone], 7u * 4 * 97 * 83);
+  EXPECT_LT(sizes[ExrCompression::kZip], sizes[ExrCompression::kNone]);
+  EXPECT_EQ(exrCompressionFromName("dwaa"), std::nullopt);
+  EXPECT_EQ(exrCompressionFromName("ZIP"), std::nullopt);
 }
 
 TEST(ExrIo, ThreadCountOutsideItsRangeIsAnInputError) {

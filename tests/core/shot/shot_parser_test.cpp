@@ -179,7 +179,7 @@ TEST(ShotParser, CanonicalFormOfTheDesignExampleIsPinned) {
             R"("sun":{"direction":[0.0,0.0,1.0],"irradiance":[3.14159,3.14159,3.14159]}},)"
             R"("medium":{"albedo":[0.9,0.9,0.9],"extinction":2.0,)"
             R"("phase":{"g":0.75,"mie_ratio":1.0,"type":"hg"}},"name":"slab",)"
-            R"("outputs":{"exr":true,"vdb":false},"version":1,)"
+            R"("outputs":{"exr":true,"exr_compression":"zip","vdb":false},"version":1,)"
             R"("views":[{"camera":{"look_at":[0.0,0.0,0.0],"position":[0.0,0.0,10.0],)"
             R"("type":"orthographic","up":[0.0,1.0,0.0],"width":2.0},"name":"nadir",)"
             R"("resolution":[32,32]}],)"
@@ -194,7 +194,7 @@ TEST(ShotParser, EveryVariantRoundTripsThroughTheCanonicalForm) {
   const std::vector<std::function<void(json&)>> variants = {
       [](json& j) {
         j["volume"] = {{"sphere", {{"center", {1, 2, 3}}, {"radius", 2}, {"density", 0.5}}}};
-        j["outputs"] = {{"vdb", true}, {"vdb_voxel_size", 0.25}};
+        j["outputs"] = {{"vdb", true}, {"vdb_voxel_size", 0.25}, {"exr_compression", "piz"}};
       },
       [](json& j) {
         j["volume"] = {{"vdb", {{"path", "a.vdb"}, {"grid", "smoke"}}}};
@@ -632,6 +632,19 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
        "/outputs/vdb_voxel_size: only applies to box and sphere volumes"},
       {"output flag not a boolean", [](json& j) { j["outputs"]["exr"] = "yes"; },
        "/outputs/exr: must be true or false"},
+      {"a lossy or unknown EXR compression",
+       [](json& j) { j["outputs"]["exr_compression"] = "dwaa"; },
+       "/outputs/exr_compression: unknown EXR compression 'dwaa' (known: none, rle, zips, zip, "
+       "piz; lossless only)"},
+      {"an EXR compression that is not a string",
+       [](json& j) { j["outputs"]["exr_compression"] = 3; },
+       "/outputs/exr_compression: must be a string"},
+      {"an EXR compression without EXR outputs",
+       [](json& j) {
+         j["outputs"]["exr"] = false;
+         j["outputs"]["exr_compression"] = "piz";
+       },
+       "/outputs/exr_compression: applies only when /outputs/exr is true"},
       {"shot name with a space", [](json& j) { j["name"] = "my shot"; }, "/name: must be 1 to 128"},
       {"box of the wrong shape",
        [](json& j) {
