@@ -155,9 +155,16 @@ void runBakeSlice(const SliceOptions& opt) {
   double lo, hi;
   sliceRange(slice, opt.range, &lo, &hi);
   writeSlicePng(slice, lo, hi, opt.png);
-  std::cout << nlohmann::json{{"grid", opt.grid},           {"axis", opt.axis},
-                              {"index", slice.index},       {"min", lo <= hi ? lo : 0.0},
-                              {"max", lo <= hi ? hi : 0.0}, {"png", opt.png}}
+  // The lattice too, so that a script can give a knob in voxels of it (a view's `step`).
+  const BakeGrid& g = bake.grid;
+  std::cout << nlohmann::json{{"grid", opt.grid},
+                              {"axis", opt.axis},
+                              {"index", slice.index},
+                              {"min", lo <= hi ? lo : 0.0},
+                              {"max", lo <= hi ? hi : 0.0},
+                              {"png", opt.png},
+                              {"lattice", {g.nx, g.ny, g.nz}},
+                              {"voxel_size", g.voxel_size}}
                    .dump()
             << std::endl;
 }
@@ -169,7 +176,8 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code) {
   CLI::App* cmd = app.add_subcommand(
       "bake-slice",
       "Write a colour-mapped PNG of one slice through a grid of a bake (bake.vdb of methods "
-      "single and pointcloud); prints the slice's range as JSON");
+      "single and pointcloud); prints the slice's range, the lattice's voxels along each axis and "
+      "its voxel size in world units as JSON");
   cmd->add_option("bake", opt->bake, "the bake (.vdb)")->required();
   cmd->add_option("--grid", opt->grid, "grid name: density, sun_transmittance, mie_ratio, Co, ...")
       ->required();

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -290,6 +291,13 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   const json slice = json::parse(r.out);
   EXPECT_GE(slice.at("min").get<double>(), 0.0);
   EXPECT_LE(slice.at("max").get<double>(), 1.0);
+  // The lattice: 16 voxels along the sphere's diameter of 2, plus a voxel of margin each side.
+  const auto lattice = slice.at("lattice").get<std::vector<int>>();
+  ASSERT_EQ(lattice.size(), 3u);
+  EXPECT_EQ(*std::max_element(lattice.begin(), lattice.end()), 18);
+  const double voxel = slice.at("voxel_size").get<double>();
+  EXPECT_GE(16 * voxel, 2.0 - 1e-9);
+  EXPECT_LE(16 * voxel, 2.0 + 2 * voxel);
   EXPECT_GT(fs::file_size(dir_ / "r.png"), 100u);
   EXPECT_EQ(slurp(dir_ / "r.png").substr(1, 3), "PNG");
   r = run("bake-slice '" + bake + "' --grid Co --axis z --at 0.1 --png '" +
