@@ -26,7 +26,7 @@ class AutoMethod final : public BakeMethod {
     info_.citation =
         "cloudbake's own measured trade curves (2026; docs/methods.md, \"Method auto\"): the "
         "model and its fit; the methods it chooses cite their papers";
-    info_.version = 5;
+    info_.version = 6;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {
@@ -225,6 +225,7 @@ nlohmann::json AutoChoice::toJson() const {
             {"tau_voxel_128", traits.tau_voxel_128},
             {"views", traits.views},
             {"pixels", traits.pixels},
+            {"write_seconds_per_pixel", traits.write_seconds_per_pixel},
             {"frames", traits.frames}}},
           {"pilot",
            {{"noise_1spp", pilot.noise_1spp},

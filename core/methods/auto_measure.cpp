@@ -71,6 +71,7 @@ SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene) {
   if (shot.outputs.exr) {  // views are rendered only then
     t.views = int(shot.views.size());
     for (const Camera& c : shot.views) t.pixels += double(c.width_px) * c.height_px;
+    t.write_seconds_per_pixel = exrWriteSecondsPerPixel(shot.outputs.exr_compression);
   }
   if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
     t.sequence = true;

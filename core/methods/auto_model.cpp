@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/error.h"
 #include "core/format.h"
+#include "core/io/exr_compression.h"
 #include "core/math/sh_basis.h"
 #include "core/methods/common.h"
 #include "core/methods/photon.h"
@@ -28,9 +30,6 @@ constexpr double kPhotonWorstFactor = 2.25;
 // photon views at 256x192 took 0.031-0.091 us per ray and coefficient (1.3-4.1 us per ray with
 // 37-45 coefficients) on two cores, their writing apart.
 constexpr double kViewSecondsPerCoefficient = 6e-8;
-// Seconds per pixel of writing a view's EXR (22 float channels, ZIP, on every core), whatever
-// made it: 0.64-1.48 us measured at 256x192 and 0.75-0.8 at 640x480 on two cores.
-constexpr double kWriteSecondsPerPixel = 0.8e-6;
 // Seconds of one photon over those of one pilot path through the cloud: 0.16-0.68 on the five
 // bench scenes at 524288 and 2M photons (bench/auto_cost_fit.py; the thin layer, whose paths are
 // short, the highest), median 0.33; their upper quartile, so that a plan more often overstates
@@ -48,7 +47,9 @@ constexpr double kAureoleSlope = 0.03;
 const int kZonalOrder = PhotonBakeOptions{}.zonal_order;
 
 // Writing every view's EXR: the same for every candidate.
-double writeSeconds(const SceneTraits& traits) { return traits.pixels * kWriteSecondsPerPixel; }
+double writeSeconds(const SceneTraits& traits) {
+  return traits.pixels * traits.write_seconds_per_pixel;
+}
 
 // Rays per pixel of a view from a bake. The bakes' errors were measured at 80x60 with 16 rays
 // per pixel, as the reference averages over each pixel (one ray through the centre would count
@@ -129,6 +130,30 @@ AutoCandidate pathtraceCandidate(const SceneTraits& traits, const PilotMeasure& 
 }
 
 }  // namespace
+
+double exrWriteSecondsPerPixel(const std::string& compression) {
+  // bench/exr_compression.py's six pointcloud views at 640x480 on two cores: ZIP 0.15-0.38 s a
+  // view, 0.75-0.8 us a pixel in bench/trade_curve.py's views; the others scaled by their
+  // median write over ZIP's on the same views (none 0.54, rle 0.58, zips 0.99, piz 0.93).
+  constexpr double kZip = 0.8e-6;
+  const auto c = exrCompressionFromName(compression);
+  if (!c) {
+    throw InputError("/outputs/exr_compression: unknown EXR compression '" + compression + "'");
+  }
+  switch (*c) {
+    case ExrCompression::kNone:
+      return 0.54 * kZip;
+    case ExrCompression::kRle:
+      return 0.58 * kZip;
+    case ExrCompression::kZips:
+      return 0.99 * kZip;
+    case ExrCompression::kZip:
+      return kZip;
+    case ExrCompression::kPiz:
+      return 0.93 * kZip;
+  }
+  return kZip;
+}
 
 const std::vector<PhotonRung>& photonRungs() {
   // bench/photon_bench.py --res 80 --ref-spp 8192 (docs/methods.md), the bunny scene's column,

@@ -13,6 +13,10 @@
 namespace cloudbake {
 
 /// What the model reads of a scene before any bake.
+/// Seconds per pixel of writing a view's EXR (22 float channels, on every core of two) with
+/// the named compression (outputs.exr_compression); InputError for an unknown name.
+double exrWriteSecondsPerPixel(const std::string& compression);
+
 struct SceneTraits {
   double albedo = 1;           ///< the largest channel's single-scattering albedo
   double phase_spikiness = 0;  ///< V = 4 pi integral(p^2) - 1 (core/transport/sun_guiding.h)
@@ -28,6 +32,9 @@ struct SceneTraits {
   double tau_voxel_128 = 0;
   int views = 0;
   double pixels = 0;  ///< over every view
+  /// Seconds per pixel of writing a view's EXR at the shot's outputs.exr_compression
+  /// (exrWriteSecondsPerPixel).
+  double write_seconds_per_pixel = 0.8e-6;  // ZIP's
   bool sequence = false;
   int frames = 1;
 };

@@ -108,6 +108,25 @@ TEST(AutoModel, CandidatesMeetingTheToleranceComeFirstCheapestFirst) {
   EXPECT_EQ(c.front().method, "photon");
 }
 
+TEST(AutoModel, WritingFollowsTheCompressionAndLeavesTheChoice) {
+  EXPECT_LT(exrWriteSecondsPerPixel("none"), exrWriteSecondsPerPixel("rle"));
+  EXPECT_LT(exrWriteSecondsPerPixel("rle"), exrWriteSecondsPerPixel("piz"));
+  EXPECT_LT(exrWriteSecondsPerPixel("piz"), exrWriteSecondsPerPixel("zip"));
+  EXPECT_EQ(exrWriteSecondsPerPixel("zip"), SceneTraits{}.write_seconds_per_pixel);
+  EXPECT_THROW(exrWriteSecondsPerPixel("dwaa"), InputError);
+  SceneTraits zip = traitsOf(0.1), none = zip;
+  none.write_seconds_per_pixel = exrWriteSecondsPerPixel("none");
+  const auto a = autoCandidates(zip, pilotOf(2, 0.6), 0.1, 0);
+  const auto b = autoCandidates(none, pilotOf(2, 0.6), 0.1, 0);
+  ASSERT_EQ(a.size(), b.size());
+  // Every candidate writes the same views, so each saves the same seconds and the order holds.
+  const double saved = zip.pixels * (zip.write_seconds_per_pixel - none.write_seconds_per_pixel);
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].method, b[i].method);
+    EXPECT_NEAR(a[i].seconds - b[i].seconds, saved, 1e-9 * a[i].seconds);
+  }
+}
+
 TEST(AutoModel, SingleWhereMultipleScatteringIsNegligible) {
   const std::vector<AutoCandidate> c = autoCandidates(traitsOf(0.05), pilotOf(2, 0.02), 0.1, 0);
   EXPECT_EQ(c.front().method, "single");
