@@ -5,7 +5,8 @@ grow, on the five scenes of bench/photon_bench.py, with the Pareto front.
 For each scene (both views, --res x 3/4 --res pixels) it renders a reference with `pathtrace`
 twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/ with bench/photon_bench.py's names,
 so the two benches share references and photon renders), then every configuration of CONFIGS
-once, and writes
+once (`pointcloud` at lattice 64 also with its views marched one lattice voxel a step, twice
+the default's: the cheap end, where the views' march is most of a shot), and writes
 
 - a markdown table: scene | method | quality | bake s | s/view | peak MiB | rel. RMSE (the
   cloud's own light, sun + sky layers, over the cloud's pixels, with one reference's own noise
@@ -19,8 +20,9 @@ once, and writes
   pixel is taken as the measured one: the assumption the extrapolation rests on, nearest to
   true where the measured views trace about a 640x480 image's rays, --res 256 --view-samples 6);
 - per scene and requested error (2, 5, 10, 30 %): the fastest configuration that reaches it, and
-  its speedup over the path tracer (whose seconds for any error follow from its measured noise,
-  which falls as 1 / sqrt(spp));
+  its speedup over the path tracer (whose paths per pixel for any error follow from its
+  measured noise, which falls as 1 / sqrt(spp); its seconds are its rendering's, in proportion
+  to the paths, plus its views' EXR writing, which is the same at any paths per pixel);
 - with --plot-dir, one PNG per scene (named --plot-prefix + scene): rel. RMSE against seconds
   for four 640x480 views, log-log, one line per method, the Pareto front dashed
   (python3-matplotlib, deploy/bench-packages.txt);
@@ -29,6 +31,7 @@ once, and writes
 Usage: /usr/bin/python3 bench/trade_curve.py [--build build] [--threads 2] [--res 80]
            [--ref-spp 8192 | --ref-spp disney=16384,...,8192] [--view-samples 16]
            [--scenes perlin,bunny,disney,thin,cumulus] [--photon-sweep default[,fine]]
+           [--methods pathtrace,single,pointcloud,photon] [--exr-compression zip]
            [--work DIR] [--plot-dir docs/images]
            [--json-out FILE]
 References are cached under WORK/ref/ and reused: render them where cores are many with
@@ -38,6 +41,7 @@ import argparse
 import json
 import math
 import os
+import subprocess
 import sys
 import tempfile
 
@@ -76,6 +80,31 @@ def configs(samples, photon_sweeps=("default",)):
     return out
 
 
+def coarse_configs(cloudbake, shot, scene, args):
+    """`pointcloud` at lattice 64 with its views marched at one lattice voxel a step, twice the
+    default's: the cheap end of the curve, where a view's march is most of a shot's seconds
+    (the `step` knob is in world units, so the voxel is read from the bake: bake-slice)."""
+    out = os.path.join(args.work, scene, "lattice-64")
+    info = os.path.join(out, "slice.json")
+    if not os.path.exists(info):
+        s = json.loads(json.dumps(shot))
+        s["bake"] = {"method": "pointcloud", "points": 4096, "light_resolution": 64}
+        s["views"] = []
+        s["outputs"] = {"exr": False, "vdb": True}
+        pb.render(cloudbake, s, out, args.threads)
+        text = subprocess.run([cloudbake, "bake-slice", os.path.join(out, "bake.vdb"), "--grid",
+                               "density", "--png", os.path.join(out, "slice.png")], check=True,
+                              capture_output=True, text=True).stdout
+        with open(info, "w") as f:
+            f.write(text)
+    with open(info) as f:
+        voxel = json.load(f)["voxel_size"]
+    return [("pointcloud", "%d points, lattice 64, step 1 voxel" % points,
+             {"method": "pointcloud", "points": points, "light_resolution": 64, "step": voxel,
+              "samples": args.view_samples}, "pointcloud-%d-64-step1" % points)
+            for points in (4096, 16384)]
+
+
 def layers_against(cloudbake, out, refs, views, alpha):
     """compare --json of each view against each reference, averaged: {layer: (rel_rmse, bias)}."""
     acc = {}
@@ -93,13 +122,18 @@ def layers_against(cloudbake, out, refs, views, alpha):
     return {k: (e[0] / e[2], e[1] / e[2]) for k, e in acc.items()}
 
 
+def view_write_seconds(stats):
+    """A view's mean seconds of writing its EXR (older binaries did not time it apart: 0)."""
+    views = [s for s in stats["steps"] if s["step"] == "view"]
+    return sum(s.get("write", 0.0) for s in views) / max(1, len(views))
+
+
 def shot_seconds(method, stats, res, samples):
     """Seconds for four 640x480 views from the measured run (see the module's docstring); a
     bake's views traced `samples` rays per pixel."""
     views = [s for s in stats["steps"] if s["step"] == "view"]
     view_s = sum(s["seconds"] for s in views) / max(1, len(views))
-    # Writing the EXR scales by pixels, not rays (older binaries did not time it apart: 0).
-    write_s = sum(s.get("write", 0.0) for s in views) / max(1, len(views))
+    write_s = view_write_seconds(stats)  # scales by pixels, not rays
     scale = FULL_PIXELS / float(res * (res * 3 // 4))
     if method == "pathtrace":
         return VIEWS * view_s * scale, 0.0, view_s
@@ -149,14 +183,28 @@ def plot(scene, points, path, res):
     plt.close(fig)
 
 
-def fastest(points, pt_noise_1spp, pt_s_per_spp, target):
-    """(name, seconds, speedup over the path tracer) of the cheapest way to `target`."""
-    pt_s = pt_s_per_spp * max(1.0, (pt_noise_1spp / target) ** 2)
+def fastest(points, pt_noise_1spp, pt_seconds, target):
+    """(name, seconds, speedup over the path tracer) of the cheapest way to `target`;
+    pt_seconds(spp) is the path tracer's shot at spp paths per pixel."""
+    spp = max(1.0, (pt_noise_1spp / target) ** 2)
+    pt_s = pt_seconds(spp)
     options = [(p["method"] + " " + p["quality"], p["shot_s"]) for p in points
                if p["method"] != "pathtrace" and p["error"] <= target]
-    options.append(("pathtrace %d spp" % math.ceil((pt_noise_1spp / target) ** 2), pt_s))
+    options.append(("pathtrace %d spp" % math.ceil(spp), pt_s))
     name, s = min(options, key=lambda o: o[1])
     return name, s, pt_s / s
+
+
+def pathtrace_seconds(points, res):
+    """The path tracer's shot seconds as a function of paths per pixel: its rendering scales
+    by paths (seconds per path from the run with the most), its EXR writing does not (the
+    mean of its runs' measured writes), both by pixels to four 640x480 views."""
+    pts = [p for p in points if p["method"] == "pathtrace"]
+    longest = max(pts, key=lambda p: p["samples"])
+    scale = FULL_PIXELS / float(res * (res * 3 // 4))
+    render_per_spp = (longest["view_s"] - longest["write_s"]) / longest["samples"]
+    write_s = sum(p["write_s"] for p in pts) / len(pts)
+    return lambda spp: VIEWS * scale * (render_per_spp * spp + write_s)
 
 
 def ref_spp(spec, scene):
@@ -193,7 +241,14 @@ def measure_scene(cloudbake, scene, args):
             flush=True)
         return None
     points = []
-    for method, quality, bake, name in configs(args.view_samples, args.photon_sweeps):
+    if args.exr_compression:
+        shot["outputs"]["exr_compression"] = args.exr_compression
+    runs = configs(args.view_samples, args.photon_sweeps)
+    if "pointcloud" in args.methods:
+        runs += coarse_configs(cloudbake, shot, scene, args)
+    for method, quality, bake, name in runs:
+        if method not in args.methods:
+            continue
         s = json.loads(json.dumps(shot))
         s["bake"] = bake
         out = os.path.join(args.work, scene, name)
@@ -207,7 +262,7 @@ def measure_scene(cloudbake, scene, args):
             "error": math.sqrt(max(0.0, raw * raw - ref_noise * ref_noise)),
             "beauty_error": layers["beauty"][0],
             "bias": {k: layers[k][1] for k in ("sun", "sky", "single", "multiple")},
-            "samples": bake.get("samples", 1)})
+            "samples": bake.get("samples", 1), "write_s": view_write_seconds(stats)})
     return points, ref_noise
 
 
@@ -225,6 +280,12 @@ def main():
     ap.add_argument("--photon-sweep", default="default",
                     help="photon's rungs: photon_bench sweeps, comma-separated (default; "
                     "default,fine adds 16M photons for 2 %%)")
+    ap.add_argument("--methods", default="pathtrace,single,pointcloud,photon",
+                    help="the methods to run, comma-separated (pathtrace is always run: the "
+                    "speed-ups are over it)")
+    ap.add_argument("--exr-compression", default=None,
+                    help="outputs.exr_compression of every shot (default: the shot's, zip); "
+                    "use a --work of its own, since the folders' stats are reused")
     ap.add_argument("--cloud-alpha", type=float, default=0.05)
     ap.add_argument("--scenes", default="perlin,bunny,disney,thin,cumulus")
     ap.add_argument("--work", default=None)
@@ -237,6 +298,11 @@ def main():
     if args.view_samples < 1:
         ap.error("--view-samples must be at least 1")
     args.photon_sweeps = tuple(args.photon_sweep.split(","))
+    args.methods = set(args.methods.split(",")) | {"pathtrace"}
+    unknown = args.methods - {"pathtrace", "single", "pointcloud", "photon"}
+    if unknown:
+        ap.error("--methods: %s is not pathtrace, single, pointcloud or photon"
+                 % ", ".join(sorted(unknown)))
     for name in args.photon_sweeps:
         if name not in pb.SWEEPS:
             ap.error("--photon-sweep: %r is not one of %s" % (name, ", ".join(sorted(pb.SWEEPS))))
@@ -264,10 +330,9 @@ def main():
         # points (least squares of error^2 x spp; seconds linear in spp).
         pts = [p for p in points if p["method"] == "pathtrace"]
         noise_1spp = math.sqrt(sum(p["error"] ** 2 * p["samples"] for p in pts) / len(pts))
-        longest = max(pts, key=lambda p: p["samples"])
-        s_per_spp = longest["shot_s"] / longest["samples"]
+        pt_seconds = pathtrace_seconds(points, args.res)
         for t in TARGETS:
-            summary.append((scene, t) + fastest(points, noise_1spp, s_per_spp, t))
+            summary.append((scene, t) + fastest(points, noise_1spp, pt_seconds, t))
         print("%s: reference noise %.4f per render" % (scene, ref_noise), file=sys.stderr)
         if args.plot_dir:
             os.makedirs(args.plot_dir, exist_ok=True)
