@@ -32,8 +32,9 @@ def run(cloudbake, shot, out_dir, threads):
 
 
 def same_pixels(cloudbake, a, b):
-    """True when every layer of EXR a equals b's: `compare`'s relative RMSE is 0, or both
-    means are 0 (a black layer, whose relative error is undefined)."""
+    """True when `compare` finds no difference in any layer's R, G, B (its relative RMSE is 0,
+    or both means are 0). It does not read alpha; the exact equality of every channel is
+    tests/core/io's ExrIo.EveryCompressionKeepsThePixels."""
     out = subprocess.run([cloudbake, "compare", a, b, "--json"], check=True,
                          capture_output=True, text=True).stdout
     return all(layer["rel_rmse"] == 0 or (layer["mean"] == 0 and layer["reference_mean"] == 0)
@@ -50,7 +51,8 @@ def main():
     ap.add_argument("--compressions", default="none,rle,zips,zip,piz")
     ap.add_argument("--work", default=None)
     args = ap.parse_args()
-    cloudbake = os.path.join(args.build, "tools", "cloudbake", "cloudbake")
+    cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
+                                                            "cloudbake")
     work = args.work or tempfile.mkdtemp(prefix="exr-compression-")
     compressions = args.compressions.split(",")
     print("| scene | view | compression | write s (median of %d) | MB | same pixels as zip |"

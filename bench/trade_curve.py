@@ -251,6 +251,8 @@ def measure_scene(cloudbake, scene, args):
             continue
         s = json.loads(json.dumps(shot))
         s["bake"] = bake
+        if args.exr_compression and args.exr_compression != "zip":
+            name += "-" + args.exr_compression  # the folders' stats are reused: one per kind
         out = os.path.join(args.work, scene, name)
         stats = pb.render(cloudbake, s, out, args.threads)
         layers = layers_against(cloudbake, out, refs, views, args.cloud_alpha)
@@ -284,8 +286,9 @@ def main():
                     help="the methods to run, comma-separated (pathtrace is always run: the "
                     "speed-ups are over it)")
     ap.add_argument("--exr-compression", default=None,
+                    choices=["none", "rle", "zips", "zip", "piz"],
                     help="outputs.exr_compression of every shot (default: the shot's, zip); "
-                    "use a --work of its own, since the folders' stats are reused")
+                    "the run folders get its name as a suffix")
     ap.add_argument("--cloud-alpha", type=float, default=0.05)
     ap.add_argument("--scenes", default="perlin,bunny,disney,thin,cumulus")
     ap.add_argument("--work", default=None)

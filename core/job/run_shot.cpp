@@ -375,7 +375,7 @@ void checkRunnable(const ShotSpec& shot, const std::string& source) {
     throw InputError(source + ": /volume/sequence: animated volumes are rendered by method " +
                      "'precomputed' only, not '" + info.name + "'");
   }
-  exrCompressionOf(shot, source);
+  if (shot.outputs.exr) exrCompressionOf(shot, source);  // as the parser: only with EXRs
 }
 
 namespace {

@@ -72,6 +72,8 @@ SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene) {
     t.views = int(shot.views.size());
     for (const Camera& c : shot.views) t.pixels += double(c.width_px) * c.height_px;
     t.write_seconds_per_pixel = exrWriteSecondsPerPixel(shot.outputs.exr_compression);
+  } else {
+    t.write_seconds_per_pixel = 0;  // nothing is written
   }
   if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
     t.sequence = true;

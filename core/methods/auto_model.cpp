@@ -133,8 +133,9 @@ AutoCandidate pathtraceCandidate(const SceneTraits& traits, const PilotMeasure& 
 
 double exrWriteSecondsPerPixel(const std::string& compression) {
   // bench/exr_compression.py's six pointcloud views at 640x480 on two cores: ZIP 0.15-0.38 s a
-  // view, 0.75-0.8 us a pixel in bench/trade_curve.py's views; the others scaled by their
-  // median write over ZIP's on the same views (none 0.54, rle 0.58, zips 0.99, piz 0.93).
+  // view, 0.75-0.8 us a pixel in bench/trade_curve.py's views; the others scaled by the median
+  // of their writes over the median of ZIP's on the same views (none 0.54, rle 0.58, zips 0.99,
+  // piz 0.93).
   constexpr double kZip = 0.8e-6;
   const auto c = exrCompressionFromName(compression);
   if (!c) {

@@ -13,10 +13,6 @@
 namespace cloudbake {
 
 /// What the model reads of a scene before any bake.
-/// Seconds per pixel of writing a view's EXR (22 float channels, on every core of two) with
-/// the named compression (outputs.exr_compression); InputError for an unknown name.
-double exrWriteSecondsPerPixel(const std::string& compression);
-
 struct SceneTraits {
   double albedo = 1;           ///< the largest channel's single-scattering albedo
   double phase_spikiness = 0;  ///< V = 4 pi integral(p^2) - 1 (core/transport/sun_guiding.h)
@@ -38,6 +34,10 @@ struct SceneTraits {
   bool sequence = false;
   int frames = 1;
 };
+
+/// Seconds per pixel of writing a view's EXR (22 float channels, on every core of two) with
+/// the named compression (outputs.exr_compression); InputError for an unknown name.
+double exrWriteSecondsPerPixel(const std::string& compression);
 
 /// A short path-traced render of the shot's views at a reduced size, two seeds: the noise and
 /// cost of the reference on this scene, and how much of the cloud's light is multiply scattered.
