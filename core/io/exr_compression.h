@@ -34,13 +34,6 @@ inline std::optional<ExrCompression> exrCompressionFromName(std::string_view nam
   return std::nullopt;
 }
 
-inline std::string exrCompressionName(ExrCompression value) {
-  for (const ExrCompressionName& c : kExrCompressionNames) {
-    if (c.value == value) return std::string(c.name);
-  }
-  return "zip";  // unreachable: every enumerator is listed
-}
-
 /// "none, rle, zips, zip, piz", for error messages.
 inline std::string exrCompressionNamesList() {
   std::string out;
