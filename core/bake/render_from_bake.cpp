@@ -435,28 +435,6 @@ class BakeMarcher {
     RayState s;
     s.d = ray.d;
     s.shw = scratch->shw;
-    if (sh_order_ > 0) {
-      // Funk-Hecke: the light travelling along w' scatters towards the camera (-d) with
-      // p(w' . -d), so J(-d) = sum over l, m of p_l L_lm Y_lm(-d).
-      double y[shCount(kMaxShDegree)];
-      shBasisUpTo(sh_order_, -ray.d, y);
-      for (int l = 0; l <= sh_order_; ++l) {
-        for (int i = l * l; i < (l + 1) * (l + 1); ++i) s.shw[i] = phase_l_[size_t(l)] * y[i];
-      }
-      // Sunlight scattered through the phase's forward peak only, about -sun.
-      if (peak_) s.peak_phase = peak_->scattered.eval(dot(sun_dir_, ray.d));
-      if (zonal_order_ > sh_order_) {
-        // The zonal terms about the axis of travel of sunlight, -sun: Y_l0 there at -d is
-        // sqrt((2l + 1) / (4 pi)) P_l(d . sun).
-        double z[kMaxZonalDegree];
-        const double mu = dot(ray.d, sun_dir_);
-        shZonal(sh_order_ + 1, zonal_order_, mu, z);
-        for (int l = sh_order_ + 1; l <= zonal_order_; ++l) {
-          const int i = l - sh_order_ - 1;
-          s.shw[shCount(sh_order_) + i] = phase_l_[size_t(l)] * z[i] * zonalTaper(l, mu);
-        }
-      }
-    }
     // Block space: w = index + 1, so the support of the trilinear field, index in (-1, n),
     // is w in (0, n + 1).
     s.w0 = (ray.o - grid_.origin) * inv_h_ + Vec3(1.0);
@@ -502,9 +480,10 @@ class BakeMarcher {
     // precomputed: integrals of T_v sigma_t f T_sky,i, channel-major ([c][i]) so the march's
     // sums run over i in vector registers
     double sky_ms_sh[3][kShCoefficients] = {};
-    Rgb* shw = nullptr;     // photon: the per-ray weights, in the caller's Scratch
-    Rgb peak_phase;         // photon: PhotonPeakLight::scattered towards the camera
-    TallyAnchor anchor[2];  // the last two tally anchors along the ray (tallySources)
+    Rgb* shw = nullptr;          // photon: the per-ray weights, in the caller's Scratch
+    Rgb peak_phase;              // photon: PhotonPeakLight::scattered towards the camera
+    bool weights_ready = false;  // shw and peak_phase (rayWeights)
+    TallyAnchor anchor[2];       // the last two tally anchors along the ray (tallySources)
     bool done = false;
   };
 
@@ -618,12 +597,41 @@ class BakeMarcher {
     tally_dt_ = 0.5 * t.voxel_size;
   }
 
+  /// The photon tallies' per-ray weights: computed when the ray first reads a tally, so the rays
+  /// that miss the cloud (most of a view's pixels, often) skip their dozens of SH terms.
+  void rayWeights(RayState* s) const {
+    s->weights_ready = true;
+    if (sh_order_ > 0) {
+      // Funk-Hecke: the light travelling along w' scatters towards the camera (-d) with
+      // p(w' . -d), so J(-d) = sum over l, m of p_l L_lm Y_lm(-d).
+      double y[shCount(kMaxShDegree)];
+      shBasisUpTo(sh_order_, -s->d, y);
+      for (int l = 0; l <= sh_order_; ++l) {
+        for (int i = l * l; i < (l + 1) * (l + 1); ++i) s->shw[i] = phase_l_[size_t(l)] * y[i];
+      }
+      // Sunlight scattered through the phase's forward peak only, about -sun.
+      if (peak_) s->peak_phase = peak_->scattered.eval(dot(sun_dir_, s->d));
+      if (zonal_order_ > sh_order_) {
+        // The zonal terms about the axis of travel of sunlight, -sun: Y_l0 there at -d is
+        // sqrt((2l + 1) / (4 pi)) P_l(d . sun).
+        double z[kMaxZonalDegree];
+        const double mu = dot(s->d, sun_dir_);
+        shZonal(sh_order_ + 1, zonal_order_, mu, z);
+        for (int l = sh_order_ + 1; l <= zonal_order_; ++l) {
+          const int i = l - sh_order_ - 1;
+          s->shw[shCount(sh_order_) + i] = phase_l_[size_t(l)] * z[i] * zonalTaper(l, mu);
+        }
+      }
+    }
+  }
+
   // The tallies' terms at distance t along the ray, interpolated linearly between anchors
   // every tally_dt_ (half a tally voxel, as the march steps half a voxel of its own lattice):
   // the tallies vary on their coarser lattice, and their coefficient reads are most of a
   // sample's cost. Anchors lie at fixed distances along the ray, so an image does not depend on
   // how the march splits it.
   void tallySources(RayState* rs, double t, Rgb* ms, Rgb* ssky, Rgb* csky) const {
+    if (!rs->weights_ready) rayWeights(rs);
     const double x = t / tally_dt_;
     const double fk = std::floor(x);
     const int64_t k = int64_t(fk);
@@ -849,9 +857,13 @@ class BakeMarcher {
     if (tally_) {
       tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
     } else if (!msh_.empty()) {
+      if (!rs->weights_ready) rayWeights(rs);
       shSources(c, rs->shw, &s->ms, &s->ssky, &s->csky);
     }
-    if (peak_) s->ms += rs->peak_phase * peak_->fluence(s->tsun);
+    if (peak_) {
+      if (!rs->weights_ready) rayWeights(rs);
+      s->ms += rs->peak_phase * peak_->fluence(s->tsun);
+    }
     if (sky_sh_) {
       for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = v[kSh + i];
     } else if (vsky_ && ssky_sh_.empty()) {
