@@ -22,7 +22,9 @@ the default's: the cheap end, where the views' march is most of a shot), and wri
 - per scene and requested error (2, 5, 10, 30 %): the fastest configuration that reaches it, and
   its speedup over the path tracer (whose paths per pixel for any error follow from its
   measured noise, which falls as 1 / sqrt(spp); its seconds are its rendering's, in proportion
-  to the paths, plus its views' EXR writing, which is the same at any paths per pixel);
+  to the paths, plus its views' EXR writing, which is the same at any paths per pixel, plus
+  the volume's building, which every method's shot pays once: a bake's "bake s" includes it,
+  and the path tracer's "bake s" is that alone);
 - with --plot-dir, one PNG per scene (named --plot-prefix + scene): rel. RMSE against seconds
   for four 640x480 views, log-log, one line per method, the Pareto front dashed
   (python3-matplotlib, deploy/bench-packages.txt);
@@ -128,15 +130,23 @@ def view_write_seconds(stats):
     return sum(s.get("write", 0.0) for s in views) / max(1, len(views))
 
 
+def volume_seconds(stats):
+    """Seconds of building the shot's volume (a mesh's voxelisation, a VDB's read), which every
+    method pays once per shot, the path tracer included."""
+    return sum(s["seconds"] for s in stats["steps"] if s["step"] == "volume")
+
+
 def shot_seconds(method, stats, res, samples):
     """Seconds for four 640x480 views from the measured run (see the module's docstring); a
-    bake's views traced `samples` rays per pixel."""
+    bake's views traced `samples` rays per pixel. The middle value is what precedes the views:
+    the volume, and for a bake the bake."""
     views = [s for s in stats["steps"] if s["step"] == "view"]
     view_s = sum(s["seconds"] for s in views) / max(1, len(views))
     write_s = view_write_seconds(stats)  # scales by pixels, not rays
     scale = FULL_PIXELS / float(res * (res * 3 // 4))
     if method == "pathtrace":
-        return VIEWS * view_s * scale, 0.0, view_s
+        volume_s = volume_seconds(stats)
+        return volume_s + VIEWS * view_s * scale, volume_s, view_s
     bake_s = sum(s["seconds"] for s in stats["steps"]
                  if s["step"] in ("bake", "precompute", "light", "volume"))
     rays_ratio = 1.0 / samples  # -> 1 ray per pixel at 640x480 (auto's rule)
@@ -198,13 +208,15 @@ def fastest(points, pt_noise_1spp, pt_seconds, target):
 def pathtrace_seconds(points, res):
     """The path tracer's shot seconds as a function of paths per pixel: its rendering scales
     by paths (seconds per path from the run with the most), its EXR writing does not (the
-    mean of its runs' measured writes), both by pixels to four 640x480 views."""
+    mean of its runs' measured writes), both by pixels to four 640x480 views; and the volume,
+    built once per shot (the mean of its runs'), as a bake's seconds count it."""
     pts = [p for p in points if p["method"] == "pathtrace"]
     longest = max(pts, key=lambda p: p["samples"])
     scale = FULL_PIXELS / float(res * (res * 3 // 4))
     render_per_spp = (longest["view_s"] - longest["write_s"]) / longest["samples"]
     write_s = sum(p["write_s"] for p in pts) / len(pts)
-    return lambda spp: VIEWS * scale * (render_per_spp * spp + write_s)
+    volume_s = sum(p["bake_s"] for p in pts) / len(pts)
+    return lambda spp: volume_s + VIEWS * scale * (render_per_spp * spp + write_s)
 
 
 def ref_spp(spec, scene):
