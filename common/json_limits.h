@@ -31,6 +31,10 @@ Json parseJsonLimited(
     throw InputError(what + ": " + std::to_string(text.size()) + " bytes of JSON, more than the " +
                      std::to_string(limits.max_bytes) + " allowed");
   }
+  // nlohmann's lexer takes a NUL byte for the end of the input and would ignore what follows.
+  if (const size_t nul = text.find('\0'); nul != std::string::npos) {
+    throw InputError(what + ": invalid JSON: a NUL byte at offset " + std::to_string(nul));
+  }
   size_t depth = 0;
   auto callback = [&](int level, typename Json::parse_event_t event, Json& parsed) {
     using E = typename Json::parse_event_t;

@@ -42,5 +42,13 @@ TEST(JsonLimits, SizeAndSyntaxErrorsNameWhatWasParsed) {
   EXPECT_EQ(parseJsonLimited("{\"a\": [1, {\"b\": 2}]}", "x").at("a").at(1).at("b"), 2);
 }
 
+TEST(JsonLimits, ANulByteIsNotTheEndOfTheText) {
+  // The parser's lexer stops at a NUL: what follows it would have been ignored.
+  const std::string text = std::string("{\"a\": 1}") + '\0' + "this is not json {{{";
+  EXPECT_EQ(errorOf(text), "views_json: invalid JSON: a NUL byte at offset 8");
+  EXPECT_EQ(errorOf(std::string("[1,") + '\0' + "2]"),
+            "views_json: invalid JSON: a NUL byte at offset 3");
+}
+
 }  // namespace
 }  // namespace cloudbake

@@ -8,6 +8,7 @@
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -34,8 +35,15 @@ Rgb colourMap(double t) {
 
 struct SliceOptions {
   std::string bake, grid, axis = "y", png, range;
-  double at = std::nan("");
+  std::optional<double> at;  // unset: the middle of the lattice
 };
+
+// A number for a message: short, whatever its size.
+std::string shortNumber(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
 
 // The slice of one grid: which voxel a pixel of the slice shows, and its value (a 3-component
 // grid by its luminance).
@@ -92,11 +100,11 @@ Slice findSlice(const BakedLight& bake, const SliceOptions& opt) {
   s.n[1] = g.ny;
   s.n[2] = g.nz;
   s.index = s.n[s.a] / 2;
-  if (!std::isnan(opt.at)) {
-    const double index = (opt.at - g.origin[s.a]) / g.voxel_size;
+  if (opt.at) {
+    if (!std::isfinite(*opt.at)) throw InputError("--at: must be a finite number");
+    const double index = (*opt.at - g.origin[s.a]) / g.voxel_size;
     if (!(index > -0.5 && index < s.n[s.a] - 0.5)) {
-      throw InputError("--at: " + std::to_string(opt.at) + " is outside the bake along " +
-                       opt.axis);
+      throw InputError("--at: " + shortNumber(*opt.at) + " is outside the bake along " + opt.axis);
     }
     s.index = int(std::lround(index));
   }
@@ -116,8 +124,14 @@ void sliceRange(const Slice& s, const std::string& range, double* lo, double* hi
       *hi = std::max(*hi, s.value(voxel));
     }
   if (!range.empty()) {
-    if (std::sscanf(range.c_str(), "%lf,%lf", lo, hi) != 2 || !(*hi > *lo)) {
-      throw InputError("--range: expected LO,HI with HI > LO, got '" + range + "'");
+    int used = 0;
+    const bool two =
+        std::sscanf(range.c_str(), "%lf,%lf%n", lo, hi, &used) == 2 && size_t(used) == range.size();
+    // Finite ends whose difference is finite too: the colour map divides by it.
+    if (!two || !std::isfinite(*lo) || !std::isfinite(*hi) || !(*hi > *lo) ||
+        !std::isfinite(*hi - *lo)) {
+      throw InputError("--range: expected LO,HI, two finite numbers with HI > LO, got '" + range +
+                       "'");
     }
   }
 }
@@ -147,8 +161,11 @@ void runBakeSlice(const SliceOptions& opt) {
     throw InputError("--axis: must be x, y or z, got '" + opt.axis + "'");
   }
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(opt.bake, ec)) {
+  if (!std::filesystem::exists(opt.bake, ec)) {
     throw MissingFileError(opt.bake + ": bake file not found");
+  }
+  if (!std::filesystem::is_regular_file(opt.bake, ec)) {
+    throw InputError(opt.bake + ": not a file (a bake is a .vdb file)");
   }
   const BakedLight bake = readBakedLight(opt.bake);
   const Slice slice = findSlice(bake, opt);

@@ -26,8 +26,10 @@ struct LayerStats {
 // The pixels that count: all, or those whose reference alpha is at least `min_alpha`.
 using PixelMask = std::vector<bool>;
 
+// `test_what` and `ref_what` name the two images ("FILE layer 'L'") in errors.
 LayerStats compareLayer(const Image& test, const Image& ref, const PixelMask& mask,
-                        const std::string& what) {
+                        const std::string& test_what, const std::string& ref_what) {
+  const std::string& what = test_what;
   if (test.width != ref.width || test.height != ref.height) {
     throw InputError(what + ": images differ in size (" + std::to_string(test.width) + "x" +
                      std::to_string(test.height) + " vs " + std::to_string(ref.width) + "x" +
@@ -41,8 +43,8 @@ LayerStats compareLayer(const Image& test, const Image& ref, const PixelMask& ma
       for (int c = 0; c < 3 && c < ref.channels && c < test.channels; ++c) {
         const double t = test.at(x, y)[c], r = ref.at(x, y)[c];
         if (!std::isfinite(t) || !std::isfinite(r)) {
-          throw InputError(what + ": non-finite pixel at (" + std::to_string(x) + ", " +
-                           std::to_string(y) + ")");
+          throw InputError((std::isfinite(t) ? ref_what : test_what) + ": non-finite pixel at (" +
+                           std::to_string(x) + ", " + std::to_string(y) + ")");
         }
         sum_t += t;
         sum_r += r;
@@ -144,23 +146,30 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
     nameLayers(&ref);
     addScattered(&test);
     addScattered(&ref);
+    // Every layer is compared before anything is printed: an error leaves stdout empty.
     nlohmann::json out = nlohmann::json::object();
-    if (!opt->json) std::printf("%-10s %14s %14s %10s\n", "layer", "mean", "reference", "rel_rmse");
+    std::string table;
     for (const auto& [name, image] : ref.layers) {
       auto it = test.layers.find(name);
       if (it == test.layers.end()) continue;
       const std::string& label = name;
       const LayerStats s =
-          compareLayer(it->second, image, mask, opt->test + " layer '" + label + "'");
+          compareLayer(it->second, image, mask, opt->test + " layer '" + label + "'",
+                       opt->ref + " layer '" + label + "'");
       out[label] = {
           {"mean", s.mean_test}, {"reference_mean", s.mean_ref}, {"rel_rmse", s.rel_rmse}};
-      if (!opt->json) {
-        std::printf("%-10s %14.6g %14.6g %10.4f\n", label.c_str(), s.mean_test, s.mean_ref,
-                    s.rel_rmse);
-      }
+      char row[256];
+      std::snprintf(row, sizeof row, "%-10s %14.6g %14.6g %10.4f\n", label.c_str(), s.mean_test,
+                    s.mean_ref, s.rel_rmse);
+      table += row;
     }
     if (out.empty()) throw InputError(opt->test + ": no layer in common with " + opt->ref);
-    if (opt->json) std::cout << out.dump() << std::endl;
+    if (opt->json) {
+      std::cout << out.dump() << std::endl;
+    } else {
+      std::printf("%-10s %14s %14s %10s\n%s", "layer", "mean", "reference", "rel_rmse",
+                  table.c_str());
+    }
     *exit_code = kOk;
   });
 }

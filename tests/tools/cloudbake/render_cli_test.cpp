@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <set>
@@ -313,6 +314,22 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   r = run("bake-slice '" + (dir_ / "none.vdb").string() + "' --grid density --png '" +
           (dir_ / "x.png").string() + "'");
   EXPECT_EQ(r.rc, 3);
+  r = run("bake-slice '" + dir_.string() + "' --grid density --png '" + (dir_ / "x.png").string() +
+          "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("not a file"), std::string::npos) << r.err;
+  // Numbers that are not finite, or a range whose width is not, are refused, not used.
+  for (const std::string flags : {"--at nan", "--at inf", "--range 0,inf", "--range nan,1",
+                                  "--range 0,1,2", "--range -1e308,1e308", "--range 1,1"}) {
+    r = run("bake-slice '" + bake + "' --grid density " + flags + " --png '" +
+            (dir_ / "x.png").string() + "'");
+    EXPECT_EQ(r.rc, 2) << flags;
+    EXPECT_NE(r.err.find(flags.substr(0, flags.find(' '))), std::string::npos) << r.err;
+  }
+  r = run("bake-slice '" + bake + "' --grid density --at 1e300 --png '" +
+          (dir_ / "x.png").string() + "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--at: 1e+300 is outside"), std::string::npos) << r.err;
 
   // compare: a view against itself is exact; against a brighter copy it is not.
   const std::string view = (out / "nadir.exr").string();
@@ -368,6 +385,24 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   r = run("compare '" + view + "' '" + (dir_ / "none.exr").string() + "'");
   EXPECT_EQ(r.rc, 3);
   EXPECT_NE(r.err.find("none.exr: file not found"), std::string::npos) << r.err;
+  // A non-finite pixel is named in the file that has it, and nothing reaches stdout.
+  std::vector<ExrLayer> layers;
+  for (auto& [name, image] : readExr(view).layers) layers.push_back({name, image});
+  for (ExrLayer& l : layers) {
+    if (l.name == "sun") l.image.data[0] = std::numeric_limits<float>::quiet_NaN();
+  }
+  const std::string nan_exr = (dir_ / "nan.exr").string();
+  writeExr(nan_exr, layers);
+  for (const bool nan_is_ref : {true, false}) {
+    r = run("compare '" + (nan_is_ref ? view : nan_exr) + "' '" + (nan_is_ref ? nan_exr : view) +
+            "'");
+    EXPECT_EQ(r.rc, 2);
+    // ('scattered', sun + sky, is compared before 'sun'.)
+    EXPECT_NE(r.err.find("nan.exr layer 'scattered': non-finite pixel at (0, 0)"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(r.out, "");
+  }
 }
 
 // Previews of any EXR: the beauty by default, any layer by name, a clear error for a layer the
