@@ -4,6 +4,7 @@
 #pragma once
 
 #include <exception>
+#include <new>
 #include <string>
 
 #include "core/error.h"
@@ -54,6 +55,12 @@ inline ClassifiedError classifyException(std::exception_ptr error) {
     return {ErrorKind::kFailedPrecondition, e.what()};
   } catch (const Cancelled& e) {
     return {ErrorKind::kCancelled, e.what()};
+  } catch (const std::bad_alloc&) {
+    // Not a bug but a machine too small for the work (the limits are checked before a run, as
+    // an upper bound; other processes hold memory too): retry with less or elsewhere.
+    return {ErrorKind::kResourceExhausted,
+            "out of memory: the work needs more memory than is free (lower the shot's "
+            "resolutions, photons or orders, or run it on a larger machine)"};
   } catch (const std::exception& e) {
     return {ErrorKind::kInternal, e.what()};
   } catch (...) {

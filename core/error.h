@@ -15,7 +15,26 @@ namespace cloudbake {
 /// user can fix it; the service maps it to INVALID_ARGUMENT, the CLI to exit code 2.
 class InputError : public std::runtime_error {
  public:
-  explicit InputError(const std::string& what) : std::runtime_error(what) {}
+  explicit InputError(const std::string& what) : std::runtime_error(withControlsEscaped(what)) {}
+
+  /// `text` with its control characters but newline and tab as \xNN: messages quote the user's
+  /// values, and a NUL would cut what() short, an escape sequence would reach the terminal.
+  static std::string withControlsEscaped(const std::string& text) {
+    std::string out;
+    out.reserve(text.size());
+    for (const char ch : text) {
+      const unsigned char c = static_cast<unsigned char>(ch);
+      if ((c < 0x20 && c != '\n' && c != '\t') || c == 0x7F) {
+        static const char kHex[] = "0123456789ABCDEF";
+        out += "\\x";
+        out += kHex[c >> 4];
+        out += kHex[c & 15];
+      } else {
+        out += ch;
+      }
+    }
+    return out;
+  }
 };
 
 /// A file named by the shot (or the shot file itself) does not exist. An InputError, so callers

@@ -116,8 +116,9 @@ void validateOptions(const BakeRenderOptions& o, double voxel_size) {
   }
   // Far finer than any lattice needs; bounds the step count of a march.
   if (o.step > 0 && o.step < 1e-4 * voxel_size) {
-    throw InputError("step: must be 0 or at least 1e-4 voxel (" + str(1e-4 * voxel_size) +
-                     " world units), got " + str(o.step));
+    // (0 is the default, half a voxel, which the shot says by leaving `step` out.)
+    throw InputError("step: must be at least 1e-4 voxel (" + str(1e-4 * voxel_size) +
+                     " world units) or left out for half a voxel, got " + str(o.step));
   }
   if (o.samples_per_pixel < 1 || o.samples_per_pixel > 1024) {
     throw InputError("samples_per_pixel: must be in 1..1024, got " + str(o.samples_per_pixel));

@@ -19,7 +19,7 @@ namespace {
   std::ostringstream os;
   os.precision(15);
   os << source << ": " << pointer << ": " << what << " gives " << voxels
-     << " voxels, over this server's limit of " << max_voxels << " (--max-voxels)";
+     << " voxels, over the limit of " << max_voxels << " (--max-voxels)";
   throw InputError(os.str());
 }
 
@@ -138,7 +138,7 @@ void checkLoadedVoxels(const ShotSpec& shot, const DensityField& field, uint64_t
   const uint64_t n = grid->activeVoxelCount();
   if (n > max_voxels) {
     throw InputError(source + ": /volume/vdb/path: " + vdb->path + " has " + std::to_string(n) +
-                     " active voxels, over this server's limit of " + std::to_string(max_voxels) +
+                     " active voxels, over the limit of " + std::to_string(max_voxels) +
                      " (--max-voxels)");
   }
 }

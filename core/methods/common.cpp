@@ -180,7 +180,7 @@ void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const 
     std::ostringstream os;
     os.precision(15);
     os << source << ": " << pointer << ": " << what << " of up to (" << resolution
-       << " + 2)^3 gives " << n << " voxels, over this server's limit of " << limits.max_voxels
+       << " + 2)^3 gives " << n << " voxels, over the limit of " << limits.max_voxels
        << " (--max-voxels)";
     throw InputError(os.str());
   }

@@ -242,19 +242,21 @@ PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions&
   return db;
 }
 
-// The walk over the database (a single basic volume repeats itself), and animation.json.
-std::vector<BlendFrame> walkDatabase(MethodRun& run, const PrecomputedDatabase& db,
+// The walk over the database (a single basic volume repeats itself).
+std::vector<BlendFrame> walkDatabase(const PrecomputedDatabase& db,
                                      const PrecomputedShotOptions& o) {
   const int n = int(db.basic.size());
-  std::vector<BlendFrame> walk;
-  if (n == 1) {
-    walk.assign(size_t(o.frames), BlendFrame{0, 0, 1.0});
-  } else {
-    const std::vector<double> p =
-        transitionProbabilities(frameDistances(db.volumes.frames), n, o.walk);
-    walk = endlessWalk(p, n, o.frames, o.walk);
-  }
-  if (!run.scope().writesShotFiles()) return walk;
+  if (n == 1) return std::vector<BlendFrame>(size_t(o.frames), BlendFrame{0, 0, 1.0});
+  const std::vector<double> p =
+      transitionProbabilities(frameDistances(db.volumes.frames), n, o.walk);
+  return endlessWalk(p, n, o.frames, o.walk);
+}
+
+// animation.json, written after the frames: a run that fails midway leaves no walk naming
+// frames it never wrote.
+void writeAnimation(MethodRun& run, const std::vector<BlendFrame>& walk, int basic_volumes) {
+  if (!run.scope().writesShotFiles()) return;
+  const int n = basic_volumes;
   Json animation = {{"basic_volumes", n}, {"frames", Json::array()}};
   for (const BlendFrame& f : walk) {
     animation["frames"].push_back({{"a", f.a}, {"b", f.b}, {"w", f.w}});
@@ -262,7 +264,6 @@ std::vector<BlendFrame> walkDatabase(MethodRun& run, const PrecomputedDatabase& 
   run.writeOutput("animation.json", [&](const std::string& path) {
     writeTextAtomically(path, animation.dump(1) + "\n");  // two tasks may write it at once
   });
-  return walk;
 }
 
 // Progress: the precompute weighs as much as all frames together.
@@ -466,8 +467,12 @@ void PrecomputedMethod::run(MethodRun& run) const {
   }
   const PrecomputedDatabase db = obtainDatabase(run, o);
   if (scope.part == RunScope::Part::kBake) return;
-  const std::vector<BlendFrame> walk = walkDatabase(run, db, o);
-  if (!scope.rendersAny()) return;
+  const std::vector<BlendFrame> walk = walkDatabase(db, o);
+  const int basic_volumes = int(db.basic.size());
+  if (!scope.rendersAny()) {
+    writeAnimation(run, walk, basic_volumes);
+    return;
+  }
 
   const Scene& lights = run.lights();
   const std::array<ShCoefficients, 3> sky_sh =
@@ -494,6 +499,7 @@ void PrecomputedMethod::run(MethodRun& run) const {
     run.report("render", progress.at(f + 1, 0),
                "frame " + std::to_string(f) + " done in " + fixed(secondsSince(t0), 2) + " s");
   }
+  writeAnimation(run, walk, basic_volumes);
 }
 
 }  // namespace

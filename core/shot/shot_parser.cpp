@@ -203,8 +203,16 @@ BakeSpec parseBake(const Object& o) {
   }
   const MethodInfo& info = findMethod(b.method)->info();
   b.samples = info.default_samples;
-  if (auto* v = o.find("samples"))
+  if (auto* v = o.find("samples")) {
+    // auto chooses the samples with the method; a number here would be ignored or would break
+    // the tolerance it promises.
+    if (info.name == "auto") {
+      r.fail(o.path("samples"),
+             "method 'auto' chooses the samples with the method, from /bake/tolerance: leave it "
+             "out (the command line's --samples overrides the choice)");
+    }
     b.samples = int(r.integer(*v, o.path("samples"), 1, kMaxSamples));
+  }
   if (auto* v = o.find("seed")) b.seed = r.unsignedInteger(*v, o.path("seed"));
   b.knobs = parseMethodKnobs(o, info);
   return b;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <spdlog/spdlog.h>
 
+#include <new>
 #include <stdexcept>
 #include <string>
 
@@ -43,6 +44,7 @@ TEST(StatusExitCodes, EachExceptionHasOneKindAndExitCode) {
       {classify(ResourceExhaustedError("queue full")), ErrorKind::kResourceExhausted, kUnavailable},
       {classify(FailedPreconditionError("not done")), ErrorKind::kFailedPrecondition, kJobFailed},
       {classify(Cancelled()), ErrorKind::kCancelled, kCancelled},
+      {classify(std::bad_alloc()), ErrorKind::kResourceExhausted, kUnavailable},
       {classify(InternalError("bug")), ErrorKind::kInternal, kFailure},
       {classify(std::runtime_error("other")), ErrorKind::kInternal, kFailure},
       {classify(42), ErrorKind::kInternal, kFailure},
@@ -53,6 +55,7 @@ TEST(StatusExitCodes, EachExceptionHasOneKindAndExitCode) {
   }
   EXPECT_EQ(classify(InputError("shot.json: /a: bad")).message, "shot.json: /a: bad");
   EXPECT_EQ(classify(42).message, "unknown exception");
+  EXPECT_EQ(classify(std::bad_alloc()).message.rfind("out of memory: ", 0), 0u);
 }
 
 TEST(StatusExitCodes, RemoteFailuresExitLikeLocalOnes) {

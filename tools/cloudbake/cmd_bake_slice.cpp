@@ -15,6 +15,8 @@
 #include "core/bake/baked_light_vdb.h"
 #include "core/error.h"
 #include "core/io/png_writer.h"
+#include "core/job/file_util.h"
+#include "core/job/vdb_gate.h"
 #include "tools/cloudbake/commands.h"
 
 namespace cloudbake::tool {
@@ -156,6 +158,34 @@ void writeSlicePng(const Slice& s, double lo, double hi, const std::string& png)
   writePng(png, w, h, 3, px);
 }
 
+// The bake read from a child process's rewrite of it (core/job/vdb_gate.h), as a run reads
+// users' VDB files: a corrupt file is then an error naming it, not a crash of this process.
+BakedLight readBakeViaChild(const std::string& path) {
+  const std::vector<std::string> command = vdbReaderCommand();
+  if (command.empty()) return readBakedLight(path);
+  const std::filesystem::path rewrite =
+      std::filesystem::temp_directory_path() / ("cloudbake-slice-" + uniqueSuffix() + ".vdb");
+  struct Remove {
+    std::filesystem::path p;
+    ~Remove() {
+      std::error_code ec;
+      std::filesystem::remove(p, ec);
+    }
+  } remove{rewrite};
+  VdbReaderOptions reader;
+  reader.command = command;
+  rewriteVdbInChild(reader, path, rewrite.string(), [] { return true; });
+  try {
+    return readBakedLight(rewrite.string());
+  } catch (const InputError& e) {  // name the user's file, not the rewrite
+    std::string message = e.what();
+    for (size_t at; (at = message.find(rewrite.string())) != std::string::npos;) {
+      message.replace(at, rewrite.string().size(), path);
+    }
+    throw InputError(message);
+  }
+}
+
 void runBakeSlice(const SliceOptions& opt) {
   if (opt.axis != "x" && opt.axis != "y" && opt.axis != "z") {
     throw InputError("--axis: must be x, y or z, got '" + opt.axis + "'");
@@ -167,7 +197,7 @@ void runBakeSlice(const SliceOptions& opt) {
   if (!std::filesystem::is_regular_file(opt.bake, ec)) {
     throw InputError(opt.bake + ": not a file (a bake is a .vdb file)");
   }
-  const BakedLight bake = readBakedLight(opt.bake);
+  const BakedLight bake = readBakeViaChild(opt.bake);
   const Slice slice = findSlice(bake, opt);
   double lo, hi;
   sliceRange(slice, opt.range, &lo, &hi);

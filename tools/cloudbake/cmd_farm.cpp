@@ -62,6 +62,7 @@ void plan(const PlanOptions& opt) {
     RunOptions ro;
     ro.source = opt.shot;
     ro.threads = opt.threads;
+    ro.vdb_reader.command = vdbReaderCommand();
     const AutoChoice choice = chooseAutoForRun(shot, ro);
     preset = RunOptions::AutoPreset{choice.shot, autoSummary(choice), choice.toJson()};
   }
@@ -109,6 +110,7 @@ void runTaskCommand(const RunTaskOptions& opt) {
   ro.source = opt.plan;
   ro.threads = opt.threads;
   ro.cache = &cache;
+  ro.vdb_reader.command = vdbReaderCommand();  // a corrupt file fails the task, not the node's run
   std::string last;
   ro.progress = [&](const RunProgress& progress) {
     if (!opt.quiet && progress.message != last) {

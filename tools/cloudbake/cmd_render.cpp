@@ -20,7 +20,9 @@
 #include "core/error.h"
 #include "core/format.h"
 #include "core/io/exr_io.h"
+#include "core/job/file_util.h"
 #include "core/job/run_shot.h"
+#include "core/job/volume_limits.h"
 #include "core/methods/registry.h"
 #include "core/shot/shot_parser.h"
 #include "tools/cloudbake/commands.h"
@@ -38,7 +40,18 @@ struct RenderOptions {
   double png_exposure = 0;
   std::string stats_json;  // "": none
   bool dry_run = false;
+  int64_t max_voxels = -1;  // -1: from this machine's memory (defaultMaxVoxels); 0: no limit
+  bool vdb_in_process = false;
 };
+
+// The floats (4 bytes each) that fit in half of this machine's physical memory: what a shot's
+// lattices, tallies and volume may hold before the run is refused, naming the field that asks
+// for more, rather than failing on an allocation midway (or waking the OOM killer).
+uint64_t defaultMaxVoxels() {
+  const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+  if (pages <= 0 || page <= 0) return 0;
+  return uint64_t(pages) * uint64_t(page) / 2 / 4;
+}
 
 // What the run would do, without doing it: method auto's choice (it measures the scene and
 // renders its pilot, which is what the choice rests on) and the method's plan.
@@ -87,16 +100,13 @@ void writeStatsJson(const std::string& path, const ShotSpec& shot, const RunResu
                                   {"bakes_cached", r.bakes_cached},
                                   {"views_from_bake", r.views_from_bake},
                                   {"views_reused_direction", r.views_reused_direction}}}};
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp);
-    out << stats.dump(1) << "\n";
-    out.close();
-    if (!out) throw InputError("--stats-json: cannot write '" + path + "'");
+  try {
+    writeFileAtomic(path, stats.dump(1) + "\n");  // no partial file, even on a full disk
+  } catch (const StorageFullError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw InputError(std::string("--stats-json: ") + e.what());
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throw InputError("--stats-json: cannot write '" + path + "': " + ec.message());
 }
 
 // Per-view progress on stderr: an updating line on a terminal, one line per 10% otherwise (logs
@@ -157,8 +167,14 @@ std::vector<std::string> render(const RenderOptions& opt) {
                                                   static_cast<size_t>(opt.threads));
     setExrThreads(opt.threads);
   }
+  if (opt.max_voxels < -1) {
+    throw InputError("--max-voxels: must be at least 0 (0 = no limit), got " +
+                     std::to_string(opt.max_voxels));
+  }
+  const uint64_t max_voxels = opt.max_voxels == -1 ? defaultMaxVoxels() : uint64_t(opt.max_voxels);
   const ShotSpec shot = parseShotFile(opt.shot);
   checkRunnable(shot, opt.shot);
+  checkShotVoxels(shot, max_voxels, opt.shot);
   if (!shot.outputs.exr && !shot.outputs.vdb && !opt.quiet) {
     std::fprintf(stderr, "%s: nothing to write (outputs.exr and outputs.vdb are both false)\n",
                  shot.name.c_str());
@@ -171,6 +187,8 @@ std::vector<std::string> render(const RenderOptions& opt) {
   run.samples = opt.samples;
   run.png = opt.png;
   run.png_exposure = opt.png_exposure;
+  run.max_voxels = max_voxels;
+  if (!opt.vdb_in_process) run.vdb_reader.command = vdbReaderCommand();
   // runShot reports each view once with its label at 0, then the tracer's fractions, then once
   // more with a summary message at the end; other stages report a message each.
   std::unique_ptr<ProgressLine> line;
@@ -227,6 +245,13 @@ void addRenderCommand(CLI::App& app, int* exit_code) {
                   "paths (pathtrace) or rays (views from a bake) per pixel, overriding the "
                   "shot's bake.samples (1..1000000)");
   cmd->add_flag("--quiet", opt->quiet, "no progress on stderr");
+  cmd->add_flag("--vdb-in-process", opt->vdb_in_process,
+                "read the shot's VDB files in this process, not first rewritten by a child "
+                "process (faster for large files, but a corrupt file can then crash the run)");
+  cmd->add_option("--max-voxels", opt->max_voxels,
+                  "most floats (4 bytes each) the shot's volume, lattices and tallies may hold, "
+                  "checked before anything runs (default: half of this machine's memory; 0 = no "
+                  "limit)");
   cmd->add_flag("--dry-run", opt->dry_run,
                 "print what the run would do (method auto: its choice, predicted error and "
                 "cost, after measuring the scene with a short pilot render) and write nothing");

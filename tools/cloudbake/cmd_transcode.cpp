@@ -4,13 +4,22 @@
 #include <sys/resource.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/volume/vdb_transcode.h"
 #include "tools/cloudbake/commands.h"
 
 namespace cloudbake::tool {
+
+std::vector<std::string> vdbReaderCommand() {
+  std::error_code ec;
+  const std::string self = std::filesystem::read_symlink("/proc/self/exe", ec).string();
+  if (ec || self.empty()) return {};  // no /proc: read in-process
+  return {self, "transcode-vdb"};
+}
 
 void addTranscodeCommand(CLI::App& app, int* exit_code) {
   struct Options {

@@ -3,6 +3,8 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <string>
+#include <vector>
 
 // Exit codes (kOk, kBadInput, ...) shared with cloudctl and the server.
 #include "common/exit_codes.h"
@@ -25,6 +27,10 @@ void addPreviewCommand(CLI::App& app, int* exit_code);
 void addFarmCommands(CLI::App& app, int* exit_code);
 /// `cloudbake transcode-vdb`: a VDB file read and written again (cmd_transcode.cpp).
 void addTranscodeCommand(CLI::App& app, int* exit_code);
+/// The command a run gives users' VDB files to, decoded in a child process (core/job/
+/// vdb_gate.h): this executable's `transcode-vdb` (cmd_transcode.cpp), so that a corrupt file
+/// fails the run as bad input instead of crashing it, as in the server.
+std::vector<std::string> vdbReaderCommand();
 /// `cloudbake render`: render a shot's views with the path tracer (cmd_render.cpp).
 void addRenderCommand(CLI::App& app, int* exit_code);
 

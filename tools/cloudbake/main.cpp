@@ -16,7 +16,14 @@ namespace {
 // word telling the user whether to fix their input ("error") or report a bug ("internal error").
 int reportError(std::exception_ptr error) {
   using cloudbake::ErrorKind;
-  const cloudbake::ClassifiedError e = cloudbake::classifyException(error);
+  cloudbake::ClassifiedError e = cloudbake::classifyException(error);
+  // The server keeps a full disk's path to its log; here the user's own file is worth naming.
+  try {
+    std::rethrow_exception(error);
+  } catch (const cloudbake::StorageFullError& full) {
+    e.message = "no space left on the device: " + full.detail();
+  } catch (...) {
+  }
   const char* label = e.kind == ErrorKind::kInternal    ? "internal error"
                       : e.kind == ErrorKind::kCancelled ? "cancelled"
                                                         : "error";

@@ -502,6 +502,12 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["bake"] = {{"method", "auto"}, {"tolerance", "NaN"}};
        },
        "/bake/tolerance: must be a finite number"},
+      // auto chooses the samples: a number in the shot would be ignored.
+      {"auto with samples",
+       [](json& j) {
+         j["bake"] = {{"method", "auto"}, {"tolerance", 0.1}, {"samples", 5}};
+       },
+       "/bake/samples: method 'auto' chooses the samples with the method"},
       {"unknown phase type",
        [](json& j) {
          j["medium"]["phase"] = {{"type", "rayleigh"}};
@@ -636,6 +642,11 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
        [](json& j) { j["outputs"]["exr_compression"] = "dwaa"; },
        "/outputs/exr_compression: unknown EXR compression 'dwaa' (known: none, rle, zips, zip, "
        "piz; lossless only)"},
+      // A value's control characters are escaped where the message quotes it: a NUL would
+      // have cut the message short, an escape sequence reached the terminal.
+      {"an EXR compression with control characters",
+       [](json& j) { j["outputs"]["exr_compression"] = std::string("zip\0\x1b[31m", 9); },
+       "/outputs/exr_compression: unknown EXR compression 'zip\\x00\\x1B[31m' (known: none, rle"},
       {"an EXR compression that is not a string",
        [](json& j) { j["outputs"]["exr_compression"] = 3; },
        "/outputs/exr_compression: must be a string"},

@@ -273,6 +273,68 @@ TEST_F(RenderCli, AssetErrorsFoundWhileBuildingNameTheField) {
   EXPECT_NE(r.err.find("fake.json: /volume/vdb: "), std::string::npos) << r.err;
 }
 
+// Work too large for the machine is refused before anything runs, naming the field: the
+// limit is half of the physical memory in floats by default, and --max-voxels sets it.
+TEST_F(RenderCli, WorkTooLargeForTheMemoryIsRefusedBeforeItRuns) {
+  json j = slab();
+  j["volume"] = {{"sphere", {{"center", {0, 0, 0}}, {"radius", 1}, {"density", 1}}}};
+  // About 10^12 floats of tallies: more than any machine's memory.
+  j["bake"] = {{"method", "photon"}, {"photons", 1000},        {"order", 8},
+               {"zonal_order", 64},  {"light_resolution", 16}, {"tally_resolution", 1024}};
+  const std::string shot = writeShot("huge.json", j).string();
+  CliResult r = run("render '" + shot + "' --out '" + (dir_ / "huge").string() + "' --quiet");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("huge.json: /bake/tally_resolution: "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("(--max-voxels)"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "huge"));
+  // A small shot under an explicit limit its lattice exceeds; 0 lifts the limit.
+  j["bake"] = {{"method", "single"}, {"light_resolution", 16}};
+  const std::string small = writeShot("small.json", j).string();
+  r = run("render '" + small + "' --out '" + (dir_ / "s").string() + "' --quiet --max-voxels 1000");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("/bake/light_resolution: "), std::string::npos) << r.err;
+  r = run("render '" + small + "' --out '" + (dir_ / "s").string() + "' --quiet --max-voxels 0");
+  EXPECT_EQ(r.rc, 0) << r.err;
+  r = run("render '" + small + "' --out '" + (dir_ / "s").string() + "' --max-voxels -5");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("--max-voxels: must be at least 0"), std::string::npos) << r.err;
+}
+
+// A run that fails at its first frame writes no animation.json naming frames it never wrote.
+TEST_F(RenderCli, AFailedAnimationLeavesNoWalk) {
+  json j = slab();
+  j["volume"] = {{"sphere", {{"center", {0, 0, 0}}, {"radius", 1}, {"density", 1}}}};
+  j["views"][0]["resolution"] = {8, 8};
+  // A march step far under the lattice's voxel: refused when the first frame renders.
+  j["bake"] = {{"method", "precomputed"}, {"light_resolution", 8}, {"step", 1e-300}};
+  const fs::path out = dir_ / "anim";
+  const CliResult r =
+      run("render '" + writeShot("anim.json", j).string() + "' --out '" + out.string() + "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("/bake/step: "), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out / "animation.json"));
+}
+
+// A VDB file that leads OpenVDB's reader past its buffers (tests/data/fuzz) is read in a child
+// process by default, as the server reads it: the command fails as bad input naming the file,
+// and does not crash.
+TEST_F(RenderCli, ACorruptVdbIsAnErrorNotACrash) {
+  const std::string bad =
+      std::string(CLOUDBAKE_SOURCE_DIR) + "/tests/data/fuzz/vdb_blosc_abort.vdb";
+  json j = slab();
+  j["volume"] = {{"vdb", {{"path", bad}}}};
+  CliResult r = run("render '" + writeShot("bad.json", j).string() + "' --out '" +
+                    (dir_ / "bad").string() + "' --quiet");
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("bad.json: /volume/vdb: " + bad + ": not a readable OpenVDB file"),
+            std::string::npos)
+      << r.err;
+  r = run("bake-slice '" + bad + "' --grid density --png '" + (dir_ / "x.png").string() + "'");
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find(bad + ": not a readable OpenVDB file"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "x.png"));
+}
+
 // A tiny pointcloud bake, inspected with bake-slice and compared with compare.
 TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   json j = slab();
