@@ -64,6 +64,16 @@ double writePreviewPng(const std::string& path, const Image& image, double expos
                      std::to_string(image.channels) + " channel(s)");
   }
   const size_t n = size_t(image.width) * image.height;
+  // A NaN would break the exposure's ordering (nth_element) and map to an arbitrary byte.
+  for (size_t p = 0; p < n; ++p) {
+    for (int c = 0; c < 3; ++c) {
+      if (!std::isfinite(image.data[p * image.channels + c])) {
+        throw InputError(path + ": cannot preview an image with a non-finite pixel at (" +
+                         std::to_string(p % size_t(image.width)) + ", " +
+                         std::to_string(p / size_t(image.width)) + ")");
+      }
+    }
+  }
   if (!(exposure > 0)) {
     std::vector<double> lum(n);
     for (size_t p = 0; p < n; ++p) lum[p] = luminanceOf(&image.data[p * image.channels]);

@@ -465,6 +465,10 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
         << r.err;
     EXPECT_EQ(r.out, "");
   }
+  r = run("preview '" + nan_exr + "' --layer sun --out '" + (dir_ / "nan.png").string() + "'");
+  EXPECT_EQ(r.rc, 2);
+  EXPECT_NE(r.err.find("non-finite pixel at (0, 0)"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "nan.png"));
 }
 
 // Previews of any EXR: the beauty by default, any layer by name, a clear error for a layer the
