@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include "core/bake/bake_lattice.h"
 #include "core/bake/baked_light_vdb.h"
 #include "core/error.h"
 #include "core/format.h"
@@ -236,6 +237,26 @@ double latticeSeconds(int64_t resolution) {
   return 0.04 + 1.0e-7 * 0.5 * std::pow(double(resolution), 3);
 }
 
+namespace {
+
+// The views refuse a step under 1e-4 of the lattice's voxel (renderFromBake), which they would
+// say only after a bake of possibly minutes. The lattice's voxel is not known before the bake
+// builds it, but it is at least the box lattice's over 1.25 (a lattice on a grid's own voxels
+// has at most 1.25x the voxels asked for per axis; 1.5 leaves room): a step under 1e-4 of that
+// is refused by the views too, so it is refused here first.
+void checkStepBeforeBake(MethodRun& run, double step, int64_t resolution, int n_views) {
+  if (!(step > 0) || resolution <= 0 || n_views == 0) return;
+  const DensityField& density = *run.scene().medium.density;
+  const double voxel =
+      bakeLatticeGeometry(density.bounds(), int(resolution), density.describe()).voxel_size / 1.5;
+  if (step < 1e-4 * voxel) {
+    throw InputError("step: must be at least 1e-4 voxel (about " + exactNumber(1e-4 * voxel) +
+                     " world units) or left out for half a voxel, got " + exactNumber(step));
+  }
+}
+
+}  // namespace
+
 void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& work) {
   const ShotSpec& shot = run.shot();
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
@@ -252,6 +273,7 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
                                                   ro.samples_per_pixel * work.view_seconds_per_ray;
   }
   const double total = start.back() + (shot.outputs.vdb ? 0.05 * work.bake_seconds : 0.0);
+  checkStepBeforeBake(run, ro.step, work.light_resolution, n_views);
   std::string entry;
   const BakedLight light = obtainBake(run, bake, bake_w / total, &entry);
   for (const char* key : {"tally_noise", "truncation"}) {

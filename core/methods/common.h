@@ -69,6 +69,9 @@ using LightBakeFn = std::function<BakedLight(const Medium& medium, const Vec3& s
 struct LightBakeWork {
   double bake_seconds = 1;
   double view_seconds_per_ray = 1.5e-6;
+  /// The bake lattice's light_resolution, for checking the views' step before the bake (0: not
+  /// checked there).
+  int64_t light_resolution = 0;
 };
 
 /// The predicted seconds of one pass over a bake lattice of `resolution` voxels along the longest

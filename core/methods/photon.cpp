@@ -148,6 +148,7 @@ class PhotonMethod final : public BakeMethod {
                         3.7e-6 * double(o.photons) * ((o.sky ? 1 : 0) + (o.sun ? 1 : 0));
     work.view_seconds_per_ray =
         4.8e-6 * double(shCount(o.order) + std::max(0, o.zonal_order - o.order)) / 16.0;
+    work.light_resolution = o.light_resolution;
     runLightBake(
         run,
         [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {

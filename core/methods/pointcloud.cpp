@@ -84,6 +84,7 @@ class PointcloudMethod final : public BakeMethod {
     work.bake_seconds =
         latticeSeconds(o.light_resolution) + 4e-7 * double(o.points) * o.passes * (o.sky ? 2 : 1);
     work.view_seconds_per_ray = 1.7e-6;
+    work.light_resolution = o.light_resolution;
     runLightBake(
         run,
         [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {

@@ -50,6 +50,7 @@ class SingleMethod final : public BakeMethod {
     LightBakeWork work;
     work.bake_seconds = latticeSeconds(o.light_resolution);
     work.view_seconds_per_ray = 1.3e-6;
+    work.light_resolution = o.light_resolution;
     runLightBake(
         run,
         [&](const Medium& medium, const Vec3& sun, const BakeProgressFn& progress) {

@@ -300,6 +300,24 @@ TEST_F(RenderCli, WorkTooLargeForTheMemoryIsRefusedBeforeItRuns) {
   EXPECT_NE(r.err.find("--max-voxels: must be at least 0"), std::string::npos) << r.err;
 }
 
+// A views' step far under the lattice's voxel is refused before the bake, which it would
+// otherwise have waited for (4M photons here): no bake is reported on stderr.
+TEST_F(RenderCli, AStepFarUnderTheVoxelIsRefusedBeforeTheBake) {
+  json j = slab();
+  j["volume"] = {{"sphere", {{"center", {0, 0, 0}}, {"radius", 1}, {"density", 1}}}};
+  j["views"][0]["resolution"] = {8, 8};
+  for (const char* method : {"single", "pointcloud", "photon"}) {
+    j["bake"] = {{"method", method}, {"light_resolution", 16}, {"step", 1e-300}};
+    if (std::string(method) == "photon") j["bake"]["photons"] = 4000000;
+    const CliResult r = run("render '" + writeShot("step.json", j).string() + "' --out '" +
+                            (dir_ / "step").string() + "'");
+    EXPECT_EQ(r.rc, 2) << method;
+    EXPECT_NE(r.err.find("step.json: /bake/step: must be at least 1e-4 voxel"), std::string::npos)
+        << r.err;
+    EXPECT_EQ(r.err.find("baking light"), std::string::npos) << method << ": " << r.err;
+  }
+}
+
 // A run that fails at its first frame writes no animation.json naming frames it never wrote.
 TEST_F(RenderCli, AFailedAnimationLeavesNoWalk) {
   json j = slab();
