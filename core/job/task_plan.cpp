@@ -1,6 +1,7 @@
 #include "core/job/task_plan.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -258,15 +259,48 @@ std::vector<std::string> stringList(const shotjson::Reader& r, const Json& v,
   return out;
 }
 
-FarmTask readTask(const shotjson::Reader& r, const Json& v, const std::string& ptr) {
+// A task's id and the files it writes name files (DIR/<id>.json markers, DIR/<name>): plain
+// names only, so a plan whose id was computed again after an edit cannot reach outside its
+// folders.
+void checkPlainName(const shotjson::Reader& r, const std::string& name, const std::string& ptr) {
+  const bool plain =
+      !name.empty() && name.size() <= 255 && name[0] != '.' &&
+      std::all_of(name.begin(), name.end(), [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' || c == '-';
+      });
+  if (!plain) {
+    r.fail(ptr,
+           "'" + name + "' is not a plain file name (A-Z a-z 0-9 _ . -, not starting with '.')");
+  }
+}
+
+// How many views, frames or basic volumes a task's range may count, from the plan's shot; -1
+// where the plan does not say (a frame count of a method other than precomputed).
+int64_t rangeLimit(const ShotSpec& shot, const std::string& key) {
+  const auto* sequence = std::get_if<SequenceVolumeSpec>(&shot.volume);
+  const int64_t basic = sequence ? sequence->frames : 1;
+  if (key == "views") return int64_t(shot.views.size());
+  if (key == "basic_volumes") return basic;
+  if (key == "frames" && shot.bake.method == "precomputed") {
+    return shot.bake.knobs.optionalInteger("frames").value_or(basic);
+  }
+  return -1;
+}
+
+FarmTask readTask(const shotjson::Reader& r, const Json& v, const std::string& ptr,
+                  const ShotSpec& shot) {
   const shotjson::Object o(r, v, ptr,
                            {"id", "kind", "after", "writes", "cost_seconds", "summary", "views",
                             "frames", "basic_volumes"});
   FarmTask t;
   t.id = r.string(o.required("id"), o.path("id"));
+  checkPlainName(r, t.id, o.path("id"));
   t.scope.part = partFromName(r, r.string(o.required("kind"), o.path("kind")), o.path("kind"));
   t.after = stringList(r, o.required("after"), o.path("after"));
   t.writes = stringList(r, o.required("writes"), o.path("writes"));
+  for (size_t i = 0; i < t.writes.size(); ++i) {
+    checkPlainName(r, t.writes[i], o.path("writes") + "/" + std::to_string(i));
+  }
   t.cost_seconds = r.numberIn(o.required("cost_seconds"), o.path("cost_seconds"), 0, 1e12);
   t.summary = r.string(o.required("summary"), o.path("summary"));
   for (const char* key : {"views", "frames", "basic_volumes"}) {
@@ -275,6 +309,10 @@ FarmTask readTask(const shotjson::Reader& r, const Json& v, const std::string& p
     if (!range->is_array() || range->size() != 2) r.fail(o.path(key), "must be [begin, end]");
     t.scope.begin = int(r.integer((*range)[0], o.path(key) + "/0", 0, 10000000));
     t.scope.end = int(r.integer((*range)[1], o.path(key) + "/1", t.scope.begin + 1, 10000000));
+    const int64_t limit = rangeLimit(shot, key);
+    if (limit >= 0 && t.scope.end > limit) {
+      r.fail(o.path(key) + "/1", "runs past the shot's " + std::to_string(limit) + " " + key);
+    }
   }
   return t;
 }
@@ -323,7 +361,8 @@ TaskPlan planFromJson(const std::string& text, const std::string& source) {
   const Json& tasks = o.required("tasks");
   if (!tasks.is_array() || tasks.empty()) r.fail("/tasks", "must be a non-empty array");
   for (size_t i = 0; i < tasks.size(); ++i) {
-    plan.tasks.push_back(readTask(r, tasks[i], "/tasks/" + std::to_string(i)));
+    plan.tasks.push_back(readTask(r, tasks[i], "/tasks/" + std::to_string(i),
+                                  plan.auto_preset ? plan.auto_preset->shot : plan.shot));
   }
   checkGraph(r, plan.tasks);
   if (contentId(plan) != plan.id) {

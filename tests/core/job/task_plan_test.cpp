@@ -232,6 +232,22 @@ TEST(TaskPlan, APlanFileRoundTripsAndAnEditedOrMalformedOneIsRefused) {
   nlohmann::json format = j;
   format["format"] = "cloudbake-plan/0";
   refused(format, "/format");
+  // Forged plans (their id computed again is no check): a task id or a written file that
+  // leaves its folder, and a range past the shot's frames, are refused before anything runs.
+  nlohmann::json escape = j;
+  escape["tasks"][2]["id"] = "../../../PWNED";
+  refused(escape, "/tasks/2/id");
+  nlohmann::json writes = j;
+  writes["tasks"][2]["writes"] = {"../../evil.exr"};
+  refused(writes, "/tasks/2/writes/0");
+  for (size_t i = 0; i < j["tasks"].size(); ++i) {
+    for (const char* key : {"views", "frames", "basic_volumes"}) {
+      if (!j["tasks"][i].contains(key)) continue;
+      nlohmann::json past = j;
+      past["tasks"][i][key] = {0, 1000000};
+      refused(past, "/tasks/" + std::to_string(i) + "/" + key + "/1");
+    }
+  }
   EXPECT_THROW(planFromJson("{\"format\": ", "plan.json"), InputError);
 }
 
