@@ -221,7 +221,9 @@ class ShotRun final : public MethodRun {
   // The shot's volume, its VDB file read from a child's rewrite with a VDB reader command.
   DensityFieldPtr buildReadableVolume() {
     const auto* vdb = std::get_if<VdbVolumeSpec>(&shot_.volume);
-    if (!vdb || opt_.vdb_reader.command.empty()) return buildVolume(shot_.volume, opt_.source);
+    if (!vdb || opt_.vdb_reader.command.empty()) {
+      return buildVolume(shot_.volume, opt_.source, [this] { return !keepGoing(); });
+    }
     VdbVolumeSpec readable = *vdb;
     readable.path = readableVdb(vdb->path, "/volume/vdb");
     return fromRewrite(vdb->path, readable.path,

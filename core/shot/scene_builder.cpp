@@ -28,7 +28,8 @@ auto labelled(const std::string& source, const std::string& pointer, F&& make) {
 
 }  // namespace
 
-DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source) {
+DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source,
+                            const std::function<bool()>& stop) {
   const std::string ptr = std::string("/volume/") + volumeTypeName(volume);
   return std::visit(
       [&](const auto& v) -> DensityFieldPtr {
@@ -44,9 +45,9 @@ DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source)
         } else if constexpr (std::is_same_v<T, VdbVolumeSpec>) {
           return labelled(source, ptr, [&] { return loadVdbVolume(v); });
         } else if constexpr (std::is_same_v<T, MeshVolumeSpec>) {
-          return labelled(source, ptr, [&] { return meshToVolume(v); });
+          return labelled(source, ptr, [&] { return meshToVolume(v, stop); });
         } else if constexpr (std::is_same_v<T, ProceduralVolumeSpec>) {
-          return labelled(source, ptr, [&] { return makePerlinCloud(v.perlin); });
+          return labelled(source, ptr, [&] { return makePerlinCloud(v.perlin, stop); });
         } else {
           throw InputError(source + ": " + ptr +
                            ": an animated volume has one density per frame; build it frame by "

@@ -15,8 +15,10 @@ namespace cloudbake {
 /// Builds the density field of a single-frame volume: analytic box/sphere (exact), a VDB grid,
 /// a voxelised mesh or a Perlin cloud. Loading errors from the factories come back as
 /// InputError prefixed with `source` and the volume's JSON pointer ("shot.json: /volume/vdb:
-/// ..."). A `sequence` volume throws InputError (use buildSequenceFrame).
-DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source = "shot.json");
+/// ..."). A `sequence` volume throws InputError (use buildSequenceFrame). `stop`, when given,
+/// is polled while a mesh or a Perlin cloud is evaluated: true throws Cancelled.
+DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source = "shot.json",
+                            const std::function<bool()>& stop = {});
 
 /// Frame `frame` (0-based, < frames) of a sequence: that frame's VDB grid, or the procedural cloud
 /// at time procedural.time + frame * time_step. Throws InputError for an out-of-range frame.

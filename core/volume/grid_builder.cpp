@@ -8,7 +8,8 @@
 namespace cloudbake {
 
 openvdb::FloatGrid::Ptr buildGridFromBlocks(const openvdb::CoordBBox& box, double voxel_size,
-                                            const BlockEvaluator& eval) {
+                                            const BlockEvaluator& eval,
+                                            const std::function<bool()>& stop) {
   using LeafT = openvdb::FloatTree::LeafNodeType;
   auto grid = openvdb::FloatGrid::create(0.f);
   grid->setTransform(openvdb::math::Transform::createLinearTransform(voxel_size));
@@ -26,36 +27,43 @@ openvdb::FloatGrid::Ptr buildGridFromBlocks(const openvdb::CoordBBox& box, doubl
     std::unique_ptr<LeafT> leaf;
   };
   std::vector<Result> results(count);
-  parallelFor(0, int64_t(count), [&](int64_t lo, int64_t hi) {
-    float values[LeafT::SIZE];
-    for (size_t b = size_t(lo); b < size_t(hi); ++b) {
-      const int bx = static_cast<int>(b % n[0]);
-      const int by = static_cast<int>((b / n[0]) % n[1]);
-      const int bz = static_cast<int>(b / (static_cast<size_t>(n[0]) * n[1]));
-      const openvdb::Coord origin((b_lo[0] + bx) * 8, (b_lo[1] + by) * 8, (b_lo[2] + bz) * 8);
-      const openvdb::CoordBBox block(origin, origin.offsetBy(7));
-      const bool inside = box.isInside(block);
-      const bool uniform = eval(origin, values);
-      if (uniform) {
-        if (values[0] == 0.f) continue;
-        if (inside) {
-          results[b].tile = values[0];
-          continue;
+  // A mesh's voxelisation at a high resolution runs for tens of seconds: a cancelled run stops
+  // between blocks.
+  ParallelOptions options;
+  if (stop) options.cancelled = [&](double) { return stop(); };
+  parallelFor(
+      0, int64_t(count),
+      [&](int64_t lo, int64_t hi) {
+        float values[LeafT::SIZE];
+        for (size_t b = size_t(lo); b < size_t(hi); ++b) {
+          const int bx = static_cast<int>(b % n[0]);
+          const int by = static_cast<int>((b / n[0]) % n[1]);
+          const int bz = static_cast<int>(b / (static_cast<size_t>(n[0]) * n[1]));
+          const openvdb::Coord origin((b_lo[0] + bx) * 8, (b_lo[1] + by) * 8, (b_lo[2] + bz) * 8);
+          const openvdb::CoordBBox block(origin, origin.offsetBy(7));
+          const bool inside = box.isInside(block);
+          const bool uniform = eval(origin, values);
+          if (uniform) {
+            if (values[0] == 0.f) continue;
+            if (inside) {
+              results[b].tile = values[0];
+              continue;
+            }
+            for (float& v : values) v = values[0];
+          }
+          auto leaf = std::make_unique<LeafT>(origin, 0.f, false);
+          bool any = false;
+          for (openvdb::Index i = 0; i < LeafT::SIZE; ++i) {
+            if (values[i] == 0.f) continue;
+            const openvdb::Coord xyz = origin + LeafT::offsetToLocalCoord(i);
+            if (!inside && !box.isInside(xyz)) continue;
+            leaf->setValueOn(i, values[i]);
+            any = true;
+          }
+          if (any) results[b].leaf = std::move(leaf);
         }
-        for (float& v : values) v = values[0];
-      }
-      auto leaf = std::make_unique<LeafT>(origin, 0.f, false);
-      bool any = false;
-      for (openvdb::Index i = 0; i < LeafT::SIZE; ++i) {
-        if (values[i] == 0.f) continue;
-        const openvdb::Coord xyz = origin + LeafT::offsetToLocalCoord(i);
-        if (!inside && !box.isInside(xyz)) continue;
-        leaf->setValueOn(i, values[i]);
-        any = true;
-      }
-      if (any) results[b].leaf = std::move(leaf);
-    }
-  });
+      },
+      options);
   openvdb::FloatTree& tree = grid->tree();
   for (size_t b = 0; b < count; ++b) {
     if (results[b].leaf) {

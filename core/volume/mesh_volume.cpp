@@ -277,7 +277,8 @@ double meshVoxelSize(const MeshSourceOptions& o, const Bounds3& b) {
   return h;
 }
 
-DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& options) {
+DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& options,
+                             const std::function<bool()>& stop) {
   if (!std::isfinite(options.density) || !(options.density > 0)) {
     std::ostringstream os;
     os << options.path << ": mesh.density: must be finite and > 0, got " << options.density;
@@ -304,7 +305,7 @@ DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& 
   auto grid = buildGridFromBlocks(
       openvdb::CoordBBox(openvdb::Coord(range.lo[0], range.lo[1], range.lo[2]),
                          openvdb::Coord(range.hi[0], range.hi[1], range.hi[2])),
-      h, [&](const openvdb::Coord& origin, float* values) { return eval(origin, values); });
+      h, [&](const openvdb::Coord& origin, float* values) { return eval(origin, values); }, stop);
   grid->setName("density");
   if (grid->activeVoxelCount() == 0) {
     std::ostringstream os;
@@ -315,8 +316,8 @@ DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& 
   return makeGridVolume(grid, options.path);
 }
 
-DensityFieldPtr meshToVolume(const MeshSourceOptions& options) {
-  return meshToVolume(readMesh(options.path), options);
+DensityFieldPtr meshToVolume(const MeshSourceOptions& options, const std::function<bool()>& stop) {
+  return meshToVolume(readMesh(options.path), options, stop);
 }
 
 }  // namespace cloudbake

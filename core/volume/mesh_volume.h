@@ -36,6 +36,7 @@ constexpr uint64_t kMaxMeshVoxels = 1024ull * 1024 * 1024;
 double meshVoxelSize(const MeshSourceOptions& options, const Bounds3& b);
 
 /// Voxelises an in-memory mesh (options.path is only used in messages).
-DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& options);
+DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& options,
+                             const std::function<bool()>& stop = {});
 
 }  // namespace cloudbake

@@ -64,9 +64,11 @@ using BlockEvaluator = std::function<bool(const openvdb::Coord& origin, float* v
 /// `voxel_size` (voxel ijk centred at world ijk * voxel_size), evaluating the leaf-aligned 8^3
 /// blocks in parallel (parallelFor) and inserting them serially, so the result does not
 /// depend on the thread count. Voxels outside `box` and voxels with value 0 stay inactive;
-/// uniform non-zero blocks become active tiles. The evaluator is called concurrently.
+/// uniform non-zero blocks become active tiles. The evaluator is called concurrently. `stop`,
+/// when given, is polled between blocks (parallelFor's cancellation): true throws Cancelled.
 openvdb::FloatGrid::Ptr buildGridFromBlocks(const openvdb::CoordBBox& box, double voxel_size,
-                                            const BlockEvaluator& eval);
+                                            const BlockEvaluator& eval,
+                                            const std::function<bool()>& stop = {});
 
 /// Floor division by 8 that is correct for negative coordinates.
 inline int blockOf(int i) { return i >= 0 ? i / 8 : -((-i + 7) / 8); }

@@ -96,7 +96,7 @@ void validatePerlinCloudOptions(const PerlinCloudOptions& o) {
   }
 }
 
-DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& o) {
+DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& o, const std::function<bool()>& stop) {
   validatePerlinCloudOptions(o);
   const CloudGeometry g = cloudGeometry(o);
   const PerlinNoise noise(o.seed);
@@ -105,35 +105,40 @@ DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& o) {
   const Vec3 inv_axes_idx = Vec3(g.h) / g.semi_axes;                    // 1 / semi-axis (voxels)
   const openvdb::CoordBBox box(openvdb::Coord(0),
                                openvdb::Coord(g.dims[0] - 1, g.dims[1] - 1, g.dims[2] - 1));
-  auto grid = buildGridFromBlocks(box, g.h, [&](const openvdb::Coord& origin, float* values) {
-    // Skip blocks entirely outside the ellipsoid: nearest point of the block to the centre.
-    double r2_min = 0;
-    for (int a = 0; a < 3; ++a) {
-      const double lo = origin[a] + 0.5, hi = origin[a] + 7.5;
-      const double d = std::max({lo - center_idx[a], center_idx[a] - hi, 0.0}) * inv_axes_idx[a];
-      r2_min += d * d;
-    }
-    if (r2_min >= 1.0) {
-      values[0] = 0.f;
-      return true;
-    }
-    for (int i = 0; i < 512; ++i) {
-      const openvdb::Coord c = origin + openvdb::FloatTree::LeafNodeType::offsetToLocalCoord(i);
-      const Vec3 vi(c.x() + 0.5, c.y() + 0.5, c.z() + 0.5);  // voxel centre, voxel units
-      const double r = length((vi - center_idx) * inv_axes_idx);
-      const double env = cloudEnvelope(r);
-      if (env <= 0) {
-        values[i] = 0.f;
-        continue;
-      }
-      const Vec3 q = vi * (g.h / max_size * o.frequency);
-      const double v = env * 2.0 *
-                       (o.time == 0 ? fbm01(noise, q, o.octaves, o.persistence)
-                                    : evolvingFbm01(noise, q, o.octaves, o.persistence, o.time));
-      values[i] = static_cast<float>(o.density * eliasCloudDensity(v, o.cover, o.sharpness));
-    }
-    return false;
-  });
+  auto grid = buildGridFromBlocks(
+      box, g.h,
+      [&](const openvdb::Coord& origin, float* values) {
+        // Skip blocks entirely outside the ellipsoid: nearest point of the block to the centre.
+        double r2_min = 0;
+        for (int a = 0; a < 3; ++a) {
+          const double lo = origin[a] + 0.5, hi = origin[a] + 7.5;
+          const double d =
+              std::max({lo - center_idx[a], center_idx[a] - hi, 0.0}) * inv_axes_idx[a];
+          r2_min += d * d;
+        }
+        if (r2_min >= 1.0) {
+          values[0] = 0.f;
+          return true;
+        }
+        for (int i = 0; i < 512; ++i) {
+          const openvdb::Coord c = origin + openvdb::FloatTree::LeafNodeType::offsetToLocalCoord(i);
+          const Vec3 vi(c.x() + 0.5, c.y() + 0.5, c.z() + 0.5);  // voxel centre, voxel units
+          const double r = length((vi - center_idx) * inv_axes_idx);
+          const double env = cloudEnvelope(r);
+          if (env <= 0) {
+            values[i] = 0.f;
+            continue;
+          }
+          const Vec3 q = vi * (g.h / max_size * o.frequency);
+          const double v =
+              env * 2.0 *
+              (o.time == 0 ? fbm01(noise, q, o.octaves, o.persistence)
+                           : evolvingFbm01(noise, q, o.octaves, o.persistence, o.time));
+          values[i] = static_cast<float>(o.density * eliasCloudDensity(v, o.cover, o.sharpness));
+        }
+        return false;
+      },
+      stop);
   // Voxel ijk is centred at box_min + (ijk + 1/2) h.
   grid->transform().postTranslate(
       openvdb::Vec3d(g.box_min.x + 0.5 * g.h, g.box_min.y + 0.5 * g.h, g.box_min.z + 0.5 * g.h));

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "core/math/vec3.h"
@@ -61,10 +62,14 @@ struct PerlinCloudOptions {
 /// (openvdb::tools::sdfToFogVolume: 1 inside, linear ramp across the inner narrow band) and
 /// rejects non-float, empty, non-finite or negative grids (vdb_source.cpp). meshToVolume fills
 /// voxels whose generalised winding number exceeds 1/2 (core/volume/mesh_volume.h), so open
-/// meshes get a sensible solid. makePerlinCloud is described in core/volume/perlin_cloud.h.
+/// meshes get a sensible solid. makePerlinCloud is described in core/volume/perlin_cloud.h. The
+/// two that evaluate blocks poll `stop`, when given, between blocks and throw Cancelled when it
+/// says so (a mesh at a high resolution takes tens of seconds).
 DensityFieldPtr loadVdbVolume(const VdbSourceOptions& options);
-DensityFieldPtr meshToVolume(const MeshSourceOptions& options);
-DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& options);
+DensityFieldPtr meshToVolume(const MeshSourceOptions& options,
+                             const std::function<bool()>& stop = {});
+DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& options,
+                                const std::function<bool()>& stop = {});
 
 /// Samples any density field onto a sparse grid of the given voxel size (world units), e.g. to
 /// write analytic shapes to a .vdb. Throws InputError if it would exceed max_voxels.

@@ -4,6 +4,7 @@
 #include <openvdb/openvdb.h>
 #include <tbb/global_control.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 
@@ -89,6 +90,15 @@ std::string perlinError(const PerlinCloudOptions& o) {
     return e.what();
   }
   return "no error";
+}
+
+// As for meshes: a stop that fires ends the cloud's evaluation with Cancelled.
+TEST(PerlinCloud, AStopPredicateCancelsTheEvaluation) {
+  PerlinCloudOptions o;
+  o.resolution = 256;
+  std::atomic<int> polls{0};
+  EXPECT_THROW(makePerlinCloud(o, [&] { return ++polls > 1; }), Cancelled);
+  EXPECT_GE(polls.load(), 2);
 }
 
 TEST(PerlinCloud, ValidatesEveryOption) {
