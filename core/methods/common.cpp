@@ -244,9 +244,10 @@ namespace {
 // builds it, but it is at least the box lattice's over 1.25 (a lattice on a grid's own voxels
 // has at most 1.25x the voxels asked for per axis; 1.5 leaves room): a step under 1e-4 of that
 // is refused by the views too, so it is refused here first.
-void checkStepBeforeBake(MethodRun& run, double step, int64_t resolution, int n_views) {
+// Called as the bake starts, with its medium: a bake found in the cache builds no volume for it.
+void checkStepBeforeBake(const Medium& medium, double step, int64_t resolution, int n_views) {
   if (!(step > 0) || resolution <= 0 || n_views == 0) return;
-  const DensityField& density = *run.scene().medium.density;
+  const DensityField& density = *medium.density;
   const double voxel =
       bakeLatticeGeometry(density.bounds(), int(resolution), density.describe()).voxel_size / 1.5;
   if (step < 1e-4 * voxel) {
@@ -273,9 +274,13 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
                                                   ro.samples_per_pixel * work.view_seconds_per_ray;
   }
   const double total = start.back() + (shot.outputs.vdb ? 0.05 * work.bake_seconds : 0.0);
-  checkStepBeforeBake(run, ro.step, work.light_resolution, n_views);
+  const LightBakeFn checked_bake = [&](const Medium& medium, const Vec3& sun,
+                                       const BakeProgressFn& progress) {
+    checkStepBeforeBake(medium, ro.step, work.light_resolution, n_views);
+    return bake(medium, sun, progress);
+  };
   std::string entry;
-  const BakedLight light = obtainBake(run, bake, bake_w / total, &entry);
+  const BakedLight light = obtainBake(run, checked_bake, bake_w / total, &entry);
   for (const char* key : {"tally_noise", "truncation"}) {
     const auto it = light.metadata.find(std::string("cloudbake:") + key);
     if (it != light.metadata.end())
