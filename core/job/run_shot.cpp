@@ -119,7 +119,7 @@ class ShotRun final : public MethodRun {
     const std::string& path = sequence->paths.at(size_t(frame));
     readable.paths[size_t(frame)] =
         readableVdb(path, "/volume/sequence/paths/" + std::to_string(frame));
-    return fromRewrite(path, readable.paths[size_t(frame)],
+    return readRewrite(path, readable.paths[size_t(frame)],
                        [&] { return buildSequenceFrame(readable, frame, opt_.source); });
   }
 
@@ -226,7 +226,7 @@ class ShotRun final : public MethodRun {
     }
     VdbVolumeSpec readable = *vdb;
     readable.path = readableVdb(vdb->path, "/volume/vdb");
-    return fromRewrite(vdb->path, readable.path,
+    return readRewrite(vdb->path, readable.path,
                        [&] { return buildVolume(VolumeSpec(readable), opt_.source); });
   }
   // The rewrite of user VDB file `path` (vdb_gate.h), made once per run in the scratch folder;
@@ -242,19 +242,6 @@ class ShotRun final : public MethodRun {
       throw InputError(opt_.source + ": " + pointer + ": " + e.what());
     }
     return rewritten_[path] = out;
-  }
-  // Errors about the rewrite name the user's file instead.
-  template <class Build>
-  DensityFieldPtr fromRewrite(const std::string& path, const std::string& rewrite, Build&& build) {
-    try {
-      return build();
-    } catch (const InputError& e) {
-      std::string message = e.what();
-      for (size_t at; (at = message.find(rewrite)) != std::string::npos;) {
-        message.replace(at, rewrite.size(), path);
-      }
-      throw InputError(message);
-    }
   }
   std::string scratchDir() {
     if (scratch_.empty()) {

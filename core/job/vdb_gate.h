@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "core/error.h"
+
 namespace cloudbake {
 
 /// How a run reads user VDB files (RunOptions::vdb_reader).
@@ -24,5 +26,20 @@ struct VdbReaderOptions {
 /// out of time on the file; InternalError when the command cannot be started.
 void rewriteVdbInChild(const VdbReaderOptions& options, const std::string& in,
                        const std::string& out, const std::function<bool()>& keep_going);
+
+/// Runs `read` (which reads the rewrite `rewrite` of the user's file `path`) with InputError
+/// messages naming `path` instead of the rewrite, which the user never saw.
+template <class Read>
+auto readRewrite(const std::string& path, const std::string& rewrite, Read&& read) {
+  try {
+    return read();
+  } catch (const InputError& e) {
+    std::string message = e.what();
+    for (size_t at; (at = message.find(rewrite)) != std::string::npos;) {
+      message.replace(at, rewrite.size(), path);
+    }
+    throw InputError(message);
+  }
+}
 
 }  // namespace cloudbake

@@ -175,15 +175,7 @@ BakedLight readBakeViaChild(const std::string& path) {
   VdbReaderOptions reader;
   reader.command = command;
   rewriteVdbInChild(reader, path, rewrite.string(), [] { return true; });
-  try {
-    return readBakedLight(rewrite.string());
-  } catch (const InputError& e) {  // name the user's file, not the rewrite
-    std::string message = e.what();
-    for (size_t at; (at = message.find(rewrite.string())) != std::string::npos;) {
-      message.replace(at, rewrite.string().size(), path);
-    }
-    throw InputError(message);
-  }
+  return readRewrite(path, rewrite.string(), [&] { return readBakedLight(rewrite.string()); });
 }
 
 void runBakeSlice(const SliceOptions& opt) {

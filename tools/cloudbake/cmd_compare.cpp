@@ -29,9 +29,8 @@ using PixelMask = std::vector<bool>;
 // `test_what` and `ref_what` name the two images ("FILE layer 'L'") in errors.
 LayerStats compareLayer(const Image& test, const Image& ref, const PixelMask& mask,
                         const std::string& test_what, const std::string& ref_what) {
-  const std::string& what = test_what;
   if (test.width != ref.width || test.height != ref.height) {
-    throw InputError(what + ": images differ in size (" + std::to_string(test.width) + "x" +
+    throw InputError(test_what + ": images differ in size (" + std::to_string(test.width) + "x" +
                      std::to_string(test.height) + " vs " + std::to_string(ref.width) + "x" +
                      std::to_string(ref.height) + ")");
   }
