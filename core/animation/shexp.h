@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <vector>
 
 #include "core/math/spherical_harmonics.h"
@@ -10,12 +11,15 @@
 namespace cloudbake {
 
 /// The real SH basis at `directions` spherical-Fibonacci directions, in two layouts: by
-/// direction, and by coefficient ([i * n + d], for loops that run across directions).
+/// direction, and by coefficient ([i * stride + d], for loops that run across directions; each
+/// row padded with zeros to a whole number of kBlock directions).
 struct ShQuadrature {
+  static constexpr size_t kBlock = 16;
   ShQuadrature() = default;
   explicit ShQuadrature(int directions);
   std::vector<std::array<double, kShCoefficients>> by_direction;
   std::vector<double> by_coefficient;
+  size_t stride = 0;
 };
 
 /// The SH projection of exp(g(w)) by quadrature over `directions` spherical-Fibonacci directions:

@@ -10,6 +10,7 @@
 #include "core/animation/optical_depth_sh.h"
 #include "core/bake/bake_lattice.h"
 #include "core/error.h"
+#include "core/math/vector_exp.h"
 #include "core/volume/sources.h"
 
 namespace cloudbake {
@@ -112,7 +113,7 @@ TEST(ShExpReference, EqualsTheDirectionAtATimeSumBitForBit) {
       for (const auto& y : basis) {
         double f = 0;
         for (int i = 0; i < kShCoefficients; ++i) f += double(g[size_t(i)]) * y[size_t(i)];
-        const double e = std::exp(f);
+        const double e = vectorExp(f);
         for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += e * y[size_t(i)];
       }
       const ShCoefficients got = shExpReference(g, dirs);
