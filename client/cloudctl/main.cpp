@@ -26,6 +26,7 @@
 #include "common/exit_codes.h"
 #include "common/grpc_status.h"
 #include "common/json_limits.h"
+#include "common/printable.h"
 #include "core/io/exr_io.h"
 #include "core/io/png_writer.h"
 #include "core/job/sha256.h"
@@ -1040,7 +1041,31 @@ Commands addCommands(CLI::App& app, SubmitArgs* sa, JobArgs* ja) {
   return cmd;
 }
 
+// A typo in --server read "server unavailable" (exit 4, inviting a retry) after gRPC failed to
+// resolve it. Targets with a scheme gRPC knows are its to check; anything else must be
+// HOST:PORT.
+void checkServerAddress(const std::string& server) {
+  for (const char* scheme : {"dns:", "unix:", "unix-abstract:", "ipv4:", "ipv6:", "vsock:"}) {
+    if (server.rfind(scheme, 0) == 0 && server.size() > std::string(scheme).size()) return;
+  }
+  const size_t colon = server.rfind(':');
+  const std::string host = colon == std::string::npos ? "" : server.substr(0, colon);
+  const std::string port = colon == std::string::npos ? "" : server.substr(colon + 1);
+  const bool bracketed = host.size() > 2 && host.front() == '[' && host.back() == ']';
+  bool host_ok = !host.empty() && (bracketed || host.find(':') == std::string::npos);
+  for (char ch : host) host_ok = host_ok && ch > ' ' && ch != '/' && ch != 0x7f;
+  bool port_ok = !port.empty() && port.size() <= 5;
+  for (char ch : port) port_ok = port_ok && ch >= '0' && ch <= '9';
+  if (port_ok) port_ok = std::stoi(port) >= 1 && std::stoi(port) <= 65535;
+  if (host_ok && port_ok) return;
+  throw CliError{ExitCode::kBadInput,
+                 "--server (or CLOUDBAKE_SERVER): expected HOST:PORT with a port in 1..65535, "
+                 "[IPV6]:PORT or a gRPC target such as unix:PATH, got '" +
+                     cloudbake::printable(server) + "'"};
+}
+
 int runCommand(const Commands& cmd, Client& c, const SubmitArgs& sa, const JobArgs& ja) {
+  checkServerAddress(c.server);
   c.png = sa.png || ja.png;
   // These connect themselves: submit only once the shot file has been read.
   if (cmd.health->parsed()) return cmdHealth(c);

@@ -1092,6 +1092,30 @@ TEST(CloudctlCommandLine, OversizedShotIsBadInputNotServerBusy) {
   EXPECT_NE(r.err.find("shot too large"), std::string::npos) << r.err;
 }
 
+// A mistyped --server is bad input naming the option, not "server unavailable" (exit 4, which
+// invites a retry); what gRPC resolves itself (a scheme it knows) is left to it.
+TEST(CloudctlCommandLine, AMalformedServerAddressIsBadInputNamingTheOption) {
+  for (const char* bad : {"garbage", "127.0.0.1", "host:", ":50051", "host:0", "host:65536",
+                          "host:5oo51", "a:b:50051", "host/x:50051"}) {
+    const CmdResult r =
+        run(std::string(CLOUDCTL_BIN) + " --server '" + std::string(bad) + "' health");
+    EXPECT_EQ(r.code, 2) << bad << ": " << r.err;
+    EXPECT_NE(r.err.find("--server (or CLOUDBAKE_SERVER): expected HOST:PORT"), std::string::npos)
+        << bad << ": " << r.err;
+  }
+  const CmdResult env = run("CLOUDBAKE_SERVER=nonsense " + std::string(CLOUDCTL_BIN) + " health");
+  EXPECT_EQ(env.code, 2) << env.err;
+  EXPECT_NE(env.err.find("got 'nonsense'"), std::string::npos) << env.err;
+  // Well-formed addresses with nothing listening get as far as connecting: unavailable.
+  const std::string port = std::to_string(freePort());
+  for (const std::string& good :
+       {"127.0.0.1:" + port, "localhost:" + port, "[::1]:" + port, "ipv4:127.0.0.1:" + port}) {
+    const CmdResult r =
+        run(std::string(CLOUDCTL_BIN) + " --server '" + good + "' --timeout 2 health");
+    EXPECT_EQ(r.code, 4) << good << ": " << r.err;
+  }
+}
+
 TEST(CloudctlCommandLine, MistypedCommandIsNamedWithTheNearestOne) {
   const CmdResult r = run(std::string(CLOUDCTL_BIN) + " --server 127.0.0.1:1 sumbit shot.json");
   EXPECT_EQ(r.code, 2);
