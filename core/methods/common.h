@@ -44,6 +44,13 @@ void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const 
                         const MethodLimits& limits, const std::string& source,
                         const std::string& pointer = "/bake/light_resolution");
 
+/// Where the shot gives its volume's bounds (a box or a sphere), the lattice of `resolution`
+/// the run would build over them: InputError naming `pointer` when it exceeds the bake lattices'
+/// limit (kMaxBakeVoxels, whatever --max-voxels says), so the shot is refused at submit and in
+/// a dry run, not after it is queued. Other volumes' bounds are known once their files are read.
+void checkAnalyticLattice(const ShotSpec& shot, int resolution, const std::string& source,
+                          const std::string& pointer = "/bake/light_resolution");
+
 /// InputError naming `pointer` and --max-points when `points` exceeds the server's limit.
 void checkPointCount(int64_t points, const std::string& pointer, const MethodLimits& limits,
                      const std::string& source);

@@ -86,6 +86,10 @@ class PhotonMethod final : public BakeMethod {
         throw InputError(source + ": " + e.what());
       }
     }
+    checkAnalyticLattice(shot, o.light_resolution, source);
+    if (o.tally_resolution > 0) {
+      checkAnalyticLattice(shot, o.tally_resolution, source, "/bake/tally_resolution");
+    }
   }
 
   nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {

@@ -54,6 +54,7 @@ class PointcloudMethod final : public BakeMethod {
                        ": /bake/output_mapping: Eq. 2's output mapping applies to rule 'paper' "
                        "only (the normalised rule keeps radiometric units)");
     }
+    checkAnalyticLattice(shot, pointcloudOptions(shot).light_resolution, source);
   }
 
   nlohmann::json keyMaterial(const ShotSpec& shot, const nlohmann::json& canonical) const override {

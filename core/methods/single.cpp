@@ -30,6 +30,10 @@ class SingleMethod final : public BakeMethod {
               {"knobs", bakeKnobMaterial(*this, shot)}}}};
   }
 
+  void validate(const ShotSpec& shot, const std::string& source) const override {
+    checkAnalyticLattice(shot, singleBakeOptions(shot).light_resolution, source);
+  }
+
   MethodPlan plan(const ShotSpec& shot, const ShotCacheKeys& keys,
                   const std::function<bool(const std::string&)>& lookup) const override {
     const SingleBakeOptions o = singleBakeOptions(shot);

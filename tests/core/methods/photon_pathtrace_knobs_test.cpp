@@ -102,14 +102,36 @@ TEST(PhotonKnobs, LimitsNameTheLatticeAndTheOrder) {
     EXPECT_NO_THROW(photonMethod().checkLimits(s, limits, "shot.json"));
     limits.max_voxels = 20000000;
   }
+  // (A sphere at 1024 is refused as it is parsed: its lattice is over kMaxBakeVoxels.)
   const ShotSpec big =
-      parseShot(shot(R"({"method": "photon", "light_resolution": 1024, "order": 1})"), "");
+      parseShot(shot(R"({"method": "photon", "light_resolution": 300, "order": 1})"), "");
   try {
     photonMethod().checkLimits(big, limits, "shot.json");
-    ADD_FAILURE() << "no error for light_resolution 1024";
+    ADD_FAILURE() << "no error for light_resolution 300";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("/bake/light_resolution"), std::string::npos) << e.what();
   }
+}
+
+// A lattice the run would refuse (over kMaxBakeVoxels) is refused as the shot is parsed (at
+// submit and in a dry run) where the shot gives the volume's bounds, whatever --max-voxels says;
+// a flat box at the same resolution fits and is accepted.
+TEST(LatticeKnobs, ALatticeOverTheLimitOnASphereOrBoxIsRefusedAtParse) {
+  for (const char* method : {"single", "pointcloud", "photon"}) {
+    SCOPED_TRACE(method);
+    const std::string m = std::string(R"({"method": ")") + method + '"';
+    expectRejected(m + R"(, "light_resolution": 400})",
+                   "/bake/light_resolution: 400 gives a lattice of 402x402x402 voxels, more than "
+                   "the limit of 33554432");
+    EXPECT_NO_THROW(parseShot(shot(m + R"(, "light_resolution": 300})"), ""));
+    std::string slab = shot(m + R"(, "light_resolution": 1024})");
+    const std::string sphere = R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})";
+    slab.replace(slab.find(sphere), sphere.size(),
+                 R"({"box": {"min": [-5, -5, 0], "max": [5, 5, 0.04], "density": 1}})");
+    EXPECT_NO_THROW(parseShot(slab, ""));
+  }
+  expectRejected(R"({"method": "photon", "light_resolution": 64, "tally_resolution": 1000})",
+                 "/bake/tally_resolution: 1000 gives a lattice of");
 }
 
 TEST(PathtraceKnobs, TrackingAndMajorantCell) {

@@ -278,9 +278,10 @@ TEST_F(RenderCli, AssetErrorsFoundWhileBuildingNameTheField) {
 TEST_F(RenderCli, WorkTooLargeForTheMemoryIsRefusedBeforeItRuns) {
   json j = slab();
   j["volume"] = {{"sphere", {{"center", {0, 0, 0}}, {"radius", 1}, {"density", 1}}}};
-  // About 10^12 floats of tallies: more than any machine's memory.
+  // About 3 x 10^10 floats of tallies (120 GB) on a lattice of 322^3 voxels, under the bake
+  // lattices' own limit of 2^25 voxels (which the parser checks over a sphere's bounds).
   j["bake"] = {{"method", "photon"}, {"photons", 1000},        {"order", 8},
-               {"zonal_order", 64},  {"light_resolution", 16}, {"tally_resolution", 1024}};
+               {"zonal_order", 64},  {"light_resolution", 16}, {"tally_resolution", 320}};
   const std::string shot = writeShot("huge.json", j).string();
   CliResult r = run("render '" + shot + "' --out '" + (dir_ / "huge").string() + "' --quiet");
   EXPECT_EQ(r.rc, 2);
