@@ -205,6 +205,13 @@ inline float lerp3(const float* p, size_t sx, size_t sy, size_t sz, float fx, fl
   return c0 + fz * (c1 - c0);
 }
 
+/// lerp3 of each of a record's `stride` floats (a multiple of 4) into out.
+CLOUDBAKE_VECTOR_CLONES void lerpRecordWide(const float* __restrict p, size_t stride, size_t sy,
+                                            size_t sz, float fx, float fy, float fz,
+                                            float* __restrict out) {
+  for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
+}
+
 /// Trilinear lookups on one lattice by index coordinates (voxel centres at integers); voxels
 /// outside it read as zero.
 class LatticeReader {
@@ -259,8 +266,14 @@ class LatticeReader {
       readPacked(pack, stride, c, 0, int(stride), out);
       return;
     }
-    const float* __restrict p = pack + c.base * stride;
     const size_t sy = stride * stride_y_, sz = stride * stride_z_;
+    // Records of 16 floats or more (precomputed's 32) are read 8 floats an instruction where
+    // the CPU has AVX2.
+    if (stride >= 16) {
+      lerpRecordWide(pack + c.base * stride, stride, sy, sz, c.fx, c.fy, c.fz, out);
+      return;
+    }
+    const float* __restrict p = pack + c.base * stride;
     const float fx = c.fx, fy = c.fy, fz = c.fz;
     for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
   }
