@@ -1051,9 +1051,13 @@ void checkServerAddress(const std::string& server) {
   const size_t colon = server.rfind(':');
   const std::string host = colon == std::string::npos ? "" : server.substr(0, colon);
   const std::string port = colon == std::string::npos ? "" : server.substr(colon + 1);
+  // An IPv6 address in brackets, or a name or IPv4 address with no brackets or colons.
   const bool bracketed = host.size() > 2 && host.front() == '[' && host.back() == ']';
-  bool host_ok = !host.empty() && (bracketed || host.find(':') == std::string::npos);
-  for (char ch : host) host_ok = host_ok && ch > ' ' && ch != '/' && ch != 0x7f;
+  const std::string inner = bracketed ? host.substr(1, host.size() - 2) : host;
+  bool host_ok =
+      !inner.empty() && inner.find_first_of("[]") == std::string::npos &&
+      (bracketed ? inner.find(':') != std::string::npos : inner.find(':') == std::string::npos);
+  for (unsigned char ch : inner) host_ok = host_ok && ch > ' ' && ch != '/' && ch != 0x7f;
   bool port_ok = !port.empty() && port.size() <= 5;
   for (char ch : port) port_ok = port_ok && ch >= '0' && ch <= '9';
   if (port_ok) port_ok = std::stoi(port) >= 1 && std::stoi(port) <= 65535;

@@ -14,6 +14,11 @@
 namespace cloudbake {
 namespace {
 
+// GCC's and clang's portable vector extension: 4 doubles, one AVX register (two SSE2 ones in the
+// baseline clone), with IEEE arithmetic per lane.
+typedef double Double4 __attribute__((vector_size(32)));
+static_assert(kShCoefficients % 4 == 0, "the sums run four coefficients a vector");
+
 double hatNorm(const ShCoefficients& g) {
   double s = 0;
   for (int i = 1; i < kShCoefficients; ++i) s += double(g[size_t(i)]) * g[size_t(i)];
@@ -21,11 +26,6 @@ double hatNorm(const ShCoefficients& g) {
 }
 
 // Halvings that bring |g^| to at most 1 (scaling and squaring), at most 16.
-// GCC's and clang's portable vector extension: 4 doubles, one AVX register (two SSE2 ones in the
-// baseline clone), with IEEE arithmetic per lane.
-typedef double Double4 __attribute__((vector_size(32)));
-static_assert(kShCoefficients % 4 == 0, "the sums run four coefficients a vector");
-
 int squarings(const ShCoefficients& g) {
   const double m = hatNorm(g);
   return m <= 1 ? 0 : std::min(16, int(std::ceil(std::log2(m))));

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/math/parallel.h"
 
 namespace cloudbake {
@@ -113,6 +114,9 @@ BakeGrid bakeLatticeGeometry(const Bounds3& b, int resolution, const std::string
     throw InputError("volume: '" + what + "' has empty or infinite bounds");
   }
   const Vec3 ext = b.extent();
+  if (!isFinite(ext)) {
+    throw InputError("volume: '" + what + "' has bounds too wide to measure (" + str(ext) + ")");
+  }
   const double longest = maxComponent(ext);
   if (!(longest > 0)) {
     throw InputError("volume: '" + what + "' has zero extent; nothing to bake");

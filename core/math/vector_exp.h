@@ -42,7 +42,7 @@ inline double vectorExp(double x) {
   const double p = (q0 + r4 * q1) + r8 * (q2 + r4 * p1213);
   // 2^n as a double: the biased exponent n + 1023 (2 to 2046 here) shifted into place; the bits
   // of kShift itself shift out of the word.
-  const uint64_t bits = (__builtin_bit_cast(uint64_t, t) + 1023u) << 52;
+  const std::uint64_t bits = (__builtin_bit_cast(std::uint64_t, t) + 1023u) << 52;
   const double e = p * __builtin_bit_cast(double, bits);
   return x < -708.0 ? 0.0 : (x > 709.0 ? std::numeric_limits<double>::infinity() : e);
 }

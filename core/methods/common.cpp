@@ -203,9 +203,13 @@ void checkAnalyticLattice(const ShotSpec& shot, int resolution, const std::strin
   try {
     bakeLatticeGeometry(b, resolution, "volume", knob.c_str());
   } catch (const InputError& e) {
-    // "<knob>: <resolution> gives a lattice of ..." with the field's whole path.
+    // "<knob>: <resolution> gives a lattice of ..." with the field's whole path; the bounds'
+    // own errors name the volume.
     const std::string what = e.what();
-    throw InputError(source + ": " + pointer + what.substr(what.find(':')));
+    if (what.rfind(knob + ":", 0) == 0) {
+      throw InputError(source + ": " + pointer + what.substr(knob.size()));
+    }
+    throw InputError(source + ": /volume/" + volumeTypeName(shot.volume) + ": " + what);
   }
 }
 

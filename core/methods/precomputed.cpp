@@ -319,7 +319,7 @@ class PrecomputedMethod final : public BakeMethod {
     info_.citation =
         "Iwasaki, Nishino and Dobashi 2011, \"Real-time rendering of endless cloud animation\" "
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
-    info_.version = 2;
+    info_.version = 3;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.animates = true;
@@ -351,6 +351,7 @@ void PrecomputedMethod::validate(const ShotSpec& shot, const std::string& source
                        volumeTypeName(shot.volume) +
                        " volume is one basic volume: every frame is the same)");
     }
+    checkAnalyticLattice(shot, int(k.integer("light_resolution")), source);
     return;
   }
   const auto h = k.optionalInteger("dissolve");

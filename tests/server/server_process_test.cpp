@@ -1095,8 +1095,9 @@ TEST(CloudctlCommandLine, OversizedShotIsBadInputNotServerBusy) {
 // A mistyped --server is bad input naming the option, not "server unavailable" (exit 4, which
 // invites a retry); what gRPC resolves itself (a scheme it knows) is left to it.
 TEST(CloudctlCommandLine, AMalformedServerAddressIsBadInputNamingTheOption) {
-  for (const char* bad : {"garbage", "127.0.0.1", "host:", ":50051", "host:0", "host:65536",
-                          "host:5oo51", "a:b:50051", "host/x:50051"}) {
+  for (const char* bad :
+       {"garbage", "127.0.0.1", "host:", ":50051", "host:0", "host:65536", "host:5oo51",
+        "a:b:50051", "host/x:50051", "[]:1", "]x:1", "[abc]:1", "[::1:1", "::1"}) {
     const CmdResult r =
         run(std::string(CLOUDCTL_BIN) + " --server '" + std::string(bad) + "' health");
     EXPECT_EQ(r.code, 2) << bad << ": " << r.err;

@@ -3,9 +3,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <vector>
 
 #include "core/animation/optical_depth_sh.h"
 #include "core/bake/bake_lattice.h"
@@ -123,6 +126,45 @@ TEST(ShExpReference, EqualsTheDirectionAtATimeSumBitForBit) {
             << dirs << " directions, trial " << trial << ", coefficient " << i << ": " << want
             << " vs " << got[size_t(i)];
       }
+    }
+  }
+}
+
+// The frames' path: ShExp beyond its tables (|g^| > 1) projects exp(min(0, g(w))) with the same
+// blocked quadrature at 256 directions; equal bit for bit to the plain loop with the clamp, over
+// optical depths where g(w) rings positive in some directions and underflows in others.
+TEST(ShExp, ThickVoxelsAreThePlainClampedQuadratureBitForBit) {
+  uint32_t state = 54321u;
+  const auto uniform = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return double(state >> 8) / double(1u << 24);
+  };
+  std::vector<ShCoefficients> fit_samples;
+  for (int i = 0; i < 64; ++i) {
+    ShCoefficients g{};
+    for (float& v : g) v = float(-0.2 * uniform());
+    fit_samples.push_back(g);
+  }
+  const ShExp shexp = ShExp::fit(fit_samples);
+  std::vector<std::array<double, kShCoefficients>> basis;
+  for (const Vec3& w : sphereDirections(256)) basis.push_back(shBasis(w));
+  for (int trial = 0; trial < 400; ++trial) {
+    const double depth = trial % 4 == 3 ? 1200.0 : 2 + 60 * uniform();
+    ShCoefficients g{};
+    g[0] = float(-depth * std::sqrt(4 * kPi) * (0.5 + 0.5 * uniform()));
+    for (int i = 1; i < kShCoefficients; ++i) g[size_t(i)] = float(depth * (uniform() - 0.5));
+    std::array<double, kShCoefficients> acc{};
+    for (const auto& y : basis) {
+      double f = 0;
+      for (int i = 0; i < kShCoefficients; ++i) f += double(g[size_t(i)]) * y[size_t(i)];
+      const double e = vectorExp(std::min(0.0, f));
+      for (int i = 0; i < kShCoefficients; ++i) acc[size_t(i)] += e * y[size_t(i)];
+    }
+    const ShCoefficients got = shexp(g);
+    for (int i = 0; i < kShCoefficients; ++i) {
+      const float want = float(acc[size_t(i)] * 4 * kPi / 256.0);
+      ASSERT_EQ(std::memcmp(&want, &got[size_t(i)], sizeof(float)), 0)
+          << "trial " << trial << ", coefficient " << i << ": " << want << " vs " << got[size_t(i)];
     }
   }
 }

@@ -117,7 +117,7 @@ TEST(PhotonKnobs, LimitsNameTheLatticeAndTheOrder) {
 // submit and in a dry run) where the shot gives the volume's bounds, whatever --max-voxels says;
 // a flat box at the same resolution fits and is accepted.
 TEST(LatticeKnobs, ALatticeOverTheLimitOnASphereOrBoxIsRefusedAtParse) {
-  for (const char* method : {"single", "pointcloud", "photon"}) {
+  for (const char* method : {"single", "pointcloud", "photon", "precomputed"}) {
     SCOPED_TRACE(method);
     const std::string m = std::string(R"({"method": ")") + method + '"';
     expectRejected(m + R"(, "light_resolution": 400})",
@@ -132,6 +132,19 @@ TEST(LatticeKnobs, ALatticeOverTheLimitOnASphereOrBoxIsRefusedAtParse) {
   }
   expectRejected(R"({"method": "photon", "light_resolution": 64, "tally_resolution": 1000})",
                  "/bake/tally_resolution: 1000 gives a lattice of");
+  // Bounds whose extent overflows a double name the volume, not the resolution.
+  std::string wide = shot(R"({"method": "single"})");
+  const std::string sphere = R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})";
+  wide.replace(wide.find(sphere), sphere.size(),
+               R"({"box": {"min": [-1e308, 0, 0], "max": [1e308, 1, 1], "density": 1}})");
+  try {
+    parseShot(wide, "");
+    ADD_FAILURE() << "a box 2e308 wide was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/volume/box: volume: 'volume' has bounds too wide"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(PathtraceKnobs, TrackingAndMajorantCell) {
