@@ -7,10 +7,12 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
 
 #include "core/bake/baked_light_vdb.h"
+#include "core/bake/sky_sh_scatter.h"
 #include "core/error.h"
 #include "core/io/vdb_io.h"
 #include "core/volume/analytic.h"
@@ -109,6 +111,43 @@ TEST(BakedLight, SupportIsTheDilationOfTheDensityByOneVoxel) {
   EXPECT_EQ(first, 2);
   EXPECT_EQ(last, 4);
   EXPECT_FALSE(supportSpan(none.data(), 6, &first, &last));
+}
+
+// Each grid's rule on every value, through the vectorised range scan and the voxel scan that
+// names the voxel: values on the rules' edges pass, one value past them anywhere is refused.
+TEST(BakedLight, ValidateChecksEveryRuleOnEveryValue) {
+  BakedLight b;
+  b.grid.voxel_size = 0.1;
+  b.grid.nx = b.grid.ny = 40;
+  b.grid.nz = 50;  // 80000 voxels, 240000 values of a 3-component grid: several chunks
+  b.sun_direction = Vec3(0, 0, 1);
+  b.density.assign(b.grid.voxelCount(), 0.f);
+  std::vector<float>& t = b.add(bake_grids::kSunTransmittance, 1).data;
+  std::vector<float>& co = b.add(bake_grids::kMultipleFluence, 3).data;
+  std::vector<float>& sh = b.add(bake_grids::skyTransmittanceSh(1), 1).data;
+  std::fill(t.begin(), t.end(), 1.f);
+  t[7] = 0.f;
+  t[8] = -0.f;
+  std::fill(co.begin(), co.end(), 0.f);
+  co[100] = std::numeric_limits<float>::max();
+  std::fill(sh.begin(), sh.end(), -3.5f);  // SH coefficients may be negative
+  sh[9] = -std::numeric_limits<float>::max();
+  EXPECT_NO_THROW(b.validate("bake"));
+  const size_t last = co.size() - 1;  // the last value of the last voxel
+  co[last] = -1e-30f;
+  expectErrorNaming([&] { b.validate("bake"); }, "grid 'Co': voxel (39, 39, 49)");
+  co[last] = std::numeric_limits<float>::infinity();
+  expectErrorNaming([&] { b.validate("bake"); }, "value is not finite");
+  co[last] = 0.f;
+  t[b.grid.index(0, 0, 49)] = std::nextafter(1.f, 2.f);
+  expectErrorNaming([&] { b.validate("bake"); }, "grid 'sun_transmittance': voxel (0, 0, 49)");
+  t[b.grid.index(0, 0, 49)] = 1.f;
+  sh[12345] = -std::numeric_limits<float>::infinity();
+  expectErrorNaming([&] { b.validate("bake"); }, "value is not finite");
+  sh[12345] = std::nanf("");
+  expectErrorNaming([&] { b.validate("bake"); }, "value is not finite");
+  sh[12345] = 0.f;
+  EXPECT_NO_THROW(b.validate("bake"));
 }
 
 TEST(BakedLight, ValidateNamesTheFirstBadVoxelOfALargeGrid) {
