@@ -201,7 +201,7 @@ void checkAnalyticLattice(const ShotSpec& shot, int resolution, const std::strin
   }
   const std::string knob = pointer.substr(pointer.rfind('/') + 1);
   try {
-    bakeLatticeGeometry(b, resolution, "volume", knob.c_str());
+    bakeLatticeGeometry(b, resolution, volumeTypeName(shot.volume), knob.c_str());
   } catch (const InputError& e) {
     // "<knob>: <resolution> gives a lattice of ..." with the field's whole path; the bounds'
     // own errors name the volume.

@@ -141,7 +141,7 @@ TEST(LatticeKnobs, ALatticeOverTheLimitOnASphereOrBoxIsRefusedAtParse) {
     parseShot(wide, "");
     ADD_FAILURE() << "a box 2e308 wide was accepted";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("/volume/box: volume: 'volume' has bounds too wide"),
+    EXPECT_NE(std::string(e.what()).find("/volume/box: volume: 'box' has bounds too wide"),
               std::string::npos)
         << e.what();
   }
