@@ -185,7 +185,7 @@ void framePart(const Args& a) {
   };
   const auto render = [&](int threads) {
     renderFromBake(light, lights.medium, lights.sun, lights.sky, camera,
-                   bakeRenderOptions(shot, threads));
+                   frameRenderOptions(shot, light, threads));
   };
   timeAtThreads(a, "frame precomputed: light", [&](int) { lightFrame(); });
   // The stages of the last frame lit (at the last thread count).

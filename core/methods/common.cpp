@@ -113,10 +113,10 @@ bool needsSky(const ShotSpec& shot) {
   return true;
 }
 
-Knob stepKnob() {
+Knob stepKnob(const char* derived_default) {
   return Knob::number("step", 0, 1e12, std::nullopt, "world units",
                       "ray-march step of the view renders (not part of the bake's cache key)")
-      .derivedDefault("half a lattice voxel")
+      .derivedDefault(derived_default)
       .viewOnly();
 }
 

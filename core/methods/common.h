@@ -24,8 +24,9 @@ bool needsSky(const ShotSpec& shot);
 /// True when the shot has a sun that is not black (method photon then traces sun photons).
 bool needsSun(const ShotSpec& shot);
 
-/// The knobs of every method that renders views from a lattice.
-Knob stepKnob();
+/// The knobs of every method that renders views from a lattice; `derived_default` says what a
+/// step left out is.
+Knob stepKnob(const char* derived_default = "half a lattice voxel");
 Knob lightResolutionKnob(int64_t default_resolution, bool aligned_to_grid);
 
 /// How views of a lattice method are rendered: `step`, bake.samples rays per pixel, bake.seed.

@@ -27,7 +27,7 @@ using Json = nlohmann::json;
 std::vector<Knob> precomputedKnobs() {
   const PrecomputedShotOptions d;
   return {
-      stepKnob(),
+      stepKnob("one lattice voxel"),
       lightResolutionKnob(d.light_resolution, false),
       Knob::integer("sample_points", 1, int64_t(1) << 20, d.precompute.sample_points,
                     "K: sample points of the multiple-scattering transfer, shared by every "
@@ -277,7 +277,7 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
                  const FrameProgress& progress) {
   const ShotSpec& shot = run.shot();
   const Scene& lights = run.lights();
-  const BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
+  const BakeRenderOptions ro = frameRenderOptions(shot, light, run.threads());
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   for (int i = 0; i < n_views; ++i) {
     const Camera& camera = lights.cameras[size_t(i)];
@@ -508,6 +508,17 @@ void PrecomputedMethod::run(MethodRun& run) const {
 const BakeMethod& precomputedMethod() {
   static const PrecomputedMethod kMethod;
   return kMethod;
+}
+
+BakeRenderOptions frameRenderOptions(const ShotSpec& shot, const BakedLight& frame, int threads) {
+  BakeRenderOptions o = bakeRenderOptions(shot, threads);
+  // A frame's sources vary on its lattice smoothly enough that a whole voxel a step costs no
+  // measured accuracy and halves the march, the larger half of a frame's time. Measured against
+  // `pathtrace` (two 1024-path renders) on bench/precomputed_bench.py's Perlin cloud, 160x120:
+  // the scattered light's relative RMSE 0.319 -> 0.321 from the side, 0.761 -> 0.756 towards
+  // the sun, the layers' means within 0.6 %.
+  if (!(o.step > 0)) o.step = frame.grid.voxel_size;
+  return o;
 }
 
 PrecomputedShotOptions precomputedOptions(const ShotSpec& shot) {

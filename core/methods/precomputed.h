@@ -8,6 +8,7 @@
 
 #include "core/animation/precomputed.h"
 #include "core/animation/video_texture.h"
+#include "core/bake/render_from_bake.h"
 #include "core/methods/method.h"
 
 namespace cloudbake {
@@ -24,6 +25,10 @@ struct PrecomputedShotOptions {
   int basic_volumes = 1;  ///< the sequence's frames (1 for a static volume)
 };
 PrecomputedShotOptions precomputedOptions(const ShotSpec& shot);
+
+/// The render options of a frame's views: the shot's, with the step a whole voxel of the frame's
+/// lattice where the shot leaves it out (see docs/methods.md, "An eighth step").
+BakeRenderOptions frameRenderOptions(const ShotSpec& shot, const BakedLight& frame, int threads);
 
 /// Output names of frame `f`: "<stem>.<ffff>" (4 digits at least, as DCC frame sequences).
 std::string frameStem(const std::string& stem, int frame);
