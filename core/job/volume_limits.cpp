@@ -65,16 +65,8 @@ void checkShotVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
   }
   methodOf(shot).checkLimits(shot, MethodLimits{max_voxels, 0, 0}, source);
   if (shot.outputs.vdb && shot.outputs.vdb_voxel_size > 0) {
-    Vec3 extent;
-    bool analytic = true;
-    if (auto* b = std::get_if<BoxVolumeSpec>(&shot.volume)) {
-      extent = b->max - b->min;
-    } else if (auto* s = std::get_if<SphereVolumeSpec>(&shot.volume)) {
-      extent = Vec3(2 * s->radius);
-    } else {
-      analytic = false;
-    }
-    const double n = analytic ? boxVoxels(extent, shot.outputs.vdb_voxel_size) : 0;
+    const std::optional<Bounds3> b = statedBounds(shot.volume);
+    const double n = b ? boxVoxels(b->extent(), shot.outputs.vdb_voxel_size) : 0;
     if (n > limit) {
       std::ostringstream what;
       what << "voxel size " << shot.outputs.vdb_voxel_size << " over the volume's bounds";

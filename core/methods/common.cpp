@@ -189,19 +189,11 @@ void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const 
 
 void checkAnalyticLattice(const ShotSpec& shot, int resolution, const std::string& source,
                           const std::string& pointer) {
-  Bounds3 b;
-  if (const auto* box = std::get_if<BoxVolumeSpec>(&shot.volume)) {
-    b.min = box->min;
-    b.max = box->max;
-  } else if (const auto* sphere = std::get_if<SphereVolumeSpec>(&shot.volume)) {
-    b.min = sphere->center - Vec3(sphere->radius);
-    b.max = sphere->center + Vec3(sphere->radius);
-  } else {
-    return;
-  }
+  const std::optional<Bounds3> b = statedBounds(shot.volume);
+  if (!b) return;
   const std::string knob = pointer.substr(pointer.rfind('/') + 1);
   try {
-    bakeLatticeGeometry(b, resolution, volumeTypeName(shot.volume), knob.c_str());
+    bakeLatticeGeometry(*b, resolution, volumeTypeName(shot.volume), knob.c_str());
   } catch (const InputError& e) {
     // "<knob>: <resolution> gives a lattice of ..." with the field's whole path; the bounds'
     // own errors name the volume.

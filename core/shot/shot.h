@@ -108,4 +108,21 @@ inline const char* volumeTypeName(const VolumeSpec& volume) {
   return kNames[volume.index()];
 }
 
+/// The bounds a `box` or `sphere` volume states (world units), known before anything is built;
+/// nullopt for the other volumes, whose bounds are known once their files are read or their
+/// field evaluated.
+inline std::optional<Bounds3> statedBounds(const VolumeSpec& volume) {
+  Bounds3 b;
+  if (const auto* box = std::get_if<BoxVolumeSpec>(&volume)) {
+    b.min = box->min;
+    b.max = box->max;
+  } else if (const auto* sphere = std::get_if<SphereVolumeSpec>(&volume)) {
+    b.min = sphere->center - Vec3(sphere->radius);
+    b.max = sphere->center + Vec3(sphere->radius);
+  } else {
+    return std::nullopt;
+  }
+  return b;
+}
+
 }  // namespace cloudbake

@@ -306,17 +306,7 @@ OutputSpec parseOutputs(const Object& o) {
 
 // Cross-section checks: they need more than one part of the shot.
 void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
-  Bounds3 b;
-  bool analytic = false;
-  if (auto* box = std::get_if<BoxVolumeSpec>(&shot.volume)) {
-    b.min = box->min;
-    b.max = box->max;
-    analytic = true;
-  } else if (auto* s = std::get_if<SphereVolumeSpec>(&shot.volume)) {
-    b.min = s->center - Vec3(s->radius);
-    b.max = s->center + Vec3(s->radius);
-    analytic = true;
-  }
+  const std::optional<Bounds3> b = statedBounds(shot.volume);
   const OutputSpec& out = shot.outputs;
   // Bake methods write their own lattice (light_resolution), whatever the volume.
   if (methodOf(shot).info().bakes_light) {
@@ -327,7 +317,7 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
     }
     return;
   }
-  if (!analytic) {
+  if (!b) {
     if (out.vdb_voxel_size > 0) {
       r.fail("/outputs/vdb_voxel_size", std::string("only applies to box and sphere volumes (a ") +
                                             volumeTypeName(shot.volume) +
@@ -342,7 +332,7 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
                volumeTypeName(shot.volume) + " volume");
   }
   double voxels = 1;
-  for (int a = 0; a < 3; ++a) voxels *= std::ceil(b.extent()[a] / out.vdb_voxel_size);
+  for (int a = 0; a < 3; ++a) voxels *= std::ceil(b->extent()[a] / out.vdb_voxel_size);
   if (!(voxels <= kMaxVdbVoxels)) {
     std::ostringstream os;
     os << "gives " << voxels << " voxels over the volume's bounds; the limit is "
