@@ -99,6 +99,9 @@ ForwardPeak photonPeakSplit(const PhaseFunction& phase, const PhotonBakeOptions&
 inline Rgb photonPeakFluence(double tsun, const Rgb& e) {
   if (!(tsun > 0)) return Rgb(0.0);
   const float l = std::log(float(tsun));
+  // A grey albedo's channels share one exponential (the same value: a sixth of a view's time
+  // was these exponentials).
+  if (e.x == e.y && e.y == e.z) return Rgb(double(std::exp(l * float(e.x))) - tsun);
   return Rgb(std::exp(l * float(e.x)), std::exp(l * float(e.y)), std::exp(l * float(e.z))) -
          Rgb(tsun);
 }

@@ -21,6 +21,10 @@ struct BakeRenderOptions {
   /// what is behind, and of the in-scattering left).
   double min_transmittance = 1e-4;
   int threads = 0;  ///< 0: the caller's TBB arena
+  /// Method photon's views: read the tallies' light towards the camera from a field built per
+  /// view (render_from_bake.cpp, buildViewField) where it pays; false: weight the tallies per
+  /// ray everywhere (the same image within the field's second-order difference; for tests).
+  bool view_field = true;
 };
 
 /// The sky's radiance averaged over the sphere (exact for a constant sky, else an equal-area

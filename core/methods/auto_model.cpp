@@ -30,6 +30,10 @@ constexpr double kPhotonWorstFactor = 2.25;
 // photon views at 256x192 took 0.031-0.091 us per ray and coefficient (1.3-4.1 us per ray with
 // 37-45 coefficients) on two cores, their writing apart.
 constexpr double kViewSecondsPerCoefficient = 6e-8;
+// Seconds per ray of a photon view that reads its tallies from a field built for the view
+// (render_from_bake.cpp, buildViewField; photon 8): 0.89-1.31 us measured at 256x192 with 16
+// rays per pixel on bench/scenes' perlin_cloud and perlin_droplet, 2 threads; single's figure.
+constexpr double kFieldViewSecondsPerRay = 1.5e-6;
 // Seconds of one photon over those of one pilot path through the cloud: 0.16-0.68 on the five
 // bench scenes at 524288 and 2M photons (bench/auto_cost_fit.py; the thin layer, whose paths are
 // short, the highest), median 0.33; their upper quartile, so that a plan more often overstates
@@ -83,6 +87,16 @@ AutoCandidate singleCandidate(const SceneTraits& traits, const PilotMeasure& pil
   return c;
 }
 
+// A photon view builds its field where it traces at least a quarter as many rays as the tally
+// lattice has voxels (at most the rung's resolution plus its border, cubed); smaller views
+// weight every coefficient per ray.
+double photonViewSecondsPerRay(const SceneTraits& traits, const PhotonRung& rung, int samples) {
+  const double rays = traits.views > 0 ? traits.pixels / traits.views * samples : 0.0;
+  const int tally = rung.tally_resolution > 0 ? rung.tally_resolution : rung.light_resolution;
+  if (4 * rays >= std::pow(tally + 2.0, 3)) return kFieldViewSecondsPerRay;
+  return kViewSecondsPerCoefficient * double(shCount(rung.order) + kZonalOrder - rung.order);
+}
+
 AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pilot,
                               const PhotonRung& rung, double factor) {
   AutoCandidate c;
@@ -101,8 +115,7 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   c.seconds = latticeSeconds(rung.light_resolution) * (traits.sky ? 2.0 : 1.0) +
               photon_seconds * double(rung.photons) *
                   ((traits.sky ? 1.0 : 0.0) + (traits.sun ? 1.0 : 0.0)) +
-              traits.pixels * c.samples * kViewSecondsPerCoefficient *
-                  double(shCount(rung.order) + kZonalOrder - rung.order) +
+              traits.pixels * c.samples * photonViewSecondsPerRay(traits, rung, c.samples) +
               writeSeconds(traits);
   c.why = "photon's error at these knobs was " + fixed(100 * rung.bunny_error, 1) +
           " % on the bunny scene and at most " + fixed(factor, 2) +

@@ -453,6 +453,70 @@ TEST(PhotonBake, PeakLightsPhaseIsNormalisedAndSmoothsOnlyThePeaks) {
   EXPECT_NEAR(light.fluence(1).y, 0, 1e-7);
 }
 
+// Relative RMS difference of channel 0 of `layer` between two renders of one view, over the
+// pixels where `a`'s alpha exceeds 0.5, and the largest difference there.
+struct LayerDifference {
+  double rel_rms = 0, max_abs = 0;
+};
+LayerDifference layerDifference(const RenderLayers& a, const RenderLayers& b,
+                                Image RenderLayers::*layer) {
+  double sq = 0, sum = 0, max_abs = 0;
+  int n = 0;
+  for (int y = 0; y < a.beauty.height; ++y)
+    for (int x = 0; x < a.beauty.width; ++x) {
+      if (a.beauty.at(x, y)[3] < 0.5) continue;
+      const double d = (a.*layer).at(x, y)[0] - (b.*layer).at(x, y)[0];
+      sq += d * d;
+      sum += (b.*layer).at(x, y)[0];
+      max_abs = std::max(max_abs, std::abs(d));
+      ++n;
+    }
+  EXPECT_GT(n, 0) << "the view must see the cloud";
+  return {n > 0 && sum > 0 ? std::sqrt(sq / n) / (sum / n) : 0.0, max_abs};
+}
+
+// A photon view reads the tallies' light towards the camera from a field built per view
+// (render_from_bake.cpp, buildViewField) instead of weighting their coefficients per ray: the
+// same image within the field's second-order difference for a pinhole camera far off and an
+// orthographic one (exact directions), and the per-ray weights themselves for a camera inside
+// the cloud, where the directions turn too fast from voxel to voxel.
+TEST(PhotonBake, ViewFieldMatchesPerRayWeights) {
+  const Medium m = sphere(4, Rgb(0.95), std::make_shared<HenyeyGreensteinPhase>(0.8));
+  PhotonBakeOptions o = small(100000, 3);
+  o.light_resolution = 32;
+  o.tally_resolution = 16;
+  o.zonal_order = 16;
+  Sun sun;
+  sun.direction = normalize(Vec3(0.15, 1, 0.1));  // the cameras look towards the sun
+  sun.irradiance = Rgb(1.0);
+  Sky sky;
+  sky.radiance = Rgb(0.3);
+  const BakedLight bake = bakePhoton(m, sun.direction, o);
+  Camera far = perspectiveCamera(48, 12);
+  far.position = Vec3(0.3, -10, 0.8);
+  Camera ortho = perspectiveCamera(48);
+  ortho.type = Camera::Type::kOrthographic;
+  ortho.width = 2.0;
+  Camera inside = perspectiveCamera(48, 60);
+  inside.position = Vec3(0, 0.1, 0.5);
+  inside.look_at = Vec3(0, 1, 0.5);
+  BakeRenderOptions per_ray;
+  per_ray.view_field = false;
+  for (const Camera* cam : {&far, &ortho, &inside}) {
+    const RenderLayers field = renderFromBake(bake, m, sun, sky, *cam, {});
+    const RenderLayers ray = renderFromBake(bake, m, sun, sky, *cam, per_ray);
+    for (auto layer : {&RenderLayers::multiple, &RenderLayers::sky}) {
+      const LayerDifference d = layerDifference(field, ray, layer);
+      if (cam == &inside) {
+        EXPECT_EQ(d.max_abs, 0) << "inside the cloud every sample is near the eye";
+      } else {
+        EXPECT_LT(d.rel_rms, 0.01) << (cam == &far ? "far" : "orthographic");
+        EXPECT_GT(d.max_abs, 0) << "the field must be read";
+      }
+    }
+  }
+}
+
 TEST(PhotonBake, CancelsAndNamesBadInput) {
   const Medium m = sphere(4, Rgb(0.9), std::make_shared<IsotropicPhase>());
   const Vec3 up(0, 0, 1);
