@@ -80,6 +80,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
@@ -389,11 +390,13 @@ struct PixelSum {
 
 /// Everything constant over a render: the grids, the block maxima and the lights.
 /// Where a view's rays come from: every ray of a pinhole camera leaves `eye`; every ray of an
-/// orthographic camera travels along `forward`. `rays` is how many the view traces.
+/// orthographic camera travels along `forward`. `rays` is how many the view traces; `cancelled`
+/// is polled while a field is built for the view (BakeMarcher::buildViewField).
 struct ViewGeometry {
   bool pinhole = true;
   Vec3 eye, forward;
   double rays = 0;
+  std::function<bool(double)> cancelled;
 };
 
 class BakeMarcher {
@@ -690,32 +693,40 @@ class BakeMarcher {
     field_near_ = view.pinhole ? 2.0 * std::max(sh_order_, zonal_order_) * g.voxel_size : 0.0;
     field_.resize(voxels * kFieldFloats);
     const size_t nx = size_t(g.nx), ny = size_t(g.ny);
-    parallelFor(0, g.nz, [&](int64_t k) {
-      Rgb w[shCount(kMaxShDegree) + kMaxZonalDegree];
-      for (size_t j = 0; j < ny; ++j) {
-        for (size_t i = 0; i < nx; ++i) {
-          const size_t v = (size_t(k) * ny + j) * nx + i;
-          const float* rec = tally_pack_.data() + v * tally_stride_;
-          float* out = field_.data() + v * kFieldFloats;
-          if (std::all_of(rec, rec + tally_floats_, [](float x) { return x == 0; })) {
-            std::fill(out, out + kFieldFloats, 0.f);
-            continue;
+    // A slice's voxels take about 0.3 us each: a tally lattice near the memory's limit takes
+    // seconds, so the loop stops when the view is cancelled.
+    ParallelOptions slices;
+    slices.cancelled = view.cancelled;
+    slices.cancelled_message = "render from bake cancelled while building the view's field";
+    parallelFor(
+        0, g.nz,
+        [&](int64_t k) {
+          Rgb w[shCount(kMaxShDegree) + kMaxZonalDegree];
+          for (size_t j = 0; j < ny; ++j) {
+            for (size_t i = 0; i < nx; ++i) {
+              const size_t v = (size_t(k) * ny + j) * nx + i;
+              const float* rec = tally_pack_.data() + v * tally_stride_;
+              float* out = field_.data() + v * kFieldFloats;
+              if (std::all_of(rec, rec + tally_floats_, [](float x) { return x == 0; })) {
+                std::fill(out, out + kFieldFloats, 0.f);
+                continue;
+              }
+              Vec3 d = view.forward;
+              if (view.pinhole) {
+                const Vec3 r = g.center(int(i), int(j), int(k)) - view.eye;
+                if (length(r) > 0) d = normalize(r);
+              }
+              phaseWeights(d, w);
+              const Rgb src[3] = {weightedSum(rec, msh_.size(), w),
+                                  weightedSum(rec + ssky_slot_, ssky_sh_.size(), w),
+                                  weightedSum(rec + msky_slot_, msky_sh_.size(), w)};
+              for (int q = 0; q < 3; ++q) {
+                for (int c = 0; c < 3; ++c) out[3 * q + c] = float(src[q][c]);
+              }
+            }
           }
-          Vec3 d = view.forward;
-          if (view.pinhole) {
-            const Vec3 r = g.center(int(i), int(j), int(k)) - view.eye;
-            if (length(r) > 0) d = normalize(r);
-          }
-          phaseWeights(d, w);
-          const Rgb src[3] = {weightedSum(rec, msh_.size(), w),
-                              weightedSum(rec + ssky_slot_, ssky_sh_.size(), w),
-                              weightedSum(rec + msky_slot_, msky_sh_.size(), w)};
-          for (int q = 0; q < 3; ++q) {
-            for (int c = 0; c < 3; ++c) out[3 * q + c] = float(src[q][c]);
-          }
-        }
-      }
-    });
+        },
+        slices);
   }
 
   // Whether a sample at distance t along the ray reads the view's field (buildViewField).
@@ -1270,6 +1281,7 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
   view.eye = centre.o;
   view.forward = centre.d;
   view.rays = options.view_field ? double(w) * double(h) * spp : 0.0;
+  if (progress) view.cancelled = [&progress](double) { return !progress(0.0); };
 
   RenderLayers out = makeRenderLayers(w, h);
   std::optional<BakeMarcher> marcher;

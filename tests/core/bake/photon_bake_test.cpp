@@ -517,6 +517,30 @@ TEST(PhotonBake, ViewFieldMatchesPerRayWeights) {
   }
 }
 
+// Building a view's field takes seconds on a tally lattice near the memory's limit, so it stops
+// when the view is cancelled, before any tile.
+TEST(PhotonBake, AViewCancelsWhileItBuildsItsField) {
+  const Medium m = sphere(4, Rgb(0.9), std::make_shared<IsotropicPhase>());
+  PhotonBakeOptions o = small(20000);
+  o.tally_resolution = 16;
+  const BakedLight bake = bakePhoton(m, Vec3(0, 0, 1), o);
+  Sun sun;
+  sun.direction = bake.sun_direction;
+  sun.irradiance = Rgb(1.0);
+  int polls = 0;
+  try {
+    renderFromBake(bake, m, sun, Sky{}, perspectiveCamera(64), {}, [&](double f) {
+      ++polls;
+      EXPECT_EQ(f, 0.0) << "no tile may run";
+      return false;
+    });
+    ADD_FAILURE() << "a cancelled view must throw Cancelled";
+  } catch (const Cancelled& e) {
+    EXPECT_NE(std::string(e.what()).find("field"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(polls, 1);
+}
+
 TEST(PhotonBake, CancelsAndNamesBadInput) {
   const Medium m = sphere(4, Rgb(0.9), std::make_shared<IsotropicPhase>());
   const Vec3 up(0, 0, 1);
