@@ -691,7 +691,11 @@ class BakeMarcher {
     const size_t voxels = g.voxelCount();
     if (!(4 * view.rays >= double(voxels))) return;
     field_near_ = view.pinhole ? 2.0 * std::max(sh_order_, zonal_order_) * g.voxel_size : 0.0;
-    field_.resize(voxels * kFieldFloats);
+    // A sample at t >= field_near_ reads voxels at least field_near_ - sqrt(3) h from the eye:
+    // nearer ones are never read, and a lattice all nearer than field_near_ needs no field.
+    const double skip = field_near_ - 2 * g.voxel_size;
+    if (view.pinhole && farthestCentre(g, view.eye) < field_near_) return;
+    field_ = LargeArray<float>(voxels * kFieldFloats);
     const size_t nx = size_t(g.nx), ny = size_t(g.ny);
     // A slice's voxels take about 0.3 us each: a tally lattice near the memory's limit takes
     // seconds, so the loop stops when the view is cancelled.
@@ -707,13 +711,12 @@ class BakeMarcher {
               const size_t v = (size_t(k) * ny + j) * nx + i;
               const float* rec = tally_pack_.data() + v * tally_stride_;
               float* out = field_.data() + v * kFieldFloats;
-              if (std::all_of(rec, rec + tally_floats_, [](float x) { return x == 0; })) {
-                std::fill(out, out + kFieldFloats, 0.f);
-                continue;
-              }
+              std::fill(out, out + kFieldFloats, 0.f);
+              if (std::all_of(rec, rec + tally_floats_, [](float x) { return x == 0; })) continue;
               Vec3 d = view.forward;
               if (view.pinhole) {
                 const Vec3 r = g.center(int(i), int(j), int(k)) - view.eye;
+                if (length(r) < skip) continue;
                 if (length(r) > 0) d = normalize(r);
               }
               phaseWeights(d, w);
@@ -729,8 +732,18 @@ class BakeMarcher {
         slices);
   }
 
+  // The largest distance from `eye` to a voxel centre of `g` (at one of the lattice's corners).
+  static double farthestCentre(const BakeGrid& g, const Vec3& eye) {
+    double far = 0;
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 p = g.center(c & 1 ? g.nx - 1 : 0, c & 2 ? g.ny - 1 : 0, c & 4 ? g.nz - 1 : 0);
+      far = std::max(far, length(p - eye));
+    }
+    return far;
+  }
+
   // Whether a sample at distance t along the ray reads the view's field (buildViewField).
-  bool fieldAt(double t) const { return !field_.empty() && t >= field_near_; }
+  bool fieldAt(double t) const { return field_.size() > 0 && t >= field_near_; }
 
   void readField(const Cell& c, Rgb* ms, Rgb* ssky, Rgb* csky) const {
     float v[kFieldFloats];
@@ -1195,7 +1208,7 @@ class BakeMarcher {
   std::vector<double> zonal_sinc_;  // 1 - sinc(pi l / (top + 1)) per zonal degree l
   // photon: the tallies' light towards the view per voxel (buildViewField; empty: none)
   static constexpr int kFieldFloats = 9;
-  std::vector<float> field_;
+  LargeArray<float> field_;
   double field_near_ = 0;  // samples nearer the eye than this keep the per-ray weights
 };
 
