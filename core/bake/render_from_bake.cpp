@@ -388,7 +388,6 @@ struct PixelSum {
   double alpha = 0;
 };
 
-/// Everything constant over a render: the grids, the block maxima and the lights.
 /// Where a view's rays come from: every ray of a pinhole camera leaves `eye`; every ray of an
 /// orthographic camera travels along `forward`. `rays` is how many the view traces; `cancelled`
 /// is polled while a field is built for the view (BakeMarcher::buildViewField).
@@ -399,6 +398,7 @@ struct ViewGeometry {
   std::function<bool(double)> cancelled;
 };
 
+/// Everything constant over a render: the grids, the block maxima and the lights.
 class BakeMarcher {
  public:
   BakeMarcher(const BakedLight& bake, const Medium& medium, const Sun& sun, const SkyLight& sky,
@@ -716,8 +716,9 @@ class BakeMarcher {
               Vec3 d = view.forward;
               if (view.pinhole) {
                 const Vec3 r = g.center(int(i), int(j), int(k)) - view.eye;
-                if (length(r) < skip) continue;
-                if (length(r) > 0) d = normalize(r);
+                const double dist = length(r);
+                if (dist < skip) continue;
+                if (dist > 0) d = r / dist;
               }
               phaseWeights(d, w);
               const Rgb src[3] = {weightedSum(rec, msh_.size(), w),
