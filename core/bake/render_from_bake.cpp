@@ -689,7 +689,7 @@ class BakeMarcher {
   // quarter of the voxels or more).
   void buildViewField(const BakeGrid& g, const ViewGeometry& view) {
     const size_t voxels = g.voxelCount();
-    if (!(4 * view.rays >= double(voxels))) return;
+    if (!viewFieldPays(view.rays, double(voxels))) return;
     field_near_ = view.pinhole ? 2.0 * std::max(sh_order_, zonal_order_) * g.voxel_size : 0.0;
     // A sample at t >= field_near_ reads voxels at least field_near_ - sqrt(3) h from the eye:
     // nearer ones are never read, and a lattice all nearer than field_near_ needs no field.

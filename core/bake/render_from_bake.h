@@ -27,6 +27,11 @@ struct BakeRenderOptions {
   bool view_field = true;
 };
 
+/// Whether a photon view builds its field of the tallies' light towards the camera
+/// (BakeRenderOptions::view_field): where it traces `rays` at least a quarter of the tally
+/// lattice's `tally_voxels`, since the field costs about as much per voxel as a ray's reads.
+inline bool viewFieldPays(double rays, double tally_voxels) { return 4 * rays >= tally_voxels; }
+
 /// The sky's radiance averaged over the sphere (exact for a constant sky, else an equal-area
 /// 256 x 512 quadrature, exact for the gradient sky): the scale of every per-unit-radiance sky
 /// term of a bake.

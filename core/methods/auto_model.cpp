@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/bake/render_from_bake.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/io/exr_compression.h"
@@ -30,12 +31,6 @@ constexpr double kPhotonWorstFactor = 2.25;
 // photon views at 256x192 took 0.031-0.091 us per ray and coefficient (1.3-4.1 us per ray with
 // 37-45 coefficients) on two cores, their writing apart.
 constexpr double kViewSecondsPerCoefficient = 6e-8;
-// Seconds per ray of a photon view that reads its tallies from a field built for the view
-// (render_from_bake.cpp, buildViewField; photon 8), per 128 voxels of the bake's lattice (the
-// march's samples): at lattice 128, 0.89-1.31 us measured at 256x192 with 16 rays per pixel on
-// bench/scenes' perlin_cloud and perlin_droplet; at 320, 2.0-2.9 us on Disney's cloud and the
-// cumulus (bench/photon_bench.py --sweep far); 2 threads.
-constexpr double kFieldViewSecondsPerRay = 1.5e-6;
 // Seconds of one photon over those of one pilot path through the cloud: 0.16-0.68 on the five
 // bench scenes at 524288 and 2M photons (bench/auto_cost_fit.py; the thin layer, whose paths are
 // short, the highest), median 0.33; their upper quartile, so that a plan more often overstates
@@ -95,8 +90,8 @@ AutoCandidate singleCandidate(const SceneTraits& traits, const PilotMeasure& pil
 double photonViewSecondsPerRay(const SceneTraits& traits, const PhotonRung& rung, int samples) {
   const double rays = traits.views > 0 ? traits.pixels / traits.views * samples : 0.0;
   const int tally = rung.tally_resolution > 0 ? rung.tally_resolution : rung.light_resolution;
-  if (4 * rays >= std::pow(tally + 2.0, 3)) {
-    return kFieldViewSecondsPerRay * std::max(0.5, rung.light_resolution / 128.0);
+  if (viewFieldPays(rays, std::pow(tally + 2.0, 3))) {
+    return photonFieldViewSecondsPerRay(rung.light_resolution);
   }
   return kViewSecondsPerCoefficient * double(shCount(rung.order) + kZonalOrder - rung.order);
 }

@@ -145,13 +145,11 @@ class PhotonMethod final : public BakeMethod {
     PhotonBakeOptions o = photonBakeOptions(run.shot());
     if (bakesSkyShape(run.shot())) o.sky_shape = &run.lights().sky;
     // Measured on the Perlin example: 3.7 us per photon (its tallies included; 5.7 before
-    // version 4 summed each photon's segments per voxel); a view's ray 0.9-1.3 us at lattice 128
-    // where it reads the view's field of the tallies (version 8; docs/methods.md), and in
-    // proportion to the lattice, as auto's model takes it.
+    // version 4 summed each photon's segments per voxel); a view's ray as auto's model prices it.
     LightBakeWork work;
     work.bake_seconds = latticeSeconds(o.light_resolution) +
                         3.7e-6 * double(o.photons) * ((o.sky ? 1 : 0) + (o.sun ? 1 : 0));
-    work.view_seconds_per_ray = 1.5e-6 * std::max(0.5, o.light_resolution / 128.0);
+    work.view_seconds_per_ray = photonFieldViewSecondsPerRay(o.light_resolution);
     work.light_resolution = o.light_resolution;
     runLightBake(
         run,
@@ -166,6 +164,10 @@ class PhotonMethod final : public BakeMethod {
 };
 
 }  // namespace
+
+double photonFieldViewSecondsPerRay(int light_resolution) {
+  return 1.5e-6 * std::max(0.5, light_resolution / 128.0);
+}
 
 const BakeMethod& photonMethod() {
   static const PhotonMethod kMethod;
