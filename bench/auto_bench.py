@@ -13,7 +13,7 @@ error the references' noise hides reads n/a and is not counted.
 
 For each scene it renders a reference with `pathtrace`
 twice (seeds 1 and 2, --ref-spp each, cached under WORK/ref/), then `auto` at each tolerance,
-and the candidates auto chooses among (single, photon's first three rungs; the path tracer's
+and the candidates auto chooses among (single, photon's first --rungs rungs; the path tracer's
 cost for a tolerance follows from the references' own noise and seconds). It prints
 
   scene | tolerance | auto's choice | auto s | rel. RMSE | met | best in hindsight | best s |
@@ -29,6 +29,7 @@ cost for a tolerance follows from the references' own noise and seconds). It pri
 
 Usage: bench/auto_bench.py [--build build] [--threads 2] [--res 80] [--ref-spp 4096]
                            [--tolerances 0.05,0.1,0.2,0.3] [--scenes a,b] [--work DIR]
+                           [--rungs 3]
 """
 import argparse
 import json
@@ -113,7 +114,9 @@ HELD_OUT = {"perlin_dense": ("perlin", _perlin_dense), "bunny_thin": ("bunny", _
             "layer_albedo": ("thin", _layer_low_albedo),
             "droplet_dense": ("perlin", _droplet_dense),
             "droplet_sphere": ("perlin", _droplet_sphere)}
-PHOTON_RUNGS = [(1 << 17, 3, 64, 32), (1 << 19, 3, 128, 48), (1 << 21, 4, 192, 48)]
+# auto's rungs (core/methods/auto_model.cpp, photonRungs); --rungs picks how many are measured.
+PHOTON_RUNGS = [(1 << 17, 3, 64, 32), (1 << 19, 3, 128, 48), (1 << 21, 4, 192, 48),
+                (1 << 22, 4, 192, 48), (1 << 24, 4, 320, 96)]
 
 
 def error_against(cloudbake, out, refs, views, alpha, ref_noise):
@@ -149,6 +152,9 @@ def main():
     ap.add_argument("--scenes",
                     default=",".join(s for s in HELD_OUT if not s.startswith("droplet")))
     ap.add_argument("--work", default=None)
+    ap.add_argument("--rungs", type=int, default=3,
+                    help="how many of auto's photon rungs to measure, cheapest first (5: all, "
+                    "the last a bake of minutes per scene)")
     args = ap.parse_args()
     args.work = args.work or tempfile.mkdtemp(prefix="auto_bench.")
     cloudbake = os.environ.get("CLOUDBAKE") or os.path.join(args.build, "tools", "cloudbake",
@@ -187,7 +193,7 @@ def main():
                                      os.path.join(args.work, scene, "single-%d" % samples), refs,
                                      views, args, ref_noise)
         measured.append(("single", stats["seconds"], err))
-        for photons, order, lattice, tally in PHOTON_RUNGS:
+        for photons, order, lattice, tally in PHOTON_RUNGS[:args.rungs]:
             bake = {"method": "photon", "photons": photons, "order": order,
                     "light_resolution": lattice, "tally_resolution": tally, "samples": samples}
             stats, err = run_and_measure(cloudbake, shot, bake, os.path.join(

@@ -108,6 +108,26 @@ TEST(AutoModel, CandidatesMeetingTheToleranceComeFirstCheapestFirst) {
   EXPECT_EQ(c.front().method, "photon");
 }
 
+// The last rung (16M photons, lattices 320/96) is what reaches the tolerances between the 4M
+// rung's prediction (1.1 x 2.25 x 0.0387 = 0.096) and its own (0.076) on four 640x480 views; below
+// that only the path tracer is predicted to meet them. A Disney-like pilot: 2.08 at one path a
+// pixel (the reference's 0.023 at 8192), 3.8 us a path.
+TEST(AutoModel, TheLastRungMeetsTolerancesTheOthersCannot) {
+  const PilotMeasure p = pilotOf(2.08, 0.7, 3.8e-6);
+  const SceneTraits t = traitsOf(0.3);
+  const PhotonRung& last = photonRungs().back();
+  EXPECT_EQ(last.photons, int64_t(1) << 24);
+  EXPECT_NEAR(1.1 * 2.25 * last.bunny_error, 0.076, 0.001);
+  const AutoCandidate at8 = autoCandidates(t, p, 0.08, 0).front();
+  EXPECT_EQ(at8.method, "photon");
+  EXPECT_EQ(at8.knobs.front().second, last.photons) << at8.why;
+  EXPECT_LT(at8.seconds, 600) << "a bake of minutes, against the path tracer's hour";
+  EXPECT_EQ(autoCandidates(t, p, 0.07, 0).front().method, "pathtrace");
+  const AutoCandidate at10 = autoCandidates(t, p, 0.1, 0).front();
+  EXPECT_EQ(at10.method, "photon");
+  EXPECT_LT(at10.knobs.front().second, last.photons) << "a cheaper rung meets 10 %";
+}
+
 TEST(AutoModel, WritingFollowsTheCompressionAndLeavesTheChoice) {
   EXPECT_LT(exrWriteSecondsPerPixel("none"), exrWriteSecondsPerPixel("rle"));
   EXPECT_LT(exrWriteSecondsPerPixel("rle"), exrWriteSecondsPerPixel("piz"));
