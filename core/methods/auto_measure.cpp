@@ -150,6 +150,12 @@ double PairNoise::multipleFraction() const {
   return sum_mean > 0 ? std::clamp(sum_multiple / sum_mean, 0.0, 1.0) : 0.0;
 }
 
+int pilotSide(const PilotOptions& o, int views) {
+  if (views <= o.full_size_views) return o.longest_side_px;
+  const double scale = std::sqrt(double(std::max(o.full_size_views, 1)) / double(views));
+  return std::max(std::min(16, o.longest_side_px), int(std::lround(o.longest_side_px * scale)));
+}
+
 PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   PilotMeasure pm;
   pm.samples = o.samples;
@@ -158,9 +164,13 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   double noise_sum = 0, multiple_rms_sum = 0;
   int noise_views = 0;
   const bool sun = maxComponent(scene.sun.irradiance) > 0;
-  const int n = std::min<int>(int(scene.cameras.size()), o.max_views);
+  // Every view: a shot's error is the mean over its views, and one left out would count as none
+  // (a shot whose first four views saw only sky, when only four were piloted, was given one
+  // path a pixel for a fifth that saw the cloud, which then measured 0.68 against 0.05).
+  const int n = int(scene.cameras.size());
+  const int side = pilotSide(o, n);
   for (int v = 0; v < n; ++v) {
-    const Camera cam = pilotCamera(scene.cameras[size_t(v)], o.longest_side_px);
+    const Camera cam = pilotCamera(scene.cameras[size_t(v)], side);
     RenderLayers pair[2];
     for (int s = 0; s < 2; ++s) {
       PathTracerOptions pt;

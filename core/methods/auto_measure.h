@@ -19,12 +19,18 @@ SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene);
 struct PilotOptions {
   int longest_side_px = 64;  ///< each view is rendered at most this size (aspect kept)
   int samples = 8;           ///< paths per pixel of each of the two renders
-  int max_views = 4;         ///< views beyond these are not piloted (their cost is scaled)
+  /// Every view is piloted; beyond this many they share these views' pixels (pilotSide).
+  int full_size_views = 4;
   int max_depth = 100000;
   int threads = 0;
   /// Return false to stop (the pilot then throws Cancelled).
   std::function<bool(double fraction)> progress;
 };
+
+/// The longest side, in pixels, of each of `views` pilot views: options.longest_side_px for up
+/// to options.full_size_views views, smaller beyond so that the pixels stay about the same,
+/// and at least 16.
+int pilotSide(const PilotOptions& options, int views);
 
 /// Renders the pilot and measures it. A scene whose cloud covers no pixel of any view measures
 /// noise and multiple fraction 0 (there is no cloud light to be wrong about).

@@ -443,6 +443,43 @@ TEST(AutoPilot, CountsTheViewsTowardsTheSun) {
   EXPECT_TRUE(runPilot(buildScene(parseShot(black, ""), ""), po).aureole.empty());
 }
 
+// Every view is piloted, however many: a shot whose first four views see only sky and whose
+// fifth sees the cloud is measured on the fifth (before, only the first four were piloted and
+// auto chose one path a pixel, predicted 0 error). Beyond four views they share four views'
+// pixels.
+TEST(AutoPilot, PilotsEveryViewInTheSamePixels) {
+  PilotOptions po;
+  po.threads = 2;
+  EXPECT_EQ(pilotSide(po, 1), 64);
+  EXPECT_EQ(pilotSide(po, 4), 64);
+  EXPECT_EQ(pilotSide(po, 16), 32);
+  EXPECT_EQ(pilotSide(po, 64), 16);
+  EXPECT_EQ(pilotSide(po, 1000), 16);
+  std::string text = shot(R"({"method": "auto", "tolerance": 0.05})", 0.95, 3, 32);
+  const std::string view_at = R"("views": [)";
+  const size_t at = text.find(view_at) + view_at.size();
+  for (int k = 0; k < 4; ++k) {
+    text.insert(at, R"({"name": "sky)" + std::to_string(k) + R"(", "camera": {"type": "perspective",
+        "position": [0, -5, 0], "look_at": [0, -9, 0], "up": [0, 0, 1], "fov_deg": 30},
+        "resolution": [8, 8]}, )");
+  }
+  const ShotSpec s = parseShot(text, "");
+  ASSERT_EQ(s.views.size(), 5u);
+  const Scene scene = buildScene(s, "shot.json");
+  const PilotMeasure p = runPilot(scene, po);
+  EXPECT_GT(p.noise_1spp, 0.1);
+  EXPECT_GT(p.cloud_fraction, 0.05);
+  EXPECT_EQ(p.aureole.size(), 1u) << "the one view with cloud pixels";
+  AutoOptions ao;
+  ao.threads = 2;
+  const AutoChoice c = chooseAuto(s, scene, ao);
+  EXPECT_LE(c.chosen.error, 0.05);
+  EXPECT_GT(c.chosen.error, 0.0);
+  if (c.chosen.method == "pathtrace") {
+    EXPECT_GT(c.chosen.samples, 100);
+  }
+}
+
 // What auto reads of the phase: whether photon splits its peak, or refuses it.
 TEST(AutoPilot, TraitsSayWhetherPhotonSplitsOrRefusesThePhase) {
   auto traits = [](const std::string& phase) {
