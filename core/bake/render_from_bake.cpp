@@ -123,6 +123,15 @@ void validateOptions(const BakeRenderOptions& o, double voxel_size) {
     throw InputError("step: must be at least 1e-4 voxel (" + str(1e-4 * voxel_size) +
                      " world units) or left out for half a voxel, got " + str(o.step));
   }
+  // A run of non-empty blocks is marched from its first face to its last, so a step beyond
+  // half a block puts no sample inside a lone block: the cloud would vanish from the view.
+  if (o.step > kMaxStepVoxels * voxel_size) {
+    throw InputError("step: must be at most " + str(kMaxStepVoxels) + " lattice voxels (" +
+                     str(kMaxStepVoxels * voxel_size) +
+                     " world units; a coarser step would pass over the cloud between its "
+                     "samples), got " +
+                     str(o.step));
+  }
   if (o.samples_per_pixel < 1 || o.samples_per_pixel > 1024) {
     throw InputError("samples_per_pixel: must be in 1..1024, got " + str(o.samples_per_pixel));
   }

@@ -12,9 +12,12 @@ namespace cloudbake {
 
 class SkyLight;
 
+/// The longest march step a view takes, in lattice voxels (BakeRenderOptions::step).
+constexpr double kMaxStepVoxels = 4;
+
 /// Options of renderFromBake.
 struct BakeRenderOptions {
-  double step = 0;            ///< march step, world units; 0: half a lattice voxel
+  double step = 0;  ///< march step, world units, at most kMaxStepVoxels voxels; 0: half a voxel
   int samples_per_pixel = 1;  ///< stratified jittered rays per pixel, [1, 1024]
   uint64_t seed = 1;          ///< jitter; same image at any thread count
   /// The march stops where the view transmittance falls below this (the rest is < 1e-4 of

@@ -114,8 +114,10 @@ bool needsSky(const ShotSpec& shot) {
 }
 
 Knob stepKnob(const char* derived_default) {
-  return Knob::number("step", 0, 1e12, std::nullopt, "world units",
-                      "ray-march step of the view renders (not part of the bake's cache key)")
+  return Knob::number(
+             "step", 0, 1e12, std::nullopt, "world units",
+             "ray-march step of the view renders, from 1e-4 to 4 lattice voxels (not part of the "
+             "bake's cache key)")
       .derivedDefault(derived_default)
       .viewOnly();
 }
@@ -271,6 +273,17 @@ void checkStepBeforeBake(const Medium& medium, double step, int64_t resolution, 
   if (step < 1e-4 * voxel) {
     throw InputError("step: must be at least 1e-4 voxel (about " + exactNumber(1e-4 * voxel) +
                      " world units) or left out for half a voxel, got " + exactNumber(step));
+  }
+  // The views refuse a step over kMaxStepVoxels of the lattice's voxel; an aligned lattice's
+  // voxel is under twice the box lattice's (a request just under twice the grid's voxels gets
+  // the grid's own), so a step over that is refused by the views too.
+  const double coarsest = 2 * 1.5 * voxel;
+  if (step > kMaxStepVoxels * coarsest) {
+    throw InputError("step: must be at most " + exactNumber(kMaxStepVoxels) +
+                     " lattice voxels (about " + exactNumber(kMaxStepVoxels * voxel * 1.5) +
+                     " world units; a coarser step would pass over the cloud between its "
+                     "samples), got " +
+                     exactNumber(step));
   }
 }
 

@@ -320,6 +320,33 @@ TEST_F(RenderCli, AStepFarUnderTheVoxelIsRefusedBeforeTheBake) {
   }
 }
 
+// A step over four lattice voxels would put no sample inside a lone block of cloud, which then
+// vanished from the view with success (an outside probe: a sphere 16 voxels across, step 5
+// world units); refused naming the field, before the bake where it is far over.
+TEST_F(RenderCli, AStepOverFourVoxelsIsRefused) {
+  json j = slab();
+  j["volume"] = {{"sphere", {{"center", {0, 0, 0}}, {"radius", 1}, {"density", 1}}}};
+  j["views"][0]["resolution"] = {8, 8};
+  for (const char* method : {"single", "pointcloud", "photon", "precomputed"}) {
+    for (double step : {5.0, 0.6}) {  // the lattice's voxel is 0.125 world units
+      j["bake"] = {{"method", method}, {"light_resolution", 16}, {"step", step}};
+      const CliResult r = run("render '" + writeShot("step.json", j).string() + "' --out '" +
+                              (dir_ / "step").string() + "'");
+      EXPECT_EQ(r.rc, 2) << method << " " << step;
+      EXPECT_NE(r.err.find("step.json: /bake/step: must be at most 4 lattice voxels"),
+                std::string::npos)
+          << r.err;
+      if (step > 1) {
+        EXPECT_EQ(r.err.find("slab: bake: "), std::string::npos) << method << ": " << r.err;
+      }
+    }
+    j["bake"]["step"] = 0.5;  // four voxels: allowed
+    const CliResult ok = run("render '" + writeShot("step.json", j).string() + "' --out '" +
+                             (dir_ / "step").string() + "' --quiet");
+    EXPECT_EQ(ok.rc, 0) << method << ": " << ok.err;
+  }
+}
+
 // A run that fails at its first frame writes no animation.json naming frames it never wrote.
 TEST_F(RenderCli, AFailedAnimationLeavesNoWalk) {
   json j = slab();
