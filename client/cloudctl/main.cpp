@@ -590,7 +590,8 @@ struct SubmitArgs {
   std::string shot;
   std::string out;
   bool wait = false, detach = false, dry_run = false, quiet = false;
-  int samples = -1;
+  int samples = 0;
+  bool samples_given = false;  // sent to the server, which checks its range
   double sun_tolerance_deg = 0;
   bool allow_outside = false;
   bool png = false;
@@ -743,7 +744,7 @@ int cmdSubmit(Client& c, const SubmitArgs& a) {
   v1::SubmitJobRequest req;
   req.set_shot_json(text);
   req.set_dry_run(a.dry_run);
-  if (a.samples != -1) req.set_samples(a.samples);
+  if (a.samples_given) req.set_samples(a.samples);
   req.set_sun_tolerance_deg(a.sun_tolerance_deg);
   addAssets(c, a, &req);
   const v1::SubmitJobResponse reply = sendSubmit(c, a, req);
@@ -1000,7 +1001,8 @@ CLI::App* addSubmitCommand(CLI::App& app, SubmitArgs* sa) {
   submit->add_flag("--detach", sa->detach, "print the job id and return at once");
   submit->add_flag("--dry-run", sa->dry_run, "print the server's plan; bake nothing");
   submit->add_flag("--quiet", sa->quiet, "no progress on stderr");
-  submit->add_option("--samples", sa->samples, "override bake.samples (1..1000000)");
+  submit->add_option("--samples", sa->samples, "override bake.samples (1..1000000)")
+      ->each([sa](const std::string&) { sa->samples_given = true; });
   submit->add_flag("--allow-outside", sa->allow_outside,
                    "also upload files the shot names outside its folder (absolute or ../ paths)");
   submit->add_flag("--png", sa->png,

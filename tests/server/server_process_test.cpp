@@ -733,6 +733,15 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
   EXPECT_EQ(run(server_.cloudctl() + " submit " + ws_.path("no-such-shot.json")).code, 3);
   EXPECT_EQ(run(server_.cloudctl() + " frobnicate").code, 2);
   EXPECT_EQ(run(server_.cloudctl() + " health").code, 0);
+  // Every --samples out of range, -1 too (once the client's own "not given", so ignored).
+  for (const char* samples : {"-1", "0", "1000001"}) {
+    const CmdResult bad = run(server_.cloudctl() + " submit " + ws_.path("good/g.json") +
+                              " --dry-run --samples=" + samples);
+    EXPECT_EQ(bad.code, 2) << samples << ": " << bad.err;
+    EXPECT_NE(bad.err.find("samples: must be in [1, 1000000], got " + std::string(samples)),
+              std::string::npos)
+        << bad.err;
+  }
   // RenderView with views nested 100,000 deep: a clear error naming views_json (it was a
   // SIGSEGV in the handler thread, and UNAVAILABLE for everyone after it); likewise the irradiance.
   const CmdResult job = run(server_.cloudctl() + " --json submit " + ws_.path("good/g.json") +

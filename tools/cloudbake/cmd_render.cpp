@@ -34,7 +34,8 @@ struct RenderOptions {
   std::string shot;
   std::string out;
   int threads = 0;
-  int samples = -1;  // -1: the shot's bake.samples
+  int samples = -1;
+  bool samples_given = false;  // else the shot's bake.samples (-1 is a value, refused)
   bool quiet = false;
   bool png = false;
   double png_exposure = 0;
@@ -157,7 +158,7 @@ std::vector<std::string> render(const RenderOptions& opt) {
     throw InputError("--threads: must be in [0, 4096] (0 = all cores), got " +
                      std::to_string(opt.threads));
   }
-  if (opt.samples != -1 && (opt.samples < 1 || opt.samples > 1000000)) {
+  if (opt.samples_given && (opt.samples < 1 || opt.samples > 1000000)) {
     throw InputError("--samples: must be in [1, 1000000], got " + std::to_string(opt.samples));
   }
   // Limits every parallel stage (volume building too), not only the path tracer.
@@ -184,7 +185,7 @@ std::vector<std::string> render(const RenderOptions& opt) {
   run.out_dir = opt.out;
   run.source = opt.shot;
   run.threads = opt.threads;
-  run.samples = opt.samples;
+  run.samples = opt.samples_given ? opt.samples : -1;
   run.png = opt.png;
   run.png_exposure = opt.png_exposure;
   run.max_voxels = max_voxels;
@@ -243,7 +244,8 @@ void addRenderCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--threads", opt->threads, "worker threads (default 0 = all cores)");
   cmd->add_option("--samples", opt->samples,
                   "paths (pathtrace) or rays (views from a bake) per pixel, overriding the "
-                  "shot's bake.samples (1..1000000)");
+                  "shot's bake.samples (1..1000000)")
+      ->each([opt](const std::string&) { opt->samples_given = true; });
   cmd->add_flag("--quiet", opt->quiet, "no progress on stderr");
   cmd->add_flag("--vdb-in-process", opt->vdb_in_process,
                 "read the shot's VDB files in this process, not first rewritten by a child "

@@ -223,10 +223,14 @@ TEST_F(RenderCli, MalformedJsonAndBadArgumentsExitWith2) {
       run("render '" + (dir_ / "broken.json").string() + "' --out '" + dir_.string() + "'");
   EXPECT_EQ(r.rc, 2);
   EXPECT_NE(r.err.find("invalid JSON"), std::string::npos) << r.err;
-  r = run("render '" + (kExamples / "slab.json").string() + "' --out '" + dir_.string() +
-          "' --samples 0");
-  EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("--samples"), std::string::npos) << r.err;
+  for (const char* samples : {"0", "-1", "1000001"}) {  // -1 was once "not given", so ignored
+    r = run("render '" + (kExamples / "slab.json").string() + "' --out '" + dir_.string() +
+            "' --samples=" + samples);
+    EXPECT_EQ(r.rc, 2) << samples;
+    EXPECT_NE(r.err.find("--samples: must be in [1, 1000000], got " + std::string(samples)),
+              std::string::npos)
+        << r.err;
+  }
   r = run("render '" + (kExamples / "slab.json").string() + "'");  // no --out
   EXPECT_EQ(r.rc, 2);
 }
