@@ -22,6 +22,10 @@ void checkRadiance(const Rgb& c, const char* field) {
 
 bool isBlack(const Rgb& c) { return c.x == 0 && c.y == 0 && c.z == 0; }
 
+// The shot's bound on every radiance and irradiance (shot_parser.cpp): a map's pixels, times its
+// scale, keep to it too, or a render's sums overflow a float (3e38 pixels made infinite ones).
+constexpr double kMaxMapRadiance = 1e12;
+
 }  // namespace
 
 SkyLight::SkyLight(const Sky& sky) : sky_(sky) {
@@ -79,6 +83,13 @@ void SkyLight::buildMap(const Image& map, double scale, const std::string& what)
           std::ostringstream os;
           os << what << ": sky map pixel (" << x << ", " << y << ") must be finite and >= 0, got "
              << p[c];
+          throw InputError(os.str());
+        }
+        if (double(p[c]) * scale > kMaxMapRadiance) {
+          std::ostringstream os;
+          os << what << ": sky map pixel (" << x << ", " << y << ") times the scale " << scale
+             << " is " << double(p[c]) * scale << ", over the largest radiance, "
+             << kMaxMapRadiance;
           throw InputError(os.str());
         }
         p[c] = static_cast<float>(p[c] * scale);

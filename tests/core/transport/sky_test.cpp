@@ -182,6 +182,19 @@ TEST(Sky, MapFromExrFileAndValidation) {
   EXPECT_THROW(SkyLight(bad, 1.0, "nan map"), InputError);
   bad.at(1, 1)[2] = -1.f;
   EXPECT_THROW(SkyLight(bad, 1.0, "negative map"), InputError);
+  // Pixels times the scale keep to the shot's largest radiance, 1e12: 3e38 made renders infinite.
+  bad.at(1, 1)[2] = 3e38f;
+  try {
+    SkyLight(bad, 1.0, "bright map");
+    ADD_FAILURE() << "a 3e38 pixel must be refused";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bright map: sky map pixel (1, 1) times the scale 1 is"),
+              std::string::npos)
+        << e.what();
+  }
+  bad.at(1, 1)[2] = 1e6f;
+  EXPECT_THROW(SkyLight(bad, 1e7, "scaled map"), InputError);
+  EXPECT_NO_THROW(SkyLight(bad, 1e6, "scaled map"));
 
   Sky g;
   g.type = Sky::Type::kGradient;
