@@ -66,6 +66,8 @@ ShotSpec resolvedShot(const ShotSpec& shot, const AutoCandidate& c) {
   if (c.method == "pathtrace") {
     out.bake.knobs.set("max_depth", shot.bake.knobs.integer("max_depth"));
   }
+  // A light bake's bake.vdb is its lattice (the shot parser refuses the key for it).
+  if (method->info().bakes_light) out.outputs.vdb_voxel_size = 0;
   return out;
 }
 
@@ -171,6 +173,15 @@ AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOption
   }
   choice.chosen = choice.considered.front();
   choice.shot = resolvedShot(shot, choice.chosen);
+  if (shot.outputs.vdb && shot.outputs.vdb_voxel_size > 0 &&
+      choice.shot.outputs.vdb_voxel_size == 0) {
+    // The key is required of an analytic volume in case the path tracer is chosen.
+    choice.notes.push_back("outputs.vdb_voxel_size " + exactNumber(shot.outputs.vdb_voxel_size) +
+                           " is not used: " + choice.chosen.method +
+                           "'s bake.vdb is its bake lattice (light_resolution " +
+                           std::to_string(choice.shot.bake.knobs.integer("light_resolution")) +
+                           ")");
+  }
   return choice;
 }
 
@@ -191,6 +202,7 @@ std::vector<std::string> AutoChoice::planLines() const {
                     ", optical thickness of a 1/128 voxel " + fixed(traits.tau_voxel_128, 3) +
                     ", the views' aureole brightness " + aureoleList(pilot.aureole));
   }
+  for (const std::string& note : notes) lines.push_back("auto: " + note);
   for (size_t i = 1; i < considered.size() && i < 4; ++i) {
     const AutoCandidate& c = considered[i];
     lines.push_back("auto: also considered " + describe(c) + ": " + percent(c.error) + ", " +
@@ -214,6 +226,7 @@ nlohmann::json AutoChoice::toJson() const {
   for (const AutoCandidate& c : considered) considered_json.push_back(candidate(c));
   return {{"tolerance", tolerance},
           {"chosen", candidate(chosen)},
+          {"notes", notes},
           {"considered", considered_json},
           {"traits",
            {{"albedo", traits.albedo},

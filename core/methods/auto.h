@@ -37,6 +37,9 @@ struct AutoChoice {
   std::vector<AutoCandidate> considered;  ///< every candidate, the chosen first
   SceneTraits traits;
   PilotMeasure pilot;
+  /// What the choice changes of the shot beyond its method (outputs.vdb_voxel_size, which a
+  /// light bake's bake.vdb does not use: it is the bake's lattice).
+  std::vector<std::string> notes;
 
   /// Dry-run lines: the choice, its predicted error and cost, and the runners-up.
   std::vector<std::string> planLines() const;

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <utility>
@@ -270,6 +271,17 @@ TEST(AutoChoice, ABakeForAShotWithoutViews) {
   const AutoChoice c = chooseAuto(s, buildScene(s, "shot.json"), AutoOptions{});
   EXPECT_EQ(c.chosen.method, "photon");
   EXPECT_EQ(c.pilot.samples, 0);  // no views, no pilot
+  // The voxel size the sphere needs, should the path tracer be chosen, is not photon's: the
+  // choice says so rather than drop it silently, and its shot passes photon's own checks.
+  ASSERT_EQ(c.notes.size(), 1u);
+  EXPECT_NE(c.notes[0].find("outputs.vdb_voxel_size 0.25 is not used: photon's bake.vdb is its "
+                            "bake lattice (light_resolution "),
+            std::string::npos)
+      << c.notes[0];
+  EXPECT_EQ(c.shot.outputs.vdb_voxel_size, 0);
+  EXPECT_EQ(c.toJson().at("notes"), nlohmann::json(c.notes));
+  const std::vector<std::string> plan = c.planLines();
+  EXPECT_NE(std::find(plan.begin(), plan.end(), "auto: " + c.notes[0]), plan.end());
 }
 
 TEST(AutoChoice, ToleranceNoMethodMeetsIsAClearError) {
