@@ -116,10 +116,11 @@ class PhotonMethod final : public BakeMethod {
         " voxels along the longest side in spherical harmonics to degree " +
         std::to_string(o.order) + " (" + std::to_string(shCount(o.order)) +
         " coefficients per voxel)" +
-        (o.zonal_order > o.order ? ", and the sunlight's in zonal terms about the sun's axis "
-                                   "to degree " +
-                                       std::to_string(o.zonal_order)
-                                 : std::string()));
+        (o.sun && o.zonal_order > o.order
+             ? ", and the sunlight's in zonal terms about the sun's axis "
+               "to degree " +
+                   std::to_string(o.zonal_order)
+             : std::string()));
     return lightBakePlan(shot, keys, lookup, std::move(lines));
   }
 

@@ -177,6 +177,29 @@ TEST(MethodRegistry, PhotonsLightKeySaysWhenTheSunIsBlack) {
   EXPECT_NE(keyWith("[0, 0, 0]"), keyWith("[1, 1, 1]"));
 }
 
+// photon's plan names the zonal terms of the sunlight only where there is sunlight to tally.
+TEST(MethodRegistry, PhotonsPlanTalliesZonalTermsOnlyUnderASun) {
+  auto planOf = [](const std::string& irradiance) {
+    std::string text = shotOf("photon");
+    const std::string sun = R"("irradiance": [1, 1, 1]})";
+    text.replace(text.find(sun), sun.size(),
+                 "\"irradiance\": " + irradiance + R"(}, "sky": {"radiance": [1, 1, 1]})");
+    const ShotSpec shot = parseShot(text, "");
+    std::string all;
+    for (const std::string& line :
+         findMethod("photon")
+             ->plan(shot, ShotCacheKeys{}, [](const std::string&) { return false; })
+             .components) {
+      all += line + "\n";
+    }
+    return all;
+  };
+  EXPECT_NE(planOf("[1, 1, 1]").find("zonal terms about the sun's axis"), std::string::npos);
+  const std::string dark = planOf("[0, 0, 0]");
+  EXPECT_EQ(dark.find("zonal"), std::string::npos) << dark;
+  EXPECT_NE(dark.find("no sun photons (a black sun)"), std::string::npos) << dark;
+}
+
 TEST(MethodDocs, ShotFormatDocHasTheRegistrysKnobTables) {
   const std::string doc = readText(fs::path(CLOUDBAKE_SOURCE_DIR) / "docs/shot-format.md");
   ASSERT_FALSE(doc.empty());
