@@ -7,6 +7,7 @@
 #include "core/format.h"
 #include "core/phase/phase_factory.h"
 #include "core/shot/shot_parser.h"
+#include "core/transport/sky.h"
 #include "core/volume/analytic.h"
 #include "core/volume/sources.h"
 
@@ -107,6 +108,11 @@ Scene buildScene(const ShotSpec& shot, const std::string& source, const PhaseBui
     scene.sun.irradiance = Rgb(0, 0, 0);
   }
   scene.sky = shot.lighting.sky;
+  if (scene.sky.type == Sky::Type::kMap) {
+    // Read and checked now, before any bake: a map's bad pixel was otherwise found when the
+    // first view rendered, after a bake of possibly minutes.
+    labelled(source, "/lighting/sky/map", [&] { return SkyLight(scene.sky).black(); });
+  }
   scene.cameras = shot.views;
   return scene;
 }

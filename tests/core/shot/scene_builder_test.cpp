@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <limits>
 #include <nlohmann/json.hpp>
 
+#include "core/io/exr_io.h"
 #include "core/shot/shot_parser.h"
 #include "tests/core/shot/shot_test_util.h"
 
@@ -120,6 +122,28 @@ TEST(SceneBuilder, AssetErrorsNameTheField) {
     EXPECT_NE(std::string(e.what()).find("shot.json: /volume/mesh: "), std::string::npos)
         << e.what();
   }
+}
+
+// A sky map is read and checked as the scene is built, before any bake: a bad pixel was found
+// only when the first view rendered, after the bake.
+TEST(SceneBuilder, ABadSkyMapIsRefusedAsTheSceneIsBuilt) {
+  testing::TempDir dir;
+  Image map(8, 4, 3);
+  map.at(5, 0)[1] = std::numeric_limits<float>::quiet_NaN();
+  writeExr((dir.path() / "sky.exr").string(), {{"", map}});
+  json j = json::parse(kDesignSlab);
+  j["lighting"]["sky"] = {{"map", "sky.exr"}};
+  try {
+    buildScene(parseShot(j.dump(), dir.path().string()));
+    FAIL() << "a NaN pixel must be refused";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("shot.json: /lighting/sky/map: "), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("pixel (5, 0)"), std::string::npos) << e.what();
+  }
+  map.at(5, 0)[1] = 0.5f;
+  writeExr((dir.path() / "sky.exr").string(), {{"", map}});
+  EXPECT_EQ(buildScene(parseShot(j.dump(), dir.path().string())).sky.type, Sky::Type::kMap);
 }
 
 TEST(SceneBuilder, SharedAssets) {
