@@ -13,6 +13,7 @@
 #include "core/format.h"
 #include "core/math/parallel.h"
 #include "core/math/spherical_harmonics.h"
+#include "core/phase/similarity.h"
 
 namespace cloudbake {
 namespace {
@@ -150,7 +151,8 @@ void checkFrameInput(const PrecomputedDatabase& db, const BlendFrame& frame,
 }
 
 // The similarity reduction (forward-peaked phases only): multiple scattering on a medium of
-// extinction s sigma_t and albedo a (1 - g) / s, s = 1 - lum(a g).
+// extinction s sigma_t, s = 1 - lum(a g), and each channel's own reduced albedo a (1 - g) /
+// (1 - a g) (a (1 - g) / s made a white channel of a coloured albedo absorb).
 struct Similarity {
   double s = 1;
   Rgb albedo;
@@ -164,9 +166,7 @@ Similarity similarityReduction(const Rgb& albedo, const FrameLightOptions& optio
   const double lum = luminance(ag);
   if (lum > 0) {
     sim.s = 1 - lum;
-    for (int c = 0; c < 3; ++c) {
-      sim.albedo[c] = std::min(1.0, albedo[c] * (1 - options.mean_cosine[c]) / sim.s);
-    }
+    for (int c = 0; c < 3; ++c) sim.albedo[c] = reducedAlbedo(albedo[c], options.mean_cosine[c]);
   }
   return sim;
 }

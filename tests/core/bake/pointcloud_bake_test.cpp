@@ -375,6 +375,31 @@ TEST(NormalisedRule, AlbedoScalesTheScatteredLight) {
   EXPECT_GT(s05, 0.1 * s1);
 }
 
+// Each channel keeps its own reduced albedo: a white channel of a coloured albedo conserves
+// energy as a white medium does. With one reduced albedo a (1 - g) / (1 - lum(a g)) for all, red
+// of a = [1, 0, 0.5] at g = 0.5 became 0.57 and its light 0.2-0.3 of the white medium's and of
+// the path tracer's (an outside probe). The passes still share one extinction, so the two differ
+// in how far the light spreads (0.95 here), not in the energy kept.
+TEST(NormalisedRule, AWhiteChannelOfAColouredAlbedoKeepsItsLight) {
+  const Lattice l = sphereLattice(1, 1, 24);
+  PointcloudOptions o;
+  o.points = 6000;
+  o.passes = 12;
+  const auto hg = std::make_shared<HenyeyGreensteinPhase>(0.5);
+  auto run = [&](const Rgb& albedo) {
+    return runPointcloud(l.grid, l.density, {}, sphereMedium(1, 4, albedo, hg), Vec3(1, 0, 1), o);
+  };
+  const PointCloudResult white = run(Rgb(1.0)), coloured = run(Rgb(1, 0, 0.5));
+  double red_white = 0, red_coloured = 0;
+  for (size_t j = 0; j < white.co.size(); ++j) {
+    red_white += white.co[j].x;
+    red_coloured += coloured.co[j].x;
+  }
+  std::printf("red's light, coloured over white: %.3f\n", red_coloured / red_white);
+  EXPECT_GT(red_coloured, 0.75 * red_white);
+  EXPECT_LT(red_coloured, 1.25 * red_white);
+}
+
 TEST(NormalisedRule, GeometricTailMatchesRunningAllOrders) {
   // A thick conservative sphere: 24 passes plus the tail vs passes until < 1e-4 change. (The
   // ratio of successive orders still creeps up after 24 passes, so the tail is a little low.)
