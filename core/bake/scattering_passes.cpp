@@ -27,8 +27,8 @@ constexpr int64_t kDestinationGrain = 128;  // destinations per chunk
 // (a (1 - g) / s made a white channel of a coloured albedo absorb: 0.57 for a = [1, 0, 0.5] at
 // g = 0.5, its light 0.23 of the path tracer's; the passes share one extinction, so a channel
 // whose a g is far from lum(a g) keeps its energy but not quite its spread); `isotropic` is
-// false only for g = 0, where
-// the reduction is the identity and the beam model of R and L is used as it is. Backscattering
+// false only for g = 0, where the reduction is the identity and the beam model of R and L is
+// used as it is. Backscattering
 // phases (g < 0) are reduced too (s > 1): their beam model concentrates each source's light on
 // the few neighbours behind it without normalising the phase over them, and its passes grew
 // without bound (Co 3e10 at g = -0.8, 5e28 at -0.9), while the reduced medium conserves energy
