@@ -30,6 +30,16 @@ inline size_t utf8SequenceLength(const std::string& s, size_t i) {
   return n;
 }
 
+/// The offset of the first byte of `text` that is not part of valid UTF-8, or npos.
+inline size_t firstInvalidUtf8(const std::string& text) {
+  for (size_t i = 0; i < text.size();) {
+    const size_t n = utf8SequenceLength(text, i);
+    if (n == 0) return i;
+    i += n;
+  }
+  return std::string::npos;
+}
+
 /// `text` with \n, \r, \t as such escapes and every other control character or non-UTF-8 byte
 /// as \xNN.
 inline std::string printable(const std::string& text) {

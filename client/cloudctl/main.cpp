@@ -507,8 +507,12 @@ bool isExr(const std::string& name) {
 /// Fetches every output of a job; prints paths (or a JSON object with --json).
 int fetchAll(Client& c, const v1::Job& job, const std::string& dir, const std::string& only) {
   if (job.state() != v1::SUCCEEDED) {
-    throw CliError{jobExitCode(job) == 0 ? ExitCode::kJobFailed : jobExitCode(job),
+    // A job still queued or running has no results yet: like one that did not succeed (exit
+    // 5, docs/cli.md), not an internal error.
+    const bool finished = job.state() == v1::FAILED || job.state() == v1::CANCELLED;
+    throw CliError{finished ? jobExitCode(job) : int(ExitCode::kJobFailed),
                    "job " + job.id() + " is " + stateName(job.state()) +
+                       (finished ? "" : " (no outputs yet: `cloudctl watch` waits for it)") +
                        (job.error().empty() ? "" : ": " + job.error())};
   }
   Json files = Json::array();
@@ -607,6 +611,15 @@ std::string readShotFile(const std::string& path) {
   } catch (const std::exception& e) {
     throw CliError{ExitCode::kBadInput, path + ": cannot read: " + e.what()};
   }
+}
+
+/// JSON text must be UTF-8, and a request's strings must be (protobuf refuses to send others,
+/// with no message of ours): bad input naming the file and the byte.
+void checkUtf8(const std::string& text, const std::string& what) {
+  const size_t at = cloudbake::firstInvalidUtf8(text);
+  if (at == std::string::npos) return;
+  throw CliError{ExitCode::kBadInput, what + ": invalid JSON: the byte at offset " +
+                                          std::to_string(at) + " is not UTF-8"};
 }
 
 /// Uploads the files `req`'s shot names and lists them in `req`. A file outside the shot's
@@ -740,6 +753,7 @@ int cmdSubmit(Client& c, const SubmitArgs& a) {
   if (text.size() > kMaxRequestBytes) {
     throw tooLarge(a.shot + ": shot", text.size());
   }
+  checkUtf8(text, a.shot);
   c.connect();
   v1::SubmitJobRequest req;
   req.set_shot_json(text);
@@ -941,6 +955,14 @@ int cmdRender(Client& c, const JobArgs& a) {
     req.set_views_json(std::string(std::istreambuf_iterator<char>(in), {}));
     if (req.views_json().size() > kMaxRequestBytes) {
       throw tooLarge(a.views_file + ": views file", req.views_json().size());
+    }
+    checkUtf8(req.views_json(), "--views " + a.views_file);
+    // An empty views_json means "the shot's own views" to the server: an empty file given on
+    // purpose must not silently render those again.
+    if (req.views_json().empty()) {
+      throw CliError{ExitCode::kBadInput, "--views " + a.views_file +
+                                              ": the file is empty (expected a JSON array of "
+                                              "views)"};
     }
   }
   for (double v : a.sun) req.add_sun_irradiance(v);

@@ -18,5 +18,13 @@ TEST(Printable, KeepsUtf8AndEscapesTheRest) {
   EXPECT_EQ(printable("surrogate \xED\xA0\x80"), "surrogate \\xED\\xA0\\x80");
 }
 
+TEST(Printable, FindsTheFirstByteThatIsNotUtf8) {
+  EXPECT_EQ(firstInvalidUtf8("caf\u00e9 \u2601"), std::string::npos);
+  EXPECT_EQ(firstInvalidUtf8(""), std::string::npos);
+  EXPECT_EQ(firstInvalidUtf8("s\xe9q"), 1u);       // Latin-1
+  EXPECT_EQ(firstInvalidUtf8("ok \xE2\x98"), 3u);  // a truncated sequence
+  EXPECT_EQ(firstInvalidUtf8("ab\xC0\xAF"), 2u);   // overlong
+}
+
 }  // namespace
 }  // namespace cloudbake

@@ -565,6 +565,11 @@ TEST_F(ServerTest, CancelMidBakeStopsWithinASecond) {
       },
       30);
   ASSERT_EQ(s.at("state"), "RUNNING");
+  // A running job has no outputs yet: exit 5 like a job that did not succeed (it was 1, an
+  // internal error, by an outside probe).
+  const CmdResult early = run(server_.cloudctl() + " fetch " + id + " --out " + ws_.path("early"));
+  EXPECT_EQ(early.code, 5) << early.err;
+  EXPECT_NE(early.err.find("is RUNNING (no outputs yet"), std::string::npos) << early.err;
   const auto t0 = std::chrono::steady_clock::now();
   const CmdResult c = run(server_.cloudctl() + " cancel " + id);
   EXPECT_EQ(c.code, 0) << c.err;
@@ -754,6 +759,19 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
                           " --quiet --out " + ws_.path("deep"));
   EXPECT_EQ(r.code, 2) << r.err;
   EXPECT_NE(r.err.find("views_json: nested deeper than"), std::string::npos) << r.err;
+  // An empty views file is refused, not read as "the shot's own views" (an outside probe).
+  const CmdResult empty = run(server_.cloudctl() + " render " + id + " --views " +
+                              ws_.write("empty.json", "") + " --quiet --out " + ws_.path("e"));
+  EXPECT_EQ(empty.code, 2) << empty.err;
+  EXPECT_NE(empty.err.find("empty.json: the file is empty"), std::string::npos) << empty.err;
+  // A shot that is not UTF-8 is bad input naming the byte (protobuf refused to send it, exit 1
+  // with an empty message).
+  std::string latin = sphereShot(8, 1);
+  latin.replace(latin.find("\"name\": \"") + 9, 1, "\xe9");
+  const CmdResult bytes = run(server_.cloudctl() + " submit " + ws_.write("latin.json", latin));
+  EXPECT_EQ(bytes.code, 2) << bytes.err;
+  EXPECT_NE(bytes.err.find("latin.json: invalid JSON: the byte at offset"), std::string::npos)
+      << bytes.err;
   EXPECT_EQ(run(server_.cloudctl() + " health").code, 0);
 }
 
