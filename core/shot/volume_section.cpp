@@ -139,7 +139,14 @@ SequenceVolumeSpec parseSequence(const Object& o) {
     if (!paths->is_array()) {
       r.fail(o.path("paths"), "must be an array of file paths, got " + shotjson::typeName(*paths));
     }
-    if (paths->empty()) r.fail(o.path("paths"), "must list at least one file");
+    // Only precomputed renders sequences, and its endless animation needs two basic volumes:
+    // one was accepted here and by a dry run, then failed when the job ran.
+    if (paths->size() < 2) {
+      r.fail(o.path("paths"),
+             "must list at least 2 files (an endless animation needs at least 2 "
+             "basic volumes), got " +
+                 std::to_string(paths->size()));
+    }
     if (int64_t(paths->size()) > kMaxFrames) {
       r.fail(o.path("paths"), "at most " + std::to_string(kMaxFrames) + " frames");
     }
@@ -153,7 +160,7 @@ SequenceVolumeSpec parseSequence(const Object& o) {
     if (o.has("time_step")) r.fail(o.path("time_step"), "only applies to procedural");
     s.frames = int(paths->size());
     if (frames) {
-      const int64_t n = r.integer(*frames, o.path("frames"), 1, kMaxFrames);
+      const int64_t n = r.integer(*frames, o.path("frames"), 2, kMaxFrames);
       if (n != s.frames) {
         r.fail(o.path("frames"), "is " + std::to_string(n) + " but paths lists " +
                                      std::to_string(s.frames) + " files");
@@ -164,7 +171,7 @@ SequenceVolumeSpec parseSequence(const Object& o) {
     s.procedural =
         parseProcedural(Object(r, *proc, o.path("procedural"), {CLOUDBAKE_PROCEDURAL_KEYS}));
     if (!frames) r.fail(o.path("frames"), "missing (required with procedural)");
-    s.frames = int(r.integer(*frames, o.path("frames"), 1, kMaxFrames));
+    s.frames = int(r.integer(*frames, o.path("frames"), 2, kMaxFrames));
     if (auto* t = o.find("time_step"))
       s.time_step = r.numberIn(*t, o.path("time_step"), 0, 1e3, true);
   }

@@ -593,7 +593,19 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
        [](json& j) {
          j["volume"] = {{"sequence", {{"procedural", {{"type", "perlin_cloud"}}}, {"frames", 0}}}};
        },
-       "/volume/sequence/frames: must be an integer in [1, 100000]"},
+       "/volume/sequence/frames: must be an integer in [2, 100000]"},
+      // Only precomputed renders a sequence, and it needs two basic volumes: one frame was
+      // accepted here and by a dry run, then failed as the job ran (an outside probe).
+      {"1 frame in a sequence",
+       [](json& j) {
+         j["volume"] = {{"sequence", {{"procedural", {{"type", "perlin_cloud"}}}, {"frames", 1}}}};
+       },
+       "/volume/sequence/frames: must be an integer in [2, 100000], got 1"},
+      {"1 path in a sequence",
+       [](json& j) {
+         j["volume"] = {{"sequence", {{"paths", {"cloud.vdb"}}}}};
+       },
+       "/volume/sequence/paths: must list at least 2 files"},
       {"dissolve longer than the database",
        [](json& j) {
          j["volume"] = {{"sequence", {{"procedural", {{"type", "perlin_cloud"}}}, {"frames", 5}}}};
@@ -627,9 +639,9 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
        "/bake/points"},
       {"frames disagreeing with paths",
        [](json& j) {
-         j["volume"] = {{"sequence", {{"paths", {"cloud.vdb"}}, {"frames", 3}}}};
+         j["volume"] = {{"sequence", {{"paths", {"cloud.vdb", "cloud.vdb"}}, {"frames", 3}}}};
        },
-       "/volume/sequence/frames: is 3 but paths lists 1 files"},
+       "/volume/sequence/frames: is 3 but paths lists 2 files"},
       {"vdb_voxel_size for a grid volume",
        [](json& j) {
          j["volume"] = {{"vdb", {{"path", "cloud.vdb"}}}};
