@@ -142,7 +142,8 @@ constexpr auto kPublishInterval = std::chrono::seconds(1);
 
 struct JobManager::Job {
   JobRecord record;
-  ShotSpec shot;
+  ShotSpec shot;  // empty for a finished job restored after a restart (jobShot reads it)
+  bool has_shot = false;
   double sun_tolerance_deg = 0;
   std::atomic<bool> cancel{false};
   bool shutdown = false;  // cancelled because the manager stops, not by a client
@@ -211,6 +212,7 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
       try {
         const SubmitInput input = readSubmission(store_->jobDir(record.id));
         job->shot = prepare(input, store_->jobDir(record.id)).shot;
+        job->has_shot = true;
         job->sun_tolerance_deg = input.sun_tolerance_deg;
         queue_.push_back(job);
       } catch (const std::exception& e) {
@@ -452,6 +454,7 @@ JobPlan JobManager::plan(const SubmitInput& input) {
 JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const std::string& id) {
   auto job = std::make_shared<Job>();
   job->shot = std::move(prepared.shot);
+  job->has_shot = true;
   job->sun_tolerance_deg = prepared.input.sun_tolerance_deg;
   JobRecord& r = job->record;
   r.id = id;
@@ -719,13 +722,28 @@ bool JobManager::rebuildOutput(const std::string& id, const OutputFile& f, doubl
     if (it == jobs_.end()) return false;  // another replica's: it rebuilds its own
     job = it->second;
   }
-  const std::optional<RunScope> scope = scopeWriting(job->shot, f.name);
-  if (!scope || isAutoShot(job->shot)) return false;  // auto would choose again
-  if (!inCache(job->shot, *scope)) return false;
+  ShotSpec shot = job->shot;
+  double sun_tolerance_deg = job->sun_tolerance_deg;
+  if (!job->has_shot) {
+    // A job finished before a restart keeps its submission, not its parsed shot (a damaged
+    // output of one was refused though the cache held what it needed: an outside probe).
+    try {
+      const SubmitInput input = readSubmission(store_->jobDir(id));
+      shot = prepare(input, store_->jobDir(id)).shot;
+      sun_tolerance_deg = input.sun_tolerance_deg;
+    } catch (const std::exception& e) {
+      spdlog::warn("job {}: cannot read its submission to rebuild '{}': {}", id, f.name,
+                   printable(e.what()));
+      return false;
+    }
+  }
+  const std::optional<RunScope> scope = scopeWriting(shot, f.name);
+  if (!scope || isAutoShot(shot)) return false;  // auto would choose again
+  if (!inCache(shot, *scope)) return false;
   RunOptions ro = autoRunOptions();
   ro.cache = cache_.get();
   ro.directions = directions_.get();
-  ro.sun_tolerance_deg = job->sun_tolerance_deg;
+  ro.sun_tolerance_deg = sun_tolerance_deg;
   ro.scope = *scope;
   ro.out_dir = (fs::path(options_.state_dir) / "tmp" / ("rebuild-" + uniqueSuffix())).string();
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(budget);
@@ -737,7 +755,7 @@ bool JobManager::rebuildOutput(const std::string& id, const OutputFile& f, doubl
   try {
     tbb::task_arena arena(options_.worker_threads > 0 ? int(options_.worker_threads)
                                                       : tbb::task_arena::automatic);
-    arena.execute([&] { runShot(job->shot, ro); });
+    arena.execute([&] { runShot(shot, ro); });
     const fs::path from = fs::path(ro.out_dir) / f.name,
                    to = fs::path(store_->outputDir(id)) / f.name;
     // Only the recorded bytes go back: a file that cannot be made again bit for bit (a VDB

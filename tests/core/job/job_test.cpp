@@ -807,6 +807,26 @@ TEST(JobManager, DamagedOutputIsRebuiltFromTheCacheElseRefused) {
   fs::remove_all(dir);
 }
 
+// The same after a restart: a finished job keeps its submission, from which the shot is read
+// again to rebuild (it was refused though the cache held everything: an outside probe).
+TEST(JobManager, DamagedOutputOfAJobFromBeforeARestartIsRebuilt) {
+  const fs::path dir = freshDir("damaged-restart");
+  std::string id, bytes, path;
+  {
+    JobManager jobs(localOptions(dir));
+    id = bakedJob(jobs);
+    ASSERT_FALSE(id.empty());
+    const OutputFile good = jobs.output(id, "v.exr");
+    bytes = readWholeFile(good.path);
+    path = good.path;
+  }
+  flipBytes(path, 16);
+  JobManager restarted(localOptions(dir));
+  EXPECT_EQ(readWholeFile(restarted.output(id, "v.exr").path), bytes);
+  EXPECT_EQ(restarted.stats().outputs_corrupt, 0u);
+  fs::remove_all(dir);
+}
+
 // Bit rot keeps a file's size and time, so a fetch (which rehashes only changed files) would
 // not see it: the scrub rehashes everything, rebuilds outputs and drops assets.
 TEST(JobManager, TheScrubFindsBitRotRebuildsOutputsAndDropsAssets) {
