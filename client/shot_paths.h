@@ -4,6 +4,7 @@
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <string>
 #include <vector>
 
 namespace cloudbake::client {
@@ -16,6 +17,16 @@ inline constexpr const char* kShotPathPointers[] = {
     "/volume/sequence/paths/*",
     "/lighting/sky/map",
 };
+
+/// One file a shot names: where (a concrete JSON pointer, e.g. "/volume/sequence/paths/1") and
+/// its value.
+struct ShotPath {
+  std::string pointer;
+  nlohmann::json* node;
+};
+
+/// The string values of `shot` at kShotPathPointers with their pointers, in that order.
+std::vector<ShotPath> shotPaths(nlohmann::json& shot);
 
 /// The string values of `shot` at kShotPathPointers, in that order (array elements in theirs),
 /// so callers can read and rewrite them. Absent keys and values of other types are skipped: the

@@ -635,8 +635,10 @@ void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
   }
   const fs::path base = fs::absolute(a.shot).parent_path();
   bool rewritten = false;
-  for (Json* node : cloudbake::client::shotPathNodes(shot)) {
+  for (const cloudbake::client::ShotPath& path : cloudbake::client::shotPaths(shot)) {
+    Json* node = path.node;
     const std::string p = node->get<std::string>();
+    const std::string field = a.shot + ": " + path.pointer + ": ";
     fs::path rel = fs::path(p).lexically_normal();
     const bool outside = rel.is_absolute() || (!rel.empty() && *rel.begin() == "..");
     // Absolute or escaping paths are not sent unless asked for: the server rejects them,
@@ -656,15 +658,15 @@ void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
         std::mismatch(real_base.begin(), real_base.end(), real.begin(), real.end());
     if (!outside && !a.allow_outside && end != real_base.end()) {
       throw CliError{ExitCode::kBadInput,
-                     a.shot + ": '" + p + "' leads outside the shot's folder (to " + real.string() +
+                     field + "'" + p + "' leads outside the shot's folder (to " + real.string() +
                          "); cloudctl submit --allow-outside uploads it"};
     }
     if (!fs::exists(local)) {
       throw CliError{ExitCode::kNotFound,
-                     a.shot + ": '" + p + "' (" + local.string() + "): file not found"};
+                     field + "'" + p + "' (" + local.string() + "): file not found"};
     }
     if (!fs::is_regular_file(local)) {
-      throw CliError{ExitCode::kBadInput, a.shot + ": '" + p + "': not a regular file"};
+      throw CliError{ExitCode::kBadInput, field + "'" + p + "': not a regular file"};
     }
     const std::string sha = upload(c, local.string(), a.quiet);
     if (outside) {

@@ -72,6 +72,14 @@ TEST(CloudctlShotPaths, FindsEveryPathInListOrder) {
   for (Json* node : cloudbake::client::shotPathNodes(shot)) got.push_back(node->get<std::string>());
   EXPECT_EQ(got, (std::vector<std::string>{"a.vdb", "m.ply", "f0.vdb", "f1.vdb", "sky.exr"}));
 
+  // With the JSON pointer of each, which cloudctl's errors name (an outside probe found them
+  // naming the file alone).
+  std::vector<std::string> pointers;
+  for (const auto& p : cloudbake::client::shotPaths(shot)) pointers.push_back(p.pointer);
+  EXPECT_EQ(pointers, (std::vector<std::string>{"/volume/vdb/path", "/volume/mesh/path",
+                                                "/volume/sequence/paths/0",
+                                                "/volume/sequence/paths/2", "/lighting/sky/map"}));
+
   // The nodes are the shot's own: a client rewrites them in place.
   *cloudbake::client::shotPathNodes(shot).front() = "outside/x/a.vdb";
   EXPECT_EQ(shot["volume"]["vdb"]["path"], "outside/x/a.vdb");
