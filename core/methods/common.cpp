@@ -99,6 +99,15 @@ Vec3 sunDirection(const ShotSpec& shot) {
   return shot.lighting.has_sun ? shot.lighting.sun.direction : Vec3(0, 0, 1);
 }
 
+void addLitFrom(const ShotSpec& shot, const Vec3& lit, std::map<std::string, std::string>* out) {
+  // (The same direction read back from a bake's metadata differs by rounding at most.)
+  if (!(length(normalize(lit) - sunDirection(shot)) > 1e-9)) return;
+  const double angle = angleDeg(lit, sunDirection(shot));
+  (*out)["cloudbake:lit_sun_direction"] =
+      exactNumber(lit.x) + " " + exactNumber(lit.y) + " " + exactNumber(lit.z);
+  (*out)["cloudbake:lit_sun_angle_deg"] = exactNumber(angle);
+}
+
 bool needsSky(const ShotSpec& shot) {
   const Sky& sky = shot.lighting.sky;
   switch (sky.type) {
@@ -328,10 +337,12 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
     const auto t0 = std::chrono::steady_clock::now();
     RenderLayers layers = renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
                                          [&](double f) { return run.poll(v0 + (v1 - v0) * f, f); });
+    std::map<std::string, std::string> attributes = {
+        {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
+        {"cloudbake:seed", std::to_string(ro.seed)}};
+    if (shot.lighting.has_sun) addLitFrom(shot, light.sun_direction, &attributes);
     const double write_s =
-        run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)),
-                      {{"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
-                       {"cloudbake:seed", std::to_string(ro.seed)}});
+        run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)), attributes);
     ++run.result().views_from_bake;
     run.result().steps.push_back({"view", camera.name, -1, secondsSince(t0), {{"write", write_s}}});
     run.poll(v1, 1);

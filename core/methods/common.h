@@ -4,6 +4,7 @@
 #pragma once
 
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,12 @@ namespace cloudbake {
 /// The direction towards the sun, unit length; (0, 0, 1) when the shot has no sun (the sky's
 /// bakes still need a lattice orientation). The one place that default lives.
 Vec3 sunDirection(const ShotSpec& shot);
+
+/// A view's header where it was lit from `lit`, not the shot's own sun direction (a cached bake
+/// or render reused within --sun-tolerance): cloudbake:lit_sun_direction and
+/// cloudbake:lit_sun_angle_deg, beside cloudbake:sun_direction, the shot's. Nothing where the
+/// two are the same.
+void addLitFrom(const ShotSpec& shot, const Vec3& lit, std::map<std::string, std::string>* out);
 
 /// True when the shot's sky is not black (a bake then needs its sky terms).
 bool needsSky(const ShotSpec& shot);

@@ -1,6 +1,9 @@
 #include "core/methods/pathtrace.h"
 
 #include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
 
 #include "core/error.h"
 #include "core/format.h"
@@ -19,7 +22,7 @@ constexpr const char* kVdbFile = "bake.vdb";
 // tolerance), else traced now and committed. Returns the layers at the shot's irradiance.
 std::vector<ExrLayer> cachedView(MethodRun& run, int i,
                                  const std::function<RenderLayers(const Sun&)>& render,
-                                 bool* from_cache) {
+                                 bool* from_cache, std::optional<Vec3>* lit_from) {
   const ShotSpec& shot = run.shot();
   const ShotCacheKeys& keys = run.keys();
   RunResult& result = run.result();
@@ -35,6 +38,7 @@ std::vector<ExrLayer> cachedView(MethodRun& run, int i,
         continue;
       }
       ++result.views_reused_direction;
+      *lit_from = d;
       const double c = std::clamp(dot(d, sunDirection(shot)), -1.0, 1.0);
       result.reused_angle_deg = std::max(result.reused_angle_deg, std::acos(c) * 180.0 / M_PI);
       break;
@@ -192,14 +196,16 @@ class PathtraceMethod final : public BakeMethod {
                                 [&](double f) { return run.poll((i + f) / total, f); });
       };
       bool from_cache = false;
+      std::optional<Vec3> lit_from;
       const std::vector<ExrLayer> layers = run.hasCache()
-                                               ? cachedView(run, i, render, &from_cache)
+                                               ? cachedView(run, i, render, &from_cache, &lit_from)
                                                : renderLayersToExr(render(run.scene().sun));
       if (!run.hasCache()) ++run.result().views_rendered;
-      const double write_s =
-          run.writeView(camera.name, camera, layers,
-                        {{"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
-                         {"cloudbake:seed", std::to_string(pt.seed)}});
+      std::map<std::string, std::string> attributes = {
+          {"cloudbake:samples", std::to_string(pt.samples_per_pixel)},
+          {"cloudbake:seed", std::to_string(pt.seed)}};
+      if (lit_from) addLitFrom(shot, *lit_from, &attributes);
+      const double write_s = run.writeView(camera.name, camera, layers, attributes);
       RunResult& r = run.result();
       r.steps.push_back({"view",
                          camera.name,

@@ -986,6 +986,32 @@ TEST(JobManager, RunningJobFoundAfterACrashIsMarkedFailed) {
 namespace cloudbake {
 namespace {
 
+// A view rendered from the cached bake of a nearby sun says so in its header too.
+TEST(RunShot, AViewFromANearbyBakeNamesTheSunThatLitIt) {
+  const fs::path dir = freshDir("tolerance-bake");
+  BakeCache cache((dir / "cache").string(), 0);
+  DirectionIndex directions((dir / "dirs").string());
+  RunOptions opt;
+  opt.cache = &cache;
+  opt.directions = &directions;
+  std::string shot = tinyShot();
+  shot.replace(shot.find(R"("method": "pathtrace", "samples": 2, "seed": 3)"), 46,
+               R"("method": "single", "light_resolution": 16)");
+  shot.replace(shot.find(R"(, "vdb_voxel_size": 0.25)"), 24, "");
+  opt.out_dir = (dir / "a").string();
+  runShot(parse(shot), opt);
+  EXPECT_EQ(readExr((dir / "a/front.exr").string()).attributes.count("cloudbake:lit_sun_direction"),
+            0u);
+  shot.replace(shot.find("\"direction\": [0, 0, 1]"), 22, "\"direction\": [0, 0.012, 1]");
+  opt.sun_tolerance_deg = 1;
+  opt.out_dir = (dir / "b").string();
+  EXPECT_EQ(runShot(parse(shot), opt).views_reused_direction, 1);
+  const auto attributes = readExr((dir / "b/front.exr").string()).attributes;
+  EXPECT_EQ(attributes.at("cloudbake:lit_sun_direction"), "0 0 1");
+  EXPECT_NEAR(std::stod(attributes.at("cloudbake:lit_sun_angle_deg")), 0.6875, 1e-3);
+  fs::remove_all(dir);
+}
+
 TEST(RunShot, SunDirectionToleranceReusesANearbyBakeOnlyWhenAsked) {
   const fs::path dir = freshDir("tolerance");
   BakeCache cache((dir / "cache").string(), 0);
@@ -1011,6 +1037,14 @@ TEST(RunShot, SunDirectionToleranceReusesANearbyBakeOnlyWhenAsked) {
   EXPECT_NEAR(near.reused_angle_deg, 0.6875, 1e-3);  // the closest one
   EXPECT_EQ(readExr((dir / "c/front.exr").string()).layers.at("").data,
             readExr((dir / "a/front.exr").string()).layers.at("").data);
+  // Its header says which sun lit it, beside the shot's own (an outside probe found only the
+  // shot's); a view lit from the shot's own direction says nothing more.
+  const auto attributes = readExr((dir / "c/front.exr").string()).attributes;
+  EXPECT_EQ(attributes.at("cloudbake:lit_sun_direction"), "0 0 1");
+  EXPECT_NE(attributes.at("cloudbake:sun_direction"), "0 0 1");
+  EXPECT_NEAR(std::stod(attributes.at("cloudbake:lit_sun_angle_deg")), 0.6875, 1e-3);
+  EXPECT_EQ(readExr((dir / "a/front.exr").string()).attributes.count("cloudbake:lit_sun_direction"),
+            0u);
   opt.sun_tolerance_deg = 0.5;  // too far now
   opt.out_dir = (dir / "d").string();
   EXPECT_EQ(runShot(parse(tilted2), opt).views_rendered, 1);
