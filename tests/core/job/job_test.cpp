@@ -987,13 +987,26 @@ namespace cloudbake {
 namespace {
 
 // A view rendered from the cached bake of a nearby sun says so in its header too.
-TEST(RunShot, AViewFromANearbyBakeNamesTheSunThatLitIt) {
-  const fs::path dir = freshDir("tolerance-bake");
-  BakeCache cache((dir / "cache").string(), 0);
-  DirectionIndex directions((dir / "dirs").string());
+// A cache and a direction index in a fresh folder, and run options that use them.
+struct CachedRuns {
+  explicit CachedRuns(const std::string& name)
+      : dir(freshDir(name)),
+        cache((dir / "cache").string(), 0),
+        directions((dir / "dirs").string()) {
+    opt.cache = &cache;
+    opt.directions = &directions;
+  }
+  ~CachedRuns() { fs::remove_all(dir); }
+  fs::path dir;
+  BakeCache cache;
+  DirectionIndex directions;
   RunOptions opt;
-  opt.cache = &cache;
-  opt.directions = &directions;
+};
+
+TEST(RunShot, AViewFromANearbyBakeNamesTheSunThatLitIt) {
+  CachedRuns runs("tolerance-bake");
+  const fs::path& dir = runs.dir;
+  RunOptions& opt = runs.opt;
   std::string shot = tinyShot();
   shot.replace(shot.find(R"("method": "pathtrace", "samples": 2, "seed": 3)"), 46,
                R"("method": "single", "light_resolution": 16)");
@@ -1009,16 +1022,12 @@ TEST(RunShot, AViewFromANearbyBakeNamesTheSunThatLitIt) {
   const auto attributes = readExr((dir / "b/front.exr").string()).attributes;
   EXPECT_EQ(attributes.at("cloudbake:lit_sun_direction"), "0 0 1");
   EXPECT_NEAR(std::stod(attributes.at("cloudbake:lit_sun_angle_deg")), 0.6875, 1e-3);
-  fs::remove_all(dir);
 }
 
 TEST(RunShot, SunDirectionToleranceReusesANearbyBakeOnlyWhenAsked) {
-  const fs::path dir = freshDir("tolerance");
-  BakeCache cache((dir / "cache").string(), 0);
-  DirectionIndex directions((dir / "dirs").string());
-  RunOptions opt;
-  opt.cache = &cache;
-  opt.directions = &directions;
+  CachedRuns runs("tolerance");
+  const fs::path& dir = runs.dir;
+  RunOptions& opt = runs.opt;
   opt.out_dir = (dir / "a").string();
   const RunResult a = runShot(parse(tinyShot()), opt);
   EXPECT_EQ(a.views_rendered, 1);
@@ -1051,7 +1060,6 @@ TEST(RunShot, SunDirectionToleranceReusesANearbyBakeOnlyWhenAsked) {
   EXPECT_NEAR(angleDeg({0, 0, 1}, {1, 0, 0}), 90, 1e-12);
   opt.sun_tolerance_deg = std::nan("");
   EXPECT_THROW(runShot(parse(tilted2), opt), InputError);
-  fs::remove_all(dir);
 }
 
 }  // namespace
