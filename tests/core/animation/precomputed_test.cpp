@@ -30,6 +30,16 @@ std::vector<float> sphereOnLattice(const Vec3& c, double r, int res, BakeGrid* g
   return std::move(l.density);
 }
 
+// A database of one basic volume: a unit sphere on a 24-voxel lattice, transfers on 12.
+PrecomputedDatabase unitSphereDatabase(double extinction, int sample_points) {
+  BakeGrid g;
+  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 24, &g);
+  PrecomputeOptions po;
+  po.sample_points = sample_points;
+  po.transfer_resolution = 12;
+  return precomputeBasicVolumes({g, {d}}, extinction, po);
+}
+
 Camera ortho(const Vec3& from, int px) {
   Camera c;
   c.name = "v";
@@ -175,12 +185,7 @@ TEST(Precomputed, SimilarityReductionCarriesForwardScatteredLight) {
 // absorb (0.57 at g = 0.5: its multiple scattering 0.19 of the path tracer's in an outside
 // probe, 0.75 now, the white medium's 0.83; Co here 1.10x the white medium's, 0.26x before).
 TEST(Precomputed, AWhiteChannelOfAColouredAlbedoKeepsItsLight) {
-  BakeGrid g;
-  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 24, &g);
-  PrecomputeOptions po;
-  po.sample_points = 2048;
-  po.transfer_resolution = 12;
-  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, 4.0, po);
+  const PrecomputedDatabase db = unitSphereDatabase(4.0, 2048);
   const Vec3 sun_dir = normalize(Vec3(1, 0, 1));
   FrameLightOptions o;
   o.mean_cosine = Rgb(0.5);
@@ -201,12 +206,7 @@ TEST(Precomputed, AWhiteChannelOfAColouredAlbedoKeepsItsLight) {
 TEST(Precomputed, OrdersConvergeInAThickConservativeCloud) {
   // Optical radius 15, albedo 0.999, coarse cells (tau ~ 1 per receiver): the discrete operator
   // must still lose energy every order (every column sums to at most 1 - P_esc).
-  BakeGrid g;
-  const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 24, &g);
-  PrecomputeOptions po;
-  po.sample_points = 1024;
-  po.transfer_resolution = 12;
-  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, 15.0, po);
+  const PrecomputedDatabase db = unitSphereDatabase(15.0, 1024);
   FrameLightOptions fo;
   fo.max_orders = 400;
   fo.tolerance = 1e-3;
