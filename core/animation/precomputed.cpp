@@ -9,6 +9,7 @@
 
 #include "core/animation/optical_depth_sh.h"
 #include "core/bake/sky_sh_scatter.h"
+#include "core/bake/sun_transmittance.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/math/parallel.h"
@@ -171,7 +172,8 @@ Similarity similarityReduction(const Rgb& albedo, const FrameLightOptions& optio
   return sim;
 }
 
-// Eq. 2's transmittance to the sun: one sweep through the blended density.
+// Eq. 2's transmittance to the sun: one sweep through the blended density, over every voxel,
+// so it holds where views read it (kSunTransmittanceMarginKey; trimToSupport keeps it there).
 void addSunTransmittance(const PrecomputedDatabase& db, BakedLight& bake) {
   const std::vector<float> tau =
       sweepOpticalDepth(bake.grid, bake.density, db.extinction, bake.sun_direction);
@@ -179,6 +181,7 @@ void addSunTransmittance(const PrecomputedDatabase& db, BakedLight& bake) {
   parallelFor(0, int64_t(bake.grid.voxelCount()),
               [&](size_t v) { t.data[v] = float(std::exp(-double(tau[v]))); },
               {kCheapIterationGrain});
+  bake.metadata[kSunTransmittanceMarginKey] = "1";
 }
 
 // Eq. 6 and 7: the blended optical depth's SH, exponentiated, and its DC term as the sky

@@ -47,6 +47,16 @@ constexpr const char* kCd = "Cd";
 /// density; 0 elsewhere. `density` holds grid.voxelCount() values. Parallel, deterministic.
 std::vector<uint8_t> densitySupport(const BakeGrid& grid, const std::vector<float>& density);
 
+/// `mask` (one byte a voxel of `grid`) grown by one voxel: 1 where any voxel of the
+/// 26-neighbourhood (itself included) is set. Parallel, deterministic.
+std::vector<uint8_t> dilateSupport(const BakeGrid& grid, const std::vector<uint8_t>& mask);
+
+/// Where a bake holds the sun's transmittance: the density's support (densitySupport) grown by
+/// one voxel, so within two voxels of any density > 0. A view reads it up to two voxels towards
+/// the sun from where the density is > 0 (render_from_bake.cpp, the short characteristic).
+std::vector<uint8_t> sunTransmittanceSupport(const BakeGrid& grid,
+                                             const std::vector<uint8_t>& support);
+
 /// The first and last voxels of the support within one lattice row of n voxels (`row`, from
 /// densitySupport): what a per-row loop needs to visit. False when the row has none.
 bool supportSpan(const uint8_t* row, int n, int* first, int* last);
@@ -92,8 +102,9 @@ struct BakedLight {
   /// Zeroes every light channel outside the support of the density (voxels within one voxel,
   /// in the 26-neighbourhood, of a voxel with density > 0): trilinear lookups never read them
   /// with a non-zero density weight, and a .vdb file stores only that support, so a bake and its
-  /// file read back are identical. Bake methods call it last. Channels on tally_grid keep their
-  /// values (a file stores their non-zero voxels).
+  /// file read back are identical. The sun's transmittance keeps one voxel more
+  /// (sunTransmittanceSupport), which views read. Bake methods call it last. Channels on
+  /// tally_grid keep their values (a file stores their non-zero voxels).
   void trimToSupport();
   /// The same with the support already computed (densitySupport of this density).
   void trimToSupport(const std::vector<uint8_t>& support);

@@ -60,6 +60,7 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
     throw InputError(path + ": bake density does not match its lattice");
   }
   const std::vector<uint8_t> support = densitySupport(g, bake.density);
+  const std::vector<uint8_t> sun_support = sunTransmittanceSupport(g, support);
   openvdb::GridPtrVec grids;
   auto density = makeGrid<openvdb::FloatGrid>(g, support, bake_grids::kDensity,
                                               [&](size_t v) { return bake.density[v]; });
@@ -78,7 +79,11 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
     tallies = tallies || c.on_tally_grid;
     // The lattice's grids store the density's support (trimToSupport zeroed the rest); the
     // tallies' coarser lattice stores its non-zero voxels, so a file reads back as the bake.
-    const std::vector<uint8_t> mask = c.on_tally_grid ? nonZeroVoxels(c) : support;
+    // The sun's transmittance keeps a voxel more, which views read (sunTransmittanceSupport).
+    const bool sun = name == bake_grids::kSunTransmittance;
+    std::vector<uint8_t> tally_mask;
+    if (c.on_tally_grid) tally_mask = nonZeroVoxels(c);
+    const std::vector<uint8_t>& mask = c.on_tally_grid ? tally_mask : sun ? sun_support : support;
     if (c.components == 1) {
       grids.push_back(
           makeGrid<openvdb::FloatGrid>(cg, mask, name, [&](size_t v) { return c.data[v]; }));

@@ -9,7 +9,11 @@
 // (RGB), and the source J (radiance per unit sigma_s) the sum of
 //   sun single  J_ss  = E p(cos_s) Tsun(x), cos_s = dot(bake.sun_direction, d) (light travels
 //                       along -sun_direction and leaves towards the camera along -d; constant
-//                       per ray, so p is looked up once per ray);
+//                       per ray, so p is looked up once per ray); Tsun(x) = exp(-tau(x)) by a
+//                       short characteristic (BakeMarcher::sunDepthAt): tau at the nearest
+//                       lattice plane towards the sun, interpolated within the plane, plus the
+//                       segment to it by Simpson's rule (bakes without
+//                       cloudbake:sun_transmittance_margin, written before: Tsun trilinear);
 //   multiple    J_ms  = E a(Ldir . -d) Co, only with a Co grid, with the angular model the
 //                       bake names in its metadata (cloudbake:angular_model):
 //                       "beam" (seed 000 Eq. 8 with A_iso = 1 / (4 pi); the default):
@@ -89,6 +93,7 @@
 #include "core/bake/phase_lut.h"
 #include "core/bake/photon_bake.h"
 #include "core/bake/sky_sh_scatter.h"
+#include "core/bake/sun_transmittance.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/math/large_array.h"
@@ -111,6 +116,9 @@ std::string angularModel(const BakedLight& bake) {
 
 constexpr int kBlock = 8;      // empty-space block side, voxels (an OpenVDB leaf)
 constexpr int kTileSize = 16;  // pixels per tile side (work unit)
+// Optical thickness of a voxel below which a view interpolates the sun's depth in 3D: the
+// interpolation's error is about this / 8 in the lit edge's voxels (docs/methods.md).
+constexpr double kThinVoxelDepth = 0.25;
 
 void validateOptions(const BakeRenderOptions& o, double voxel_size) {
   if (!std::isfinite(o.step) || o.step < 0) {
@@ -199,7 +207,8 @@ struct Corners {
 constexpr int kMaxRecord = 32;
 
 struct Cell {
-  double t = 0;  // distance of the point along the view ray (set by the march)
+  double t = 0;      // distance of the point along the view ray (set by the march)
+  double sigma = 0;  // extinction there (set by the march)
   bool interior = false;
   size_t base = 0;
   float fx = 0, fy = 0, fz = 0;
@@ -407,6 +416,18 @@ struct ViewGeometry {
   std::function<bool(double)> cancelled;
 };
 
+/// The sun's optical depth -ln Tsun per voxel, at most kMaxSunDepth, which the march
+/// interpolates instead of Tsun (see the file comment).
+LargeArray<float> sunOpticalDepth(const float* tsun, size_t voxels) {
+  LargeArray<float> tau(voxels);
+  constexpr size_t kChunk = 1 << 14;
+  parallelFor(0, int64_t((voxels + kChunk - 1) / kChunk), [&](int64_t chunk) {
+    const size_t v0 = size_t(chunk) * kChunk, v1 = std::min(voxels, v0 + kChunk);
+    for (size_t v = v0; v < v1; ++v) tau[v] = sunOpticalDepthOf(tsun[v]);
+  });
+  return tau;
+}
+
 /// Everything constant over a render: the grids, the block maxima and the lights.
 class BakeMarcher {
  public:
@@ -425,6 +446,14 @@ class BakeMarcher {
         step_(step),
         min_transmittance_(min_transmittance) {
     tsun_ = channel(bake, bake_grids::kSunTransmittance, 1, true, "");
+    if (bake.metadata.count(kSunTransmittanceMarginKey)) {
+      // The bake holds the sun's transmittance where the short characteristic reads it.
+      tau_sun_ = sunOpticalDepth(tsun_, bake.grid.voxelCount());
+      tsun_ = tau_sun_.data();
+    }
+    for (int a = 1; a < 3; ++a) {
+      if (std::abs(sun_dir[a]) > std::abs(sun_dir[sun_axis_])) sun_axis_ = a;
+    }
     if (!sky.black()) {
       vsky_ = channel(bake, bake_grids::kSkyVisibility, 1, true, " (needed under a non-black sky)");
     }
@@ -460,6 +489,7 @@ class BakeMarcher {
     scale_sky_ = medium.albedo * sky_mean;
     buildBlockMax();
     buildPack();
+    thick_density_ = kThinVoxelDepth / (extinction_ * grid_.voxel_size);
   }
 
   /// Per-thread scratch of trace, reused from ray to ray: photon's per-ray phase weights,
@@ -990,6 +1020,47 @@ class BakeMarcher {
     return 1 - v > 1e-6 ? co_sky_4pi / (1 - v) : Rgb(0.0);
   }
 
+  /// The optical depth to the sun at the march's sample c by a short characteristic: from c
+  /// towards the sun to the nearest plane of lattice voxels across the sun's main axis, the
+  /// bake's depth there, interpolated within the plane, plus the segment's own by Simpson's rule
+  /// on the density the view reads. The transmittance interpolated in 3D made the single layer
+  /// of optically thick media too bright (it falls exponentially within a voxel), and the depth
+  /// interpolated in 3D too dark (along the sun it bends where the density rises): measured in
+  /// docs/methods.md ("Rendering a view from a bake").
+  /// Whether c lies in an 8^3 block whose densest voxel is optically thicker than
+  /// kThinVoxelDepth: there the sun's depth takes the short characteristic, elsewhere its 3D
+  /// interpolation, within about 1 % there (docs/methods.md) at a third of the cost.
+  bool thickBlock(const Cell& c, const RayState& rs) const {
+    const Vec3 w = rs.w0 + rs.dw * c.t;
+    int b[3];
+    const int nb[3] = {nbx_, nby_, nbz_};
+    for (int a = 0; a < 3; ++a) b[a] = std::min(std::max(int(w[a] / kBlock), 0), nb[a] - 1);
+    return block_max_[(size_t(b[2]) * nby_ + b[1]) * nbx_ + b[0]] > thick_density_;
+  }
+
+  double sunDepthAt(const Cell& c, const RayState& rs) const {
+    const Vec3 u = rs.w0 + rs.dw * c.t - Vec3(1.0);
+    const int a = sun_axis_;
+    const double la = sun_dir_[a];
+    const double plane = la > 0 ? std::floor(u[a]) + 1 : std::ceil(u[a]) - 1;
+    const double s = (plane - u[a]) / la;  // voxels, in (0, sqrt(3)]
+    Vec3 y = u + sun_dir_ * s;
+    y[a] = plane;
+    Cell cy, cm;
+    lattice_.locate(y, &cy);
+    lattice_.locate(u + sun_dir_ * (0.5 * s), &cm);
+    float at_y[2];  // density and the sun's depth at y
+    if (!pack_.empty()) {
+      lattice_.readPacked(pack_.data(), stride_, cy, kDensity, 2, at_y);
+    } else {
+      at_y[kDensity] = density(cy);
+      at_y[kTsun] = lattice_.read(tsun_, cy);
+    }
+    const double sigma_y = extinction_ * at_y[kDensity], sigma_m = extinction_ * density(cm);
+    const double segment = s * grid_.voxel_size * (c.sigma + 4 * sigma_m + sigma_y) / 6;
+    return double(at_y[kTsun]) + segment;
+  }
+
   /// The source terms at a sample: Tsun, Vsky, and the multiple term J_ms (RGB, per unit E).
   struct Source {
     double tsun = 0, vsky = 0;
@@ -1002,7 +1073,9 @@ class BakeMarcher {
     const Vec3& d = rs->d;
     readSources(c);
     const float* v = c.record;
-    s->tsun = v[kTsun];
+    s->tsun = tau_sun_.size() == 0 ? v[kTsun]
+              : thickBlock(c, *rs) ? std::exp(-sunDepthAt(c, *rs))
+                                   : std::exp(-double(v[kTsun]));
     if (tally_) {
       tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
     } else if (!msh_.empty() && fieldAt(c.t)) {
@@ -1118,6 +1191,7 @@ class BakeMarcher {
     locate(s->w0 + s->dw * t0, prev);
     prev->t = t0;
     double sigma_prev = extinction_ * density(*prev);
+    prev->sigma = sigma_prev;
     Source sources[2];
     Source* src_prev = &sources[0];
     Source* src_cur = &sources[1];
@@ -1140,6 +1214,7 @@ class BakeMarcher {
       locate(s->w0 + s->dw * t, cur);
       cur->t = t;
       const double sigma = extinction_ * density(*cur);
+      cur->sigma = sigma;
       const double delta = 0.5 * (sigma_prev + sigma) * dt;
       if (delta > 0) {
         if (!have_prev) source(*prev, s, src_prev);
@@ -1179,7 +1254,11 @@ class BakeMarcher {
   Vec3 tally_offset_;
   double tally_dt_ = 1;  // world units between the tallies' anchors along a ray
   const float* density_;
-  const float* tsun_ = nullptr;
+  const float* tsun_ = nullptr;  // Tsun, or the sun's optical depth tau_sun_ where there is one
+  LargeArray<float> tau_sun_;    // -ln Tsun (sunDepthAt), for bakes with the margin
+  int sun_axis_ = 0;             // the sun direction's largest component (sunDepthAt)
+  // Densities above which a voxel is optically thicker than kThinVoxelDepth (thickBlock).
+  double thick_density_ = 0;
   const float* vsky_ = nullptr;
   const float* co_ = nullptr;
   const float* csky_ = nullptr;

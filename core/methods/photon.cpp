@@ -56,7 +56,7 @@ class PhotonMethod final : public BakeMethod {
         "1977, "
         "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
         "approximation (JQSRT), for a droplet's forward peak split off";
-    info_.version = 8;
+    info_.version = 9;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = photonKnobs();

@@ -40,7 +40,7 @@ class PointcloudMethod final : public BakeMethod {
     info_.citation =
         "Reimschuessel 2011, \"Rendering Realistic Cloud Effects for Computer Generated Films\" "
         "(BYU thesis)";
-    info_.version = 5;
+    info_.version = 6;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = pointcloudKnobs();

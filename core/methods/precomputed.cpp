@@ -319,7 +319,7 @@ class PrecomputedMethod final : public BakeMethod {
     info_.citation =
         "Iwasaki, Nishino and Dobashi 2011, \"Real-time rendering of endless cloud animation\" "
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
-    info_.version = 4;
+    info_.version = 5;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.animates = true;

@@ -58,13 +58,20 @@ class BakeFile : public ::testing::Test {
   fs::path dir_;
 };
 
+// The light channels keep the voxels next to density; the sun's transmittance one voxel more,
+// which views read (sunTransmittanceSupport).
 TEST(BakedLight, TrimKeepsTheNeighboursOfDensityOnly) {
   const BakedLight b = smallBake();
   const auto& t = b.find(bake_grids::kSunTransmittance)->data;
-  // (2, 5, 5) touches density at (3, 5, 5); (1, 5, 5) does not; (2, 2, 2) touches (3, 3, 3).
-  EXPECT_EQ(t[b.grid.index(2, 5, 5)], float(b.grid.index(2, 5, 5) % 97) / 97.f);
-  EXPECT_EQ(t[b.grid.index(2, 2, 2)], float(b.grid.index(2, 2, 2) % 97) / 97.f);
-  EXPECT_EQ(t[b.grid.index(1, 5, 5)], 0.f);
+  const auto& co = b.find(bake_grids::kMultipleFluence)->data;
+  auto original = [&](int i, int j, int k) { return float(b.grid.index(i, j, k) % 97) / 97.f; };
+  // (2, 5, 5) touches density at (3, 5, 5); (1, 5, 5) does not but is two voxels from it;
+  // (2, 2, 2) touches (3, 3, 3); (0, 0, 0) is three voxels from it.
+  EXPECT_EQ(t[b.grid.index(2, 5, 5)], original(2, 5, 5));
+  EXPECT_EQ(t[b.grid.index(2, 2, 2)], original(2, 2, 2));
+  EXPECT_EQ(t[b.grid.index(1, 5, 5)], original(1, 5, 5));
+  EXPECT_EQ(co[3 * b.grid.index(1, 5, 5) + 1], 0.f);
+  EXPECT_GT(co[3 * b.grid.index(2, 5, 5) + 1], 0.f);
   EXPECT_EQ(t[b.grid.index(0, 0, 0)], 0.f);
   EXPECT_EQ(b.find("nothing"), nullptr);
 }
