@@ -679,7 +679,6 @@ void recordKnobs(const PhotonBakeOptions& options, const ForwardPeak& split, int
       split.active() ? str(std::acos(split.cos_cut) * 180 / kPi, 15) : "0";
   (*m)["cloudbake:peak_fraction"] = str(split.fraction);
   (*m)["cloudbake:tally_resolution"] = str(tally_resolution);
-  (*m)["cloudbake:step"] = str(options.step);
   (*m)["cloudbake:extinction"] = str(extinction);
   (*m)["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";
   (*m)["cloudbake:sun"] = options.sun ? "baked" : "skipped (black sun)";

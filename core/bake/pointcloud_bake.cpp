@@ -59,7 +59,6 @@ void addPointcloudMetadata(const PointcloudOptions& options, const PointCloudRes
   md["cloudbake:pair_interactions"] = str(result.pair_interactions);
   md["cloudbake:pairs"] = str(result.pairs);
   md["cloudbake:light_resolution"] = str(options.light_resolution);
-  md["cloudbake:step"] = str(options.step, kMetadataDigits);
   md["cloudbake:seed"] = str(options.seed);
   if (!result.transfer_scale.empty()) {
     double mean = 0;

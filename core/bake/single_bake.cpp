@@ -50,7 +50,6 @@ BakedLight bakeSingle(const Medium& medium, const Vec3& sun_dir, const SingleBak
   }
   // Cd: the isotropic preview (grey: direct sun only, since single models no multiple scattering).
   bake.addMeanRadiance();
-  bake.metadata["cloudbake:step"] = str(options.step);
   bake.metadata["cloudbake:extinction"] = str(medium.extinction);
   bake.metadata["cloudbake:sky"] = options.sky ? "baked" : "skipped (black sky)";
   bake.trimToSupport();
