@@ -68,6 +68,9 @@ AssetStore::Writer::Writer(const AssetStore& store, std::string sha256, uint64_t
                      "upload limit of " + std::to_string(store_.max_asset_bytes_) + " bytes");
   }
   tmp_ = (fs::path(store_.root_) / ("upload-" + uniqueSuffix())).string();
+  // The store's folder is made again if something removed it while the server runs.
+  std::error_code made;
+  fs::create_directories(store_.root_, made);
   file_.reset(std::fopen(tmp_.c_str(), "wb"));
   if (!file_) {
     throwIfNoSpace(errno, "asset store: cannot create " + tmp_);

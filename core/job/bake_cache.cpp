@@ -234,6 +234,7 @@ void BakeCache::commit(const std::string& key, const std::string& staging) {
     return;
   }
   std::error_code ec;
+  fs::create_directories(fs::path(entryDir(key)).parent_path(), ec);  // removed while running
   fs::rename(staging, entryDir(key), ec);
   if (ec) {
     // Another process committed the key meanwhile (its entry may not have been visible yet: NFS

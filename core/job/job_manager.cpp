@@ -470,7 +470,8 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
   if (queue_.size() >= options_.queue_bound) {
     throw queueFull(queue_.size(), options_.queue_bound);
   }
-  saveLocked(*job);  // durable before the client hears of it
+  store_->save(job->record);  // durable before the client hears of it; throws when it is not
+  publishLocked(*job);
   pushEventLocked(*job, "queued", 0, "queued at position " + std::to_string(queue_.size() + 1));
   jobs_[id] = job;
   queue_.push_back(job);
@@ -597,11 +598,16 @@ JobRecord JobManager::cancel(const std::string& id) {
   auto job = find(id);
   std::lock_guard<std::mutex> lock(mutex_);
   if (job->record.state == JobState::kQueued) {
+    // Saved before anything changes: a cancel the disk could not keep (a full volume) is
+    // refused, not reported done and undone by a restart.
+    JobRecord cancelled = job->record;
+    cancelled.state = JobState::kCancelled;
+    cancelled.finished = unixNow();
+    cancelled.stage = "cancelled";
+    store_->save(cancelled);
     queue_.erase(std::remove(queue_.begin(), queue_.end(), job), queue_.end());
-    job->record.state = JobState::kCancelled;
-    job->record.finished = unixNow();
-    job->record.stage = "cancelled";
-    saveLocked(*job);
+    job->record = cancelled;
+    publishLocked(*job);
     pushEventLocked(*job, "cancelled", job->record.fraction, "cancelled while queued");
   } else if (job->record.state == JobState::kRunning) {
     job->cancel = true;  // the runner records the final state when the work has stopped

@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -38,17 +39,36 @@ bool readSmallFile(const std::string& path, std::string* out) {
 
 // False when the file exists already; throws on any other failure.
 bool createExclusive(const std::string& path, const std::string& content) {
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0 && errno == ENOENT) {
+    // The leases' folder was removed while the server runs: make it again, once.
+    std::error_code made;
+    std::filesystem::create_directories(std::filesystem::path(path).parent_path(), made);
+    fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  }
   if (fd < 0) {
     if (errno == EEXIST) return false;
-    throw std::runtime_error(path + ": cannot create the lease: " + std::strerror(errno));
+    const int err = errno;
+    throwIfNoSpace(err, path + ": cannot create the lease: " + std::strerror(err));
+    throw std::runtime_error(path + ": cannot create the lease: " + std::strerror(err));
   }
-  const bool ok =
-      ::write(fd, content.data(), content.size()) == ssize_t(content.size()) && ::fsync(fd) == 0;
-  const bool closed = ::close(fd) == 0;
-  if (!ok || !closed) {
+  const ssize_t written = ::write(fd, content.data(), content.size());
+  int err = written < 0 ? errno : 0;
+  bool ok = written == ssize_t(content.size());
+  if (ok && ::fsync(fd) != 0) {
+    err = errno;
+    ok = false;
+  }
+  if (::close(fd) != 0 && ok) {
+    err = errno;
+    ok = false;
+  }
+  if (!ok) {
     ::unlink(path.c_str());
-    throw std::runtime_error(path + ": cannot write the lease");
+    // A short write on a full volume sets no errno: count it as full, as the OS would on retry.
+    if (written >= 0 && written < ssize_t(content.size()) && err == 0) err = ENOSPC;
+    throwIfNoSpace(err, path + ": cannot write the lease");
+    throw std::runtime_error(path + ": cannot write the lease: " + std::strerror(err));
   }
   return true;
 }

@@ -100,6 +100,19 @@ TEST(SharedCache, AnotherInstanceFindsWhatOneCommitted) {
   fs::remove_all(dir);
 }
 
+// An outside probe removed the cache's folders under a running server: every later job failed
+// ("cannot create the lease") until a restart. They are made again when needed.
+TEST(SharedCache, FoldersRemovedWhileOpenAreMadeAgain) {
+  const fs::path dir = freshDir("removed");
+  BakeCache cache(dir.string(), fastOptions());
+  fs::remove_all(dir);
+  const std::string entry =
+      cache.getOrCompute("k", [](const std::string& s) { writeFileAtomic(s + "/data", "again"); });
+  EXPECT_EQ(readAll(entry + "/data"), "again");
+  EXPECT_TRUE(cache.lookup("k").has_value());
+  fs::remove_all(dir);
+}
+
 TEST(SharedCache, ALiveLeaseOfAnotherProcessIsWaitedForNotComputedAgain) {
   const fs::path dir = freshDir("live");
   BakeCache cache(dir.string(), fastOptions());  // creates the folders before the worker
