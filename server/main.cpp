@@ -342,7 +342,8 @@ std::unique_ptr<grpc::Server> startServer(const ServerFlags& f, grpc::Service* s
 
 constexpr const char* kTranscodeVdbFlag = "--transcode-vdb";
 
-// The child's work: read IN with OpenVDB and write OUT (exit 0), or say why not (exit 2). A crash
+// The child's work: read IN with OpenVDB and write OUT (exit 0), or say why not (exit 2; 4 when
+// the rewrite's volume is full). A crash
 // inside OpenVDB ends this process, which the parent reports as the file's fault.
 int transcodeVdbChild(const char* in, const char* out) {
   const rlimit no_core{0, 0};
@@ -353,6 +354,10 @@ int transcodeVdbChild(const char* in, const char* out) {
   } catch (const cloudbake::InputError& e) {
     std::fprintf(stderr, "cloudbake-server: error: %s\n", e.what());
     return cloudbake::kBadInput;
+  } catch (const cloudbake::StorageFullError& e) {
+    // The rewrite's volume is full: the file is not at fault, and a retry may succeed.
+    std::fprintf(stderr, "cloudbake-server: error: %s\n", e.detail().c_str());
+    return cloudbake::kUnavailable;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cloudbake-server: failed: %s\n", e.what());
     return cloudbake::kFailure;

@@ -27,6 +27,7 @@
 #include "common/grpc_status.h"
 #include "common/json_limits.h"
 #include "common/printable.h"
+#include "common/stdout_check.h"
 #include "core/io/exr_io.h"
 #include "core/io/png_writer.h"
 #include "core/job/sha256.h"
@@ -1156,11 +1157,11 @@ int main(int argc, char** argv) {
   }
   try {
     c.token = readToken(token_file);
-    return runCommand(cmd, c, sa, ja);
+    return cloudbake::checkStdout(runCommand(cmd, c, sa, ja), "cloudctl");
   } catch (const CliError& e) {
     std::cerr << "cloudctl: " << e.message << "\n";
-    return e.code;
+    return cloudbake::checkStdout(e.code, "cloudctl");
   } catch (...) {
-    return reportError(std::current_exception());
+    return cloudbake::checkStdout(reportError(std::current_exception()), "cloudctl");
   }
 }

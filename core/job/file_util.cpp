@@ -60,7 +60,11 @@ void writeFileAtomic(const std::string& path, const std::string& data) {
 
 std::string readWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path + ": cannot open for reading");
+  if (!in) {
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec)) throw MissingFileError(path + ": no such file");
+    throw InputError(path + ": cannot open for reading");
+  }
   std::ostringstream s;
   s << in.rdbuf();
   if (in.bad()) throw InputError(path + ": read error");

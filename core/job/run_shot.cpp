@@ -112,15 +112,23 @@ class ShotRun final : public MethodRun {
   DensityFieldPtr sequenceFrame(int frame) override {
     const auto* sequence = std::get_if<SequenceVolumeSpec>(&shot_.volume);
     if (!sequence) throw InternalError("sequenceFrame: the shot's volume is not a sequence");
+    DensityFieldPtr density;
     if (sequence->paths.empty() || opt_.vdb_reader.command.empty()) {
-      return buildSequenceFrame(*sequence, frame, opt_.source);
+      density = buildSequenceFrame(*sequence, frame, opt_.source);
+    } else {
+      SequenceVolumeSpec readable = *sequence;
+      const std::string& path = sequence->paths.at(size_t(frame));
+      readable.paths[size_t(frame)] =
+          readableVdb(path, "/volume/sequence/paths/" + std::to_string(frame));
+      density = readRewrite(path, readable.paths[size_t(frame)],
+                            [&] { return buildSequenceFrame(readable, frame, opt_.source); });
     }
-    SequenceVolumeSpec readable = *sequence;
-    const std::string& path = sequence->paths.at(size_t(frame));
-    readable.paths[size_t(frame)] =
-        readableVdb(path, "/volume/sequence/paths/" + std::to_string(frame));
-    return readRewrite(path, readable.paths[size_t(frame)],
-                       [&] { return buildSequenceFrame(readable, frame, opt_.source); });
+    // Each frame as a static volume is: densities past what tracking resolves are refused.
+    const std::string which = sequence->paths.empty()
+                                  ? "frame " + std::to_string(frame)
+                                  : "/volume/sequence/paths/" + std::to_string(frame);
+    checkTrackableOpticalDepth(shot_, *density, opt_.source, which);
+    return density;
   }
 
   void report(const std::string& stage, double fraction, const std::string& message,

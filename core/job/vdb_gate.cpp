@@ -111,6 +111,8 @@ void rewriteVdbInChild(const VdbReaderOptions& options, const std::string& in,
   }
   if (WIFEXITED(status) && WEXITSTATUS(status) == 0) return;
   if (WIFEXITED(status) && WEXITSTATUS(status) == 2) throw InputError(lastLine(output));
+  // The rewrite's volume is full (the child's exit code 4): not the file's fault; retry later.
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 4) throw StorageFullError(lastLine(output));
   throw InputError(in + ": not a readable OpenVDB file (the VDB reader failed on it: " +
                    (WIFSIGNALED(status) ? "signal " + std::to_string(WTERMSIG(status))
                                         : "exit " + std::to_string(WEXITSTATUS(status))) +

@@ -23,7 +23,8 @@ struct VdbReaderOptions {
 /// Runs `options.command` IN OUT and waits for it, polling `keep_going` (false: the child is
 /// killed and Cancelled thrown) about every 0.1 s. InputError naming `in` when the child fails:
 /// its own message when it exits 2 (bad input), otherwise that the VDB reader crashed or ran
-/// out of time on the file; InternalError when the command cannot be started.
+/// out of time on the file; StorageFullError when it exits 4 (the rewrite's volume is full);
+/// InternalError when the command cannot be started.
 void rewriteVdbInChild(const VdbReaderOptions& options, const std::string& in,
                        const std::string& out, const std::function<bool()>& keep_going);
 

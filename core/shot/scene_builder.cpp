@@ -79,13 +79,13 @@ DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame
 }
 
 void checkTrackableOpticalDepth(const ShotSpec& shot, const DensityField& density,
-                                const std::string& source) {
+                                const std::string& source, const std::string& volume) {
   const Bounds3 b = density.bounds();
   const double size = length(b.max - b.min);
   const double tau = shot.medium.extinction * density.maxDensity() * size;
   if (!(tau <= kMaxTrackableOpticalDepth)) {
     throw InputError(source + ": /medium/extinction: extinction " + str(shot.medium.extinction) +
-                     " x the volume's largest density " + str(density.maxDensity()) +
+                     " x " + volume + "'s largest density " + str(density.maxDensity()) +
                      " x its diagonal " + str(size) + " is " + str(tau) +
                      " optical depths, beyond the " + str(kMaxTrackableOpticalDepth) +
                      " that tracking resolves in double precision; lower the extinction or the "

@@ -37,7 +37,8 @@ constexpr double kMaxTrackableOpticalDepth = 1e14;
 /// InputError naming /medium/extinction when the shot's volume is beyond
 /// kMaxTrackableOpticalDepth; buildScene calls it for every method.
 void checkTrackableOpticalDepth(const ShotSpec& shot, const DensityField& density,
-                                const std::string& source);
+                                const std::string& source,
+                                const std::string& volume = "the volume");
 
 /// Medium (density, extinction, albedo, phase function), sun, sky and cameras of a shot.
 /// Throws InputError (with `source` and the JSON pointer) when a part cannot be built. The phase

@@ -1,8 +1,11 @@
 // Shot format v1: the `volume` section (box, sphere, vdb, mesh, procedural, sequence).
+#include <algorithm>
 #include <string>
 
+#include "core/format.h"
 #include "core/shot/shot_sections.h"
 #include "core/volume/perlin_cloud.h"
+#include "core/volume/voxel_limits.h"
 
 namespace cloudbake::shotjson {
 namespace {
@@ -119,6 +122,12 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
     validatePerlinCloudOptions(c);
   } catch (const InputError& e) {
     r.fail(o.ptr(), e.what());
+  }
+  const double voxel = std::max({c.size.x, c.size.y, c.size.z}) / c.resolution;
+  if (!(voxel >= kMinVoxelSize)) {
+    r.fail(o.path("size"), "gives voxels of " + exactNumber(voxel) +
+                               " world units (largest size / resolution), below the smallest " +
+                               exactNumber(kMinVoxelSize) + ": scale the scene up");
   }
   return p;
 }

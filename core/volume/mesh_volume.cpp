@@ -10,6 +10,7 @@
 #include "core/format.h"
 #include "core/volume/noise.h"
 #include "core/volume/openvdb_grid.h"
+#include "core/volume/voxel_limits.h"
 #include "core/volume/winding_number.h"
 
 namespace cloudbake {
@@ -258,6 +259,13 @@ double meshVoxelSize(const MeshSourceOptions& o, const Bounds3& b) {
                        std::to_string(o.resolution));
     }
     h = extent / o.resolution;
+  }
+  if (!(h >= kMinVoxelSize)) {
+    std::ostringstream os;
+    os << o.path << ": mesh." << (has_size ? "voxel_size" : "resolution") << ": gives voxels of "
+       << exactNumber(h) << " world units, below the smallest " << exactNumber(kMinVoxelSize)
+       << ": scale the mesh up";
+    throw InputError(os.str());
   }
   double total = 1;
   for (int a = 0; a < 3; ++a) {

@@ -3,7 +3,9 @@
 #include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -21,8 +23,9 @@ struct VdbContent {
 
 VdbContent readAll(const std::string& in) {
   std::error_code ec;
+  if (!std::filesystem::exists(in, ec)) throw MissingFileError(in + ": VDB file not found");
   if (!std::filesystem::is_regular_file(in, ec)) {
-    throw InputError(in + ": VDB file not found (or not a regular file)");
+    throw InputError(in + ": not a regular file (a VDB file was expected)");
   }
   checkVdbHeader(in);
   try {
@@ -58,8 +61,14 @@ void writeAll(const VdbContent& c, const std::string& out) {
     }
     std::filesystem::rename(tmp, out);
   } catch (const std::exception& e) {
+    // A stream's failure leaves its errno; a rename's is in its error code.
+    const auto* fs_error = dynamic_cast<const std::filesystem::filesystem_error*>(&e);
+    const int err = fs_error ? fs_error->code().value() : errno;
     std::remove(tmp.c_str());
-    throw InputError(out + ": cannot write the rewritten VDB file (" + e.what() + ")");
+    const std::string message = out + ": cannot write the rewritten VDB file (" +
+                                (isNoSpaceErrno(err) ? std::strerror(err) : e.what()) + ")";
+    throwIfNoSpace(err, message);
+    throw InputError(message);
   }
 }
 

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -20,7 +21,8 @@ namespace cloudbake::tool {
 namespace {
 
 struct LayerStats {
-  double mean_test = 0, mean_ref = 0, rel_rmse = 0;
+  double mean_test = 0, mean_ref = 0, rmse = 0;
+  double rel_rmse = 0;  // NaN where it is undefined: an image against a reference of mean 0
 };
 
 // The pixels that count: all, or those whose reference alpha is at least `min_alpha`.
@@ -55,7 +57,12 @@ LayerStats compareLayer(const Image& test, const Image& ref, const PixelMask& ma
   if (n == 0) return s;
   s.mean_test = sum_t / double(n);
   s.mean_ref = sum_r / double(n);
-  s.rel_rmse = s.mean_ref > 0 ? std::sqrt(sq / double(n)) / s.mean_ref : 0;
+  s.rmse = std::sqrt(sq / double(n));
+  // Against a reference without light any difference is infinitely large relative to it: no
+  // number says that, and 0 would call a mismatch a perfect match.
+  s.rel_rmse = s.mean_ref > 0 ? s.rmse / s.mean_ref
+               : s.rmse == 0  ? 0
+                              : std::numeric_limits<double>::quiet_NaN();
   return s;
 }
 
@@ -117,7 +124,8 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
       "Compare a rendered view with a reference of the same view: per layer (beauty, cloud, "
       "background, sun, sky, single, multiple, and scattered = sun + sky) the means and the "
       "relative RMSE "
-      "sqrt(mean((x - r)^2)) / mean(r) over pixels and RGB");
+      "sqrt(mean((x - r)^2)) / mean(r) over pixels and RGB (undefined, JSON null, where the "
+      "reference's mean is 0 and the images differ; \"rmse\" is the absolute one)");
   cmd->add_option("test", opt->test, "the EXR to judge")->required();
   cmd->add_option("reference", opt->ref, "the reference EXR (e.g. a converged pathtrace)")
       ->required();
@@ -132,6 +140,9 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
   cmd->callback([opt, exit_code] {
     ExrContents test = readExr(opt->test);
     ExrContents ref = readExr(opt->ref);
+    if (!(opt->cloud_alpha >= 0 && opt->cloud_alpha <= 1)) {
+      throw InputError("--cloud-alpha: must be in [0, 1], got " + std::to_string(opt->cloud_alpha));
+    }
     if (!opt->mask_from.empty() && !(opt->cloud_alpha > 0)) {
       throw InputError("--mask-from: needs --cloud-alpha");
     }
@@ -155,11 +166,19 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
       const LayerStats s =
           compareLayer(it->second, image, mask, opt->test + " layer '" + label + "'",
                        opt->ref + " layer '" + label + "'");
-      out[label] = {
-          {"mean", s.mean_test}, {"reference_mean", s.mean_ref}, {"rel_rmse", s.rel_rmse}};
+      const bool defined = !std::isnan(s.rel_rmse);
+      out[label] = {{"mean", s.mean_test},
+                    {"reference_mean", s.mean_ref},
+                    {"rmse", s.rmse},
+                    {"rel_rmse", defined ? nlohmann::json(s.rel_rmse) : nlohmann::json()}};
       char row[256];
-      std::snprintf(row, sizeof row, "%-10s %14.6g %14.6g %10.4f\n", label.c_str(), s.mean_test,
-                    s.mean_ref, s.rel_rmse);
+      if (defined) {
+        std::snprintf(row, sizeof row, "%-10s %14.6g %14.6g %10.4f\n", label.c_str(), s.mean_test,
+                      s.mean_ref, s.rel_rmse);
+      } else {
+        std::snprintf(row, sizeof row, "%-10s %14.6g %14.6g %10s\n", label.c_str(), s.mean_test,
+                      s.mean_ref, "undefined");
+      }
       table += row;
     }
     if (out.empty()) throw InputError(opt->test + ": no layer in common with " + opt->ref);

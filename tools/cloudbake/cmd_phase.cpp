@@ -4,16 +4,19 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include "core/error.h"
 #include "core/io/png_writer.h"
+#include "core/job/file_util.h"
 #include "core/math/vec3.h"
 #include "core/phase/phase_factory.h"
 #include "tools/cloudbake/commands.h"
@@ -205,16 +208,22 @@ void addPhaseCommand(CLI::App& app, int* exit_code) {
     if (opt->samples < 2 || opt->samples > 100000) {
       throw InputError("--samples: must be in [2, 100000], got " + std::to_string(opt->samples));
     }
-    // Parse (cheap) and open the output before building, which can take a second for Mie.
+    // Parse (cheap) and check the output's folder before building, which can take a second
+    // for Mie.
     const PhaseSpec spec = parsePhaseSpec(opt->spec);
-    std::ofstream csv(opt->out);
-    if (!csv) throw InputError(opt->out + ": cannot open for writing");
+    const std::filesystem::path folder =
+        std::filesystem::absolute(std::filesystem::path(opt->out)).parent_path();
+    std::error_code ec;
+    if (!std::filesystem::is_directory(folder, ec)) {
+      throw InputError(opt->out + ": cannot open for writing (no folder " + folder.string() + ")");
+    }
     const auto t0 = std::chrono::steady_clock::now();
     const auto phase = makePhaseFunction(spec);
     const double build_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::vector<double> theta = plotAngles(opt->samples);
     std::vector<Rgb> values(theta.size());
+    std::ostringstream csv;
     csv << "theta_deg,cos_theta,r,g,b,pdf\n" << std::setprecision(10);
     for (size_t i = 0; i < theta.size(); ++i) {
       const double mu = std::cos(theta[i] * kPi / 180.0);
@@ -222,8 +231,9 @@ void addPhaseCommand(CLI::App& app, int* exit_code) {
       csv << theta[i] << ',' << mu << ',' << values[i].x << ',' << values[i].y << ',' << values[i].z
           << ',' << phase->pdf(mu) << '\n';
     }
-    csv.close();
-    if (!csv) throw InputError(opt->out + ": write failed");
+    // Written whole through a temporary file and a rename: a full disk leaves no partial file
+    // and exits 4 (StorageFullError), any other failure names the file.
+    writeFileAtomic(opt->out, csv.str());
     if (!opt->png.empty()) writePlot(opt->png, theta, values);
     const Rgb g = phase->meanCosine();
     const nlohmann::json summary = {{"phase", phase->describe()},

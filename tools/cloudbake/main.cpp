@@ -7,6 +7,7 @@
 
 #include "common/cli_suggest.h"
 #include "common/exit_codes.h"
+#include "common/stdout_check.h"
 #include "core/io/exr_io.h"
 #include "tools/cloudbake/commands.h"
 
@@ -66,7 +67,7 @@ int main(int argc, char** argv) {
     }
     return app.exit(e) == 0 ? kOk : kBadInput;
   } catch (...) {
-    return reportError(std::current_exception());
+    return cloudbake::checkStdout(reportError(std::current_exception()), "cloudbake");
   }
-  return exit_code;
+  return cloudbake::checkStdout(exit_code, "cloudbake");
 }

@@ -205,14 +205,20 @@ TEST_F(MeshVolumeTest, ValidatesOptions) {
   o.resolution = 0;
   o.voxel_size = std::nan("");
   EXPECT_THROW(meshToVolume(tet, o), InputError);
+  // Refused with a message holding `words`.
+  auto refusedSaying = [&](std::initializer_list<const char*> words) {
+    try {
+      meshToVolume(tet, o);
+      FAIL();
+    } catch (const InputError& e) {
+      for (const char* w : words) EXPECT_NE(std::string(e.what()).find(w), std::string::npos);
+    }
+  };
+  o.voxel_size = 3e-5;
+  refusedSaying({"limit", "mesh.voxel_size"});
+  // Finer than OpenVDB's transforms allow (kMinVoxelSize).
   o.voxel_size = 1e-5;
-  try {
-    meshToVolume(tet, o);
-    FAIL();
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("limit"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("mesh.voxel_size"), std::string::npos) << e.what();
-  }
+  refusedSaying({"below the smallest", "mesh.voxel_size"});
   o.voxel_size = 0.05;
   o.density = -1;
   EXPECT_THROW(meshToVolume(tet, o), InputError);

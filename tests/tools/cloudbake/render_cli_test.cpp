@@ -15,6 +15,8 @@
 
 #include "core/io/exr_io.h"
 #include "core/io/vdb_io.h"
+#include "core/volume/analytic.h"
+#include "tests/tiny_volume.h"
 
 namespace cloudbake {
 namespace {
@@ -551,6 +553,97 @@ TEST_F(RenderCli, PreviewWritesAPngOfAnyLayer) {
 
 // A mistyped subcommand is named, with the nearest command (CLI11 said "A subcommand is
 // required").
+// What an outside probe found: a result printed into a full disk exited 0 with an empty file;
+// the farm's and the transcoder's missing files were exit 2, not 3; a phase table on a full disk
+// left an empty file and blamed the input (exit 2, not 4).
+TEST_F(RenderCli, FullDisksAndMissingFilesHaveTheirOwnExitCodes) {
+  if (fs::exists("/dev/full")) {
+    const std::string cmd = std::string("'") + CLOUDBAKE_EXE + "' methods --json > /dev/full 2> '" +
+                            (dir_ / "err.txt").string() + "'";
+    const int status = std::system(cmd.c_str());
+    EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 4);
+    EXPECT_NE(slurp(dir_ / "err.txt").find("cannot write to standard output"), std::string::npos);
+  }
+  CliResult r = run("transcode-vdb '" + (dir_ / "none.vdb").string() + "' '" +
+                    (dir_ / "out.vdb").string() + "'");
+  EXPECT_EQ(r.rc, 3) << r.err;
+  r = run("run-task '" + (dir_ / "none.json").string() + "' layout --cache-dir '" +
+          (dir_ / "c").string() + "' --out '" + (dir_ / "o").string() + "'");
+  EXPECT_EQ(r.rc, 3) << r.err;
+  r = run("phase hg:g=0.5 --out '" + (dir_ / "no/such/folder.csv").string() + "'");
+  EXPECT_EQ(r.rc, 2) << r.err;
+  testing::TinyVolume volume((dir_ / "tiny").string(), 1);
+  if (!volume.ok()) GTEST_SKIP() << volume.why();
+  // 100000 rows of about 80 bytes: more than the volume holds.
+  const fs::path csv = fs::path(volume.dir()) / "phase.csv";
+  r = run("phase hg:g=0.5 --samples 100000 --out '" + csv.string() + "'");
+  EXPECT_EQ(r.rc, 4) << r.err;
+  EXPECT_FALSE(fs::exists(csv));
+}
+
+// A relative RMSE against a reference without light is undefined: null, not 0 (which read as a
+// perfect match of any image).
+TEST_F(RenderCli, CompareAgainstADarkReferenceSaysTheErrorIsUndefined) {
+  json j = slab();
+  j["volume"] = {{"sphere", {{"center", {0, 0, 0}}, {"radius", 1}, {"density", 1}}}};
+  j["bake"] = {{"method", "single"}, {"light_resolution", 16}};
+  j["views"][0]["resolution"] = {8, 8};
+  const fs::path lit = dir_ / "lit", dark = dir_ / "dark";
+  CliResult r = run("render '" + writeShot("lit.json", j).string() + "' --out '" + lit.string() +
+                    "' --quiet");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  j["lighting"] = {{"sun", {{"direction", {0, 0, 1}}, {"irradiance", {0, 0, 0}}}}};
+  r = run("render '" + writeShot("dark.json", j).string() + "' --out '" + dark.string() +
+          "' --quiet");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const std::string view = j["views"][0]["name"].get<std::string>() + ".exr";
+  r = run("compare '" + (lit / view).string() + "' '" + (dark / view).string() + "' --json");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json c = json::parse(r.out);
+  EXPECT_TRUE(c.at("sun").at("rel_rmse").is_null()) << r.out;
+  EXPECT_GT(c.at("sun").at("rmse").get<double>(), 0) << r.out;
+  r = run("compare '" + (dark / view).string() + "' '" + (dark / view).string() + "' --json");
+  EXPECT_EQ(json::parse(r.out).at("sun").at("rel_rmse"), 0.0) << r.out;
+  r = run("compare '" + (lit / view).string() + "' '" + (lit / view).string() +
+          "' --cloud-alpha nan");
+  EXPECT_EQ(r.rc, 2) << r.err;
+}
+
+// Voxels finer than OpenVDB's transforms allow are refused naming the field, not an internal
+// error from inside OpenVDB.
+TEST_F(RenderCli, VoxelsTooSmallForOpenVdbAreRefusedNamingTheField) {
+  json j = slab();
+  j["volume"] = {
+      {"procedural", {{"type", "perlin_cloud"}, {"resolution", 16}, {"size", {1e-5, 1e-5, 1e-5}}}}};
+  CliResult r = run("render '" + writeShot("tiny.json", j).string() + "' --out '" +
+                    (dir_ / "t").string() + "' --dry-run");
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("/volume/procedural/size"), std::string::npos) << r.err;
+}
+
+// A frame of a sequence denser than tracking resolves is refused as a static VDB is, naming
+// /medium/extinction and the frame (an outside probe: it rendered, its multiple layer 0).
+TEST_F(RenderCli, ASequenceFrameTooDenseForTheExtinctionIsRefused) {
+  const std::string light = (dir_ / "light.vdb").string(), heavy = (dir_ / "heavy.vdb").string();
+  VdbWriteOptions o;
+  o.voxel_size = 0.25;
+  writeVdb(light, BoxDensity(Vec3(-1.0), Vec3(1.0), 1.0), o);
+  writeVdb(heavy, BoxDensity(Vec3(-1.0), Vec3(1.0), 1e12), o);
+  json j = slab();
+  j["volume"] = {{"sequence", {{"paths", {light, heavy}}}}};
+  j["medium"]["extinction"] = 100;
+  j["bake"] = {{"method", "precomputed"},
+               {"light_resolution", 12},
+               {"sample_points", 128},
+               {"transfer_resolution", 6}};
+  j["views"][0]["resolution"] = {8, 8};
+  const CliResult r = run("render '" + writeShot("seq.json", j).string() + "' --out '" +
+                          (dir_ / "seq").string() + "' --quiet");
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("/medium/extinction"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("/volume/sequence/paths/1"), std::string::npos) << r.err;
+}
+
 TEST_F(RenderCli, MistypedCommandIsNamedWithTheNearestOne) {
   CliResult r = run("rendr '" + (kExamples / "slab.json").string() + "' --out x");
   EXPECT_EQ(r.rc, 2);
