@@ -416,8 +416,8 @@ struct ViewGeometry {
   std::function<bool(double)> cancelled;
 };
 
-/// The sun's optical depth -ln Tsun per voxel, at most kMaxSunDepth, which the march
-/// interpolates instead of Tsun (see the file comment).
+/// The sun's optical depth -ln Tsun per voxel (sunOpticalDepthOf), which views read instead of
+/// Tsun (see the file comment).
 LargeArray<float> sunOpticalDepth(const float* tsun, size_t voxels) {
   LargeArray<float> tau(voxels);
   constexpr size_t kChunk = 1 << 14;
@@ -1020,13 +1020,6 @@ class BakeMarcher {
     return 1 - v > 1e-6 ? co_sky_4pi / (1 - v) : Rgb(0.0);
   }
 
-  /// The optical depth to the sun at the march's sample c by a short characteristic: from c
-  /// towards the sun to the nearest plane of lattice voxels across the sun's main axis, the
-  /// bake's depth there, interpolated within the plane, plus the segment's own by Simpson's rule
-  /// on the density the view reads. The transmittance interpolated in 3D made the single layer
-  /// of optically thick media too bright (it falls exponentially within a voxel), and the depth
-  /// interpolated in 3D too dark (along the sun it bends where the density rises): measured in
-  /// docs/methods.md ("Rendering a view from a bake").
   /// Whether c lies in an 8^3 block whose densest voxel is optically thicker than
   /// kThinVoxelDepth: there the sun's depth takes the short characteristic, elsewhere its 3D
   /// interpolation, within about 1 % there (docs/methods.md) at a third of the cost.
@@ -1038,6 +1031,13 @@ class BakeMarcher {
     return block_max_[(size_t(b[2]) * nby_ + b[1]) * nbx_ + b[0]] > thick_density_;
   }
 
+  /// The optical depth to the sun at the march's sample c by a short characteristic: from c
+  /// towards the sun to the nearest plane of lattice voxels across the sun's main axis, the
+  /// bake's depth there, interpolated within the plane, plus the segment's own by Simpson's rule
+  /// on the density the view reads. The transmittance interpolated in 3D made the single layer
+  /// of optically thick media too bright (it falls exponentially within a voxel), and the depth
+  /// interpolated in 3D too dark (along the sun it bends where the density rises): measured in
+  /// docs/methods.md ("The sun's transmittance between voxels").
   double sunDepthAt(const Cell& c, const RayState& rs) const {
     const Vec3 u = rs.w0 + rs.dw * c.t - Vec3(1.0);
     const int a = sun_axis_;
