@@ -181,7 +181,7 @@ void addSunTransmittance(const PrecomputedDatabase& db, BakedLight& bake) {
   parallelFor(0, int64_t(bake.grid.voxelCount()),
               [&](size_t v) { t.data[v] = float(std::exp(-double(tau[v]))); },
               {kCheapIterationGrain});
-  bake.metadata[kSunTransmittanceMarginKey] = "1";
+  bake.metadata[kSunTransmittanceMarginKey] = "2";
 }
 
 // Eq. 6 and 7: the blended optical depth's SH, exponentiated, and its DC term as the sky

@@ -56,7 +56,7 @@ std::vector<uint8_t> densitySupport(const BakeGrid& g, const std::vector<float>&
 
 std::vector<uint8_t> sunTransmittanceSupport(const BakeGrid& g,
                                              const std::vector<uint8_t>& support) {
-  return dilateSupport(g, support);
+  return dilateSupport(g, dilateSupport(g, support));
 }
 
 bool supportSpan(const uint8_t* row, int n, int* first, int* last) {

@@ -52,8 +52,9 @@ std::vector<uint8_t> densitySupport(const BakeGrid& grid, const std::vector<floa
 std::vector<uint8_t> dilateSupport(const BakeGrid& grid, const std::vector<uint8_t>& mask);
 
 /// Where a bake holds the sun's transmittance: the density's support (densitySupport) grown by
-/// one voxel, so within two voxels of any density > 0. A view reads it up to two voxels towards
-/// the sun from where the density is > 0 (render_from_bake.cpp, the short characteristic).
+/// two voxels, so within three voxels of any density > 0. A view's short characteristic reads
+/// it in the plane of voxels up to two voxels towards the sun and one across from a sample
+/// next to density (render_from_bake.cpp, BakeMarcher::sunTransmittanceAt).
 std::vector<uint8_t> sunTransmittanceSupport(const BakeGrid& grid,
                                              const std::vector<uint8_t>& support);
 
@@ -102,7 +103,7 @@ struct BakedLight {
   /// Zeroes every light channel outside the support of the density (voxels within one voxel,
   /// in the 26-neighbourhood, of a voxel with density > 0): trilinear lookups never read them
   /// with a non-zero density weight, and a .vdb file stores only that support, so a bake and its
-  /// file read back are identical. The sun's transmittance keeps one voxel more
+  /// file read back are identical. The sun's transmittance keeps two voxels more
   /// (sunTransmittanceSupport), which views read. Bake methods call it last. Channels on
   /// tally_grid keep their values (a file stores their non-zero voxels).
   void trimToSupport();

@@ -79,7 +79,7 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
     tallies = tallies || c.on_tally_grid;
     // The lattice's grids store the density's support (trimToSupport zeroed the rest); the
     // tallies' coarser lattice stores its non-zero voxels, so a file reads back as the bake.
-    // The sun's transmittance keeps a voxel more, which views read (sunTransmittanceSupport).
+    // The sun's transmittance keeps two voxels more, which views read (sunTransmittanceSupport).
     const bool sun = name == bake_grids::kSunTransmittance;
     std::vector<uint8_t> tally_mask;
     if (c.on_tally_grid) tally_mask = nonZeroVoxels(c);

@@ -9,11 +9,12 @@
 // (RGB), and the source J (radiance per unit sigma_s) the sum of
 //   sun single  J_ss  = E p(cos_s) Tsun(x), cos_s = dot(bake.sun_direction, d) (light travels
 //                       along -sun_direction and leaves towards the camera along -d; constant
-//                       per ray, so p is looked up once per ray); Tsun(x) = exp(-tau(x)) by a
-//                       short characteristic (BakeMarcher::sunDepthAt): tau at the nearest
-//                       lattice plane towards the sun, interpolated within the plane, plus the
-//                       segment to it by Simpson's rule (bakes without
-//                       cloudbake:sun_transmittance_margin, written before: Tsun trilinear);
+//                       per ray, so p is looked up once per ray); Tsun(x) by a short
+//                       characteristic (BakeMarcher::sunTransmittanceAt): Tsun at the nearest
+//                       lattice plane towards the sun, interpolated within the plane, times the
+//                       segment's transmittance, its optical depth by Simpson's rule; trilinear
+//                       in optically thin blocks and in bakes without
+//                       cloudbake:sun_transmittance_margin (written before);
 //   multiple    J_ms  = E a(Ldir . -d) Co, only with a Co grid, with the angular model the
 //                       bake names in its metadata (cloudbake:angular_model):
 //                       "beam" (seed 000 Eq. 8 with A_iso = 1 / (4 pi); the default):
@@ -116,8 +117,8 @@ std::string angularModel(const BakedLight& bake) {
 
 constexpr int kBlock = 8;      // empty-space block side, voxels (an OpenVDB leaf)
 constexpr int kTileSize = 16;  // pixels per tile side (work unit)
-// Optical thickness of a voxel below which a view interpolates the sun's depth in 3D: the
-// interpolation's error is about this / 8 in the lit edge's voxels (docs/methods.md).
+// Optical thickness of a voxel below which a view interpolates the sun's transmittance in 3D:
+// its error along the sun is then under this^2 / 8 (docs/methods.md).
 constexpr double kThinVoxelDepth = 0.25;
 
 void validateOptions(const BakeRenderOptions& o, double voxel_size) {
@@ -416,18 +417,6 @@ struct ViewGeometry {
   std::function<bool(double)> cancelled;
 };
 
-/// The sun's optical depth -ln Tsun per voxel (sunOpticalDepthOf), which views read instead of
-/// Tsun (see the file comment).
-LargeArray<float> sunOpticalDepth(const float* tsun, size_t voxels) {
-  LargeArray<float> tau(voxels);
-  constexpr size_t kChunk = 1 << 14;
-  parallelFor(0, int64_t((voxels + kChunk - 1) / kChunk), [&](int64_t chunk) {
-    const size_t v0 = size_t(chunk) * kChunk, v1 = std::min(voxels, v0 + kChunk);
-    for (size_t v = v0; v < v1; ++v) tau[v] = sunOpticalDepthOf(tsun[v]);
-  });
-  return tau;
-}
-
 /// Everything constant over a render: the grids, the block maxima and the lights.
 class BakeMarcher {
  public:
@@ -446,11 +435,8 @@ class BakeMarcher {
         step_(step),
         min_transmittance_(min_transmittance) {
     tsun_ = channel(bake, bake_grids::kSunTransmittance, 1, true, "");
-    if (bake.metadata.count(kSunTransmittanceMarginKey)) {
-      // The bake holds the sun's transmittance where the short characteristic reads it.
-      tau_sun_ = sunOpticalDepth(tsun_, bake.grid.voxelCount());
-      tsun_ = tau_sun_.data();
-    }
+    // The bake holds the sun's transmittance where the short characteristic reads it.
+    sun_characteristic_ = bake.metadata.count(kSunTransmittanceMarginKey) > 0;
     for (int a = 1; a < 3; ++a) {
       if (std::abs(sun_dir[a]) > std::abs(sun_dir[sun_axis_])) sun_axis_ = a;
     }
@@ -1021,8 +1007,8 @@ class BakeMarcher {
   }
 
   /// Whether c lies in an 8^3 block whose densest voxel is optically thicker than
-  /// kThinVoxelDepth: there the sun's depth takes the short characteristic, elsewhere its 3D
-  /// interpolation, within about 1 % there (docs/methods.md) at a third of the cost.
+  /// kThinVoxelDepth: there the sun's transmittance takes the short characteristic, elsewhere
+  /// its 3D interpolation, within about 1 % there (docs/methods.md) and cheaper.
   bool thickBlock(const Cell& c, const RayState& rs) const {
     const Vec3 w = rs.w0 + rs.dw * c.t;
     int b[3];
@@ -1031,14 +1017,16 @@ class BakeMarcher {
     return block_max_[(size_t(b[2]) * nby_ + b[1]) * nbx_ + b[0]] > thick_density_;
   }
 
-  /// The optical depth to the sun at the march's sample c by a short characteristic: from c
-  /// towards the sun to the nearest plane of lattice voxels across the sun's main axis, the
-  /// bake's depth there, interpolated within the plane, plus the segment's own by Simpson's rule
-  /// on the density the view reads. The transmittance interpolated in 3D made the single layer
-  /// of optically thick media too bright (it falls exponentially within a voxel), and the depth
-  /// interpolated in 3D too dark (along the sun it bends where the density rises): measured in
-  /// docs/methods.md ("The sun's transmittance between voxels").
-  double sunDepthAt(const Cell& c, const RayState& rs) const {
+  /// The sun's transmittance at the march's sample c by a short characteristic: from c towards
+  /// the sun to the nearest plane of lattice voxels across the sun's main axis, the bake's
+  /// transmittance there, interpolated within the plane, times that of the segment, whose
+  /// optical depth is Simpson's rule on the density the view reads. The transmittance
+  /// interpolated in 3D is too bright where it falls exponentially within a voxel (thick
+  /// media); along the sun that part is now exact, and across it the interpolation keeps the
+  /// bound from above that convexity gives (the optical depth interpolated instead was too dark
+  /// where a low sun grazes a cloud's top). Measured in docs/methods.md ("The sun's
+  /// transmittance between voxels").
+  double sunTransmittanceAt(const Cell& c, const RayState& rs) const {
     const Vec3 u = rs.w0 + rs.dw * c.t - Vec3(1.0);
     const int a = sun_axis_;
     const double la = sun_dir_[a];
@@ -1049,16 +1037,24 @@ class BakeMarcher {
     Cell cy, cm;
     lattice_.locate(y, &cy);
     lattice_.locate(u + sun_dir_ * (0.5 * s), &cm);
-    float at_y[2];  // density and the sun's depth at y
+    float at_y[2];  // density and the sun's transmittance at y
     if (!pack_.empty()) {
       lattice_.readPacked(pack_.data(), stride_, cy, kDensity, 2, at_y);
     } else {
       at_y[kDensity] = density(cy);
       at_y[kTsun] = lattice_.read(tsun_, cy);
     }
+    double t_y = at_y[kTsun];
+    if (!cy.interior) {
+      // Beyond the lattice there is no medium: the sun's transmittance is 1 there, not the
+      // lookup's zero background (that darkened samples by a lattice face towards the sun).
+      double outside = 1;
+      for (const float w : cy.corners.weight) outside -= w;
+      t_y += outside;
+    }
     const double sigma_y = extinction_ * at_y[kDensity], sigma_m = extinction_ * density(cm);
     const double segment = s * grid_.voxel_size * (c.sigma + 4 * sigma_m + sigma_y) / 6;
-    return double(at_y[kTsun]) + segment;
+    return t_y * std::exp(-segment);
   }
 
   /// The source terms at a sample: Tsun, Vsky, and the multiple term J_ms (RGB, per unit E).
@@ -1073,9 +1069,7 @@ class BakeMarcher {
     const Vec3& d = rs->d;
     readSources(c);
     const float* v = c.record;
-    s->tsun = tau_sun_.size() == 0 ? v[kTsun]
-              : thickBlock(c, *rs) ? std::exp(-sunDepthAt(c, *rs))
-                                   : std::exp(-double(v[kTsun]));
+    s->tsun = sun_characteristic_ && thickBlock(c, *rs) ? sunTransmittanceAt(c, *rs) : v[kTsun];
     if (tally_) {
       tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
     } else if (!msh_.empty() && fieldAt(c.t)) {
@@ -1254,9 +1248,10 @@ class BakeMarcher {
   Vec3 tally_offset_;
   double tally_dt_ = 1;  // world units between the tallies' anchors along a ray
   const float* density_;
-  const float* tsun_ = nullptr;  // Tsun, or the sun's optical depth tau_sun_ where there is one
-  LargeArray<float> tau_sun_;    // -ln Tsun (sunDepthAt), for bakes with the margin
-  int sun_axis_ = 0;             // the sun direction's largest component (sunDepthAt)
+  const float* tsun_ = nullptr;
+  bool sun_characteristic_ = false;  // the bake has cloudbake:sun_transmittance_margin
+  int sun_axis_ = 0;                 // the sun direction's largest component
+
   // Densities above which a voxel is optically thicker than kThinVoxelDepth (thickBlock).
   double thick_density_ = 0;
   const float* vsky_ = nullptr;

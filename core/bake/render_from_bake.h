@@ -2,7 +2,6 @@
 // the view's directions (seed 000 Eq. 6-8, seed 004's marcher). No scattering is recomputed.
 #pragma once
 
-#include <cmath>
 #include <cstdint>
 
 #include "core/bake/baked_light.h"
@@ -30,19 +29,6 @@ struct BakeRenderOptions {
   /// ray everywhere (the same image within the field's second-order difference; for tests).
   bool view_field = true;
 };
-
-/// Largest optical depth to the sun that a view interpolates: exp(-80), about 2e-35 of the
-/// sunlight, is light no image shows.
-constexpr float kMaxSunDepth = 16.5;
-
-/// The optical depth to the sun, -ln(tsun), that views interpolate between the lattice's voxels
-/// instead of the transmittance: in a medium of optical thickness tau per voxel the
-/// transmittance falls exponentially within a voxel, and its linear interpolation
-/// overestimates it by up to cosh(tau / 2) (the lattice's single-scattering bias), where the
-/// optical depth is close to linear. At most kMaxSunDepth (tsun 0); NaN stays NaN.
-inline float sunOpticalDepthOf(float tsun) {
-  return tsun <= 0 ? kMaxSunDepth : float(-std::log(double(tsun)));
-}
 
 /// Whether a photon view builds its field of the tallies' light towards the camera
 /// (BakeRenderOptions::view_field): where it traces `rays` at least a quarter of the tally

@@ -118,7 +118,7 @@ void computeSunTransmittance(BakedLight& bake, const Vec3& sun_dir, double extin
   const double tau_per_sum = extinction * kSunStepVoxels * g.voxel_size;
   // exp(-16.2) < 1e-7: such voxels read 0, so their sums need not be finished.
   const float stop = extinction > 0 ? float(16.2 / tau_per_sum) * 1.01f : 0.f;
-  bake.metadata[kSunTransmittanceMarginKey] = "1";
+  bake.metadata[kSunTransmittanceMarginKey] = "2";
   ParallelOptions slices;  // one slice per chunk: cancellation within about a second
   if (progress) {
     slices.cancelled = [&](double f) { return !progress(f, "sun transmittance"); };

@@ -7,12 +7,12 @@
 namespace cloudbake {
 
 /// Metadata key of a bake whose sun transmittance covers sunTransmittanceSupport, the density's
-/// support and one voxel more ("1"), which views need for their short characteristic; a bake
+/// support and two voxels more ("2"), which views need for their short characteristic; a bake
 /// without it (written before) is read the old way.
 constexpr const char* kSunTransmittanceMarginKey = "cloudbake:sun_transmittance_margin";
 
 /// Adds the `sun_transmittance` channel: for every voxel of sunTransmittanceSupport (the
-/// density's support and one voxel more, where views read it; its metadata says so), the
+/// density's support and two voxels more, where views read it; its metadata says so), the
 /// transmittance from its centre towards the sun (`sun_dir`, unit, from the scene towards the
 /// sun): exp(-extinction x the trapezoidal integral of the lattice's trilinear density) in steps
 /// of half a voxel until the density has fallen to 0 (half a voxel past the lattice's faces);

@@ -462,12 +462,20 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
     if (density) run.setDensity(density);
   }
   run.report("build", 0, "building " + std::string(volumeTypeName(shot.volume)) + " volume");
-  // Validate the medium, lights and cameras up front even when everything is cached, so bad
-  // input fails the same way with and without a cache (a sequence is built by its method).
-  if (!opt.cache && !methodOf(shot).info().animates) run.scene();
-  run.lights();
-  runMethod(methodOf(shot), run, opt.source);
-  if (isAutoShot(shot_in) && opt.scope.writesShotFiles()) writeAutoRecord(run, chosen->record);
+  try {
+    // Validate the medium, lights and cameras up front even when everything is cached, so bad
+    // input fails the same way with and without a cache (a sequence is built by its method).
+    if (!opt.cache && !methodOf(shot).info().animates) run.scene();
+    run.lights();
+    runMethod(methodOf(shot), run, opt.source);
+    if (isAutoShot(shot_in) && opt.scope.writesShotFiles()) writeAutoRecord(run, chosen->record);
+  } catch (...) {
+    // A run that fails leaves none of its outputs: a view written before the bake's file failed
+    // (a full disk) looked finished.
+    std::error_code ec;
+    for (const OutputFile& f : run.result().files) fs::remove(f.path, ec);
+    throw;
+  }
   RunResult result = run.result();
   result.method = shot.bake.method;
   result.seconds = secondsSince(t_start);

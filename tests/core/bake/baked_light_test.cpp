@@ -58,7 +58,7 @@ class BakeFile : public ::testing::Test {
   fs::path dir_;
 };
 
-// The light channels keep the voxels next to density; the sun's transmittance one voxel more,
+// The light channels keep the voxels next to density; the sun's transmittance two voxels more,
 // which views read (sunTransmittanceSupport).
 TEST(BakedLight, TrimKeepsTheNeighboursOfDensityOnly) {
   const BakedLight b = smallBake();
@@ -66,14 +66,26 @@ TEST(BakedLight, TrimKeepsTheNeighboursOfDensityOnly) {
   const auto& co = b.find(bake_grids::kMultipleFluence)->data;
   auto original = [&](int i, int j, int k) { return float(b.grid.index(i, j, k) % 97) / 97.f; };
   // (2, 5, 5) touches density at (3, 5, 5); (1, 5, 5) does not but is two voxels from it;
-  // (2, 2, 2) touches (3, 3, 3); (0, 0, 0) is three voxels from it.
+  // (2, 2, 2) touches (3, 3, 3); (0, 0, 0) is three voxels from it, the sun's support's edge.
   EXPECT_EQ(t[b.grid.index(2, 5, 5)], original(2, 5, 5));
   EXPECT_EQ(t[b.grid.index(2, 2, 2)], original(2, 2, 2));
   EXPECT_EQ(t[b.grid.index(1, 5, 5)], original(1, 5, 5));
   EXPECT_EQ(co[3 * b.grid.index(1, 5, 5) + 1], 0.f);
   EXPECT_GT(co[3 * b.grid.index(2, 5, 5) + 1], 0.f);
-  EXPECT_EQ(t[b.grid.index(0, 0, 0)], 0.f);
+  EXPECT_EQ(t[b.grid.index(0, 0, 0)], original(0, 0, 0));
+  EXPECT_EQ(co[3 * b.grid.index(0, 0, 0) + 1], 0.f);
   EXPECT_EQ(b.find("nothing"), nullptr);
+  // One voxel of density: its support is 3^3 voxels, the sun's 7^3.
+  BakeGrid g;
+  g.nx = g.ny = g.nz = 11;
+  std::vector<float> one(g.voxelCount(), 0.f);
+  one[g.index(5, 5, 5)] = 1.f;
+  const std::vector<uint8_t> support = densitySupport(g, one);
+  const std::vector<uint8_t> sun = sunTransmittanceSupport(g, support);
+  EXPECT_EQ(std::count(support.begin(), support.end(), 1), 27);
+  EXPECT_EQ(std::count(sun.begin(), sun.end(), 1), 343);
+  EXPECT_TRUE(sun[g.index(2, 8, 5)]);
+  EXPECT_FALSE(sun[g.index(1, 5, 5)]);
 }
 
 // The checks scan chunks of voxels in parallel, yet name the first bad voxel, as a scan in
@@ -178,15 +190,18 @@ TEST(BakedLight, ValidateNamesTheFirstBadVoxelOfALargeGrid) {
 
   BakedLight a = smallBake(), c = smallBake();
   for (BakedLight* x : {&a, &c}) {
-    std::vector<float>& d = x->channels[bake_grids::kSunTransmittance].data;
-    std::fill(d.begin(), d.end(), 0.25f);
+    for (const char* name : {bake_grids::kSunTransmittance, bake_grids::kMultipleFluence}) {
+      std::vector<float>& d = x->channels[name].data;
+      std::fill(d.begin(), d.end(), 0.25f);
+    }
   }
   a.trimToSupport();
   c.trimToSupport(densitySupport(c.grid, c.density));
-  EXPECT_EQ(a.channels[bake_grids::kSunTransmittance].data,
-            c.channels[bake_grids::kSunTransmittance].data);
-  EXPECT_EQ(a.channels[bake_grids::kSunTransmittance].data[a.grid.index(0, 0, 0)], 0.f);
-  EXPECT_EQ(a.channels[bake_grids::kSunTransmittance].data[a.grid.index(4, 4, 4)], 0.25f);
+  for (const char* name : {bake_grids::kSunTransmittance, bake_grids::kMultipleFluence}) {
+    EXPECT_EQ(a.channels[name].data, c.channels[name].data) << name;
+  }
+  EXPECT_EQ(a.channels[bake_grids::kMultipleFluence].data[3 * a.grid.index(0, 0, 0)], 0.f);
+  EXPECT_EQ(a.channels[bake_grids::kMultipleFluence].data[3 * a.grid.index(4, 4, 4)], 0.25f);
 }
 
 TEST(BakedLight, ValidateNamesTheGridAndTheVoxel) {

@@ -158,6 +158,25 @@ TEST(RunShotBake, CancellingDuringTheBakeThrows) {
   fs::remove_all(dir);
 }
 
+// A run that fails leaves none of its outputs: an outside probe's full disk failed the bake's
+// file after the view was written, and the view looked finished.
+TEST(RunShotBake, AFailedRunLeavesNoneOfItsOutputs) {
+  const fs::path dir = freshDir("failed");
+  RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  const fs::path view = dir / "out" / "front.exr";
+  bool written = false;
+  opt.progress = [&](const RunProgress&) {
+    written = written || fs::exists(view);
+    return !written;
+  };
+  EXPECT_THROW(runShot(parse(shot("single")), opt), Cancelled);
+  EXPECT_TRUE(written) << "the view was not written before the run stopped";
+  EXPECT_FALSE(fs::exists(view));
+  EXPECT_FALSE(fs::exists(dir / "out" / "bake.vdb"));
+  fs::remove_all(dir);
+}
+
 // Progress is weighted by each part's predicted work and never goes back: the bake, most of the
 // work, takes most of the bar (it took 1 / (1 + views + vdb) of it, and a pointcloud bake sat at
 // 33% for 99% of its time).
