@@ -107,7 +107,12 @@ void checkMeshVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
     b.min = Vec3(std::min(b.min.x, v.x), std::min(b.min.y, v.y), std::min(b.min.z, v.z));
     b.max = Vec3(std::max(b.max.x, v.x), std::max(b.max.y, v.y), std::max(b.max.z, v.z));
   }
-  const double h = meshVoxelSize(*m, b);
+  double h = 0;
+  try {
+    h = meshVoxelSize(*m, b);
+  } catch (const InputError& e) {
+    throw InputError(source + ": /volume/mesh: " + e.what());
+  }
   // The padded index box of meshToVolume (core/volume/mesh_volume.cpp).
   double n = 1;
   for (int a = 0; a < 3; ++a) n *= std::ceil(b.max[a] / h) - std::floor(b.min[a] / h) + 3;

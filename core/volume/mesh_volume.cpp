@@ -269,9 +269,16 @@ double meshVoxelSize(const MeshSourceOptions& o, const Bounds3& b) {
   }
   double total = 1;
   for (int a = 0; a < 3; ++a) {
-    const double n = std::ceil(b.max[a] / h) - std::floor(b.min[a] / h) + 3;
-    if (!(std::abs(b.min[a] / h) < 1e9 && std::abs(b.max[a] / h) < 1e9)) total = 1e300;
-    total *= n;
+    if (!(std::abs(b.min[a] / h) < 1e9 && std::abs(b.max[a] / h) < 1e9)) {
+      // OpenVDB's index coordinates are 32-bit: the mesh is too far out for this voxel.
+      std::ostringstream os;
+      os << o.path << ": mesh." << (has_size ? "voxel_size" : "resolution") << ": the mesh reaches "
+         << exactNumber(std::max(std::abs(b.min[a]), std::abs(b.max[a])))
+         << " world units from the origin, beyond 1e9 voxels of " << exactNumber(h)
+         << " (the grid's index range); move it nearer the origin or use coarser voxels";
+      throw InputError(os.str());
+    }
+    total *= std::ceil(b.max[a] / h) - std::floor(b.min[a] / h) + 3;
   }
   if (!(total <= static_cast<double>(kMaxMeshVoxels))) {
     std::ostringstream os;

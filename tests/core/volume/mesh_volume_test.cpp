@@ -219,6 +219,20 @@ TEST_F(MeshVolumeTest, ValidatesOptions) {
   // Finer than OpenVDB's transforms allow (kMinVoxelSize).
   o.voxel_size = 1e-5;
   refusedSaying({"below the smallest", "mesh.voxel_size"});
+  // Small, but 1e12 from the origin: beyond the grid's index range, whatever its voxel count
+  // (the message had said "more than 1e18 voxels").
+  TriangleMesh far = tet;
+  for (Vec3& v : far.vertices) v += Vec3(1e12, 0, 0);
+  o.voxel_size = 0;
+  o.resolution = 16;
+  try {
+    meshToVolume(far, o);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("index range"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find("1e18"), std::string::npos) << e.what();
+  }
+  o.resolution = 0;
   o.voxel_size = 0.05;
   o.density = -1;
   EXPECT_THROW(meshToVolume(tet, o), InputError);

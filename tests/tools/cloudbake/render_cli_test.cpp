@@ -619,6 +619,15 @@ TEST_F(RenderCli, VoxelsTooSmallForOpenVdbAreRefusedNamingTheField) {
                     (dir_ / "t").string() + "' --dry-run");
   EXPECT_EQ(r.rc, 2) << r.err;
   EXPECT_NE(r.err.find("/volume/procedural/size"), std::string::npos) << r.err;
+  // A mesh of no extent, refused by the voxel budget's check before the scene is built: the
+  // message names the field there too (it named only the mesh file).
+  const fs::path obj = dir_ / "point.obj";
+  std::ofstream(obj) << "v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n";
+  j["volume"] = {{"mesh", {{"path", obj.string()}, {"resolution", 16}}}};
+  r = run("render '" + writeShot("point.json", j).string() + "' --out '" + (dir_ / "p").string() +
+          "' --quiet");
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("point.json: /volume/mesh: "), std::string::npos) << r.err;
 }
 
 // A frame of a sequence denser than tracking resolves is refused as a static VDB is, naming
