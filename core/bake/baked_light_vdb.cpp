@@ -135,7 +135,8 @@ void readBakeMetadata(const std::string& path, const std::map<std::string, std::
     auto it = meta.find(key);
     if (it == meta.end()) {
       throw InputError(path + ": not a cloudbake bake (no '" + std::string(key) +
-                       "' metadata; bakes are written by methods single and pointcloud)");
+                       "' metadata; light bakes are written by methods single, pointcloud, photon "
+                       "and precomputed)");
     }
     return it->second;
   };

@@ -214,8 +214,9 @@ void addBakeSliceCommand(CLI::App& app, int* exit_code) {
   auto opt = std::make_shared<SliceOptions>();
   CLI::App* cmd = app.add_subcommand(
       "bake-slice",
-      "Write a colour-mapped PNG of one slice through a grid of a bake (bake.vdb of methods "
-      "single and pointcloud); prints the slice's range, the lattice's voxels along each axis and "
+      "Write a colour-mapped PNG of one slice through a grid of a light bake (bake.vdb of methods "
+      "single, pointcloud, photon and precomputed); prints the slice's range, the lattice's voxels "
+      "along each axis and "
       "its voxel size in world units as JSON");
   cmd->add_option("bake", opt->bake, "the bake (.vdb)")->required();
   cmd->add_option("--grid", opt->grid, "grid name: density, sun_transmittance, mie_ratio, Co, ...")
