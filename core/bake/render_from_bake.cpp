@@ -120,6 +120,10 @@ constexpr int kTileSize = 16;  // pixels per tile side (work unit)
 // Optical thickness of a voxel below which a view interpolates the sun's transmittance in 3D:
 // its error along the sun is then under this^2 / 8 (docs/methods.md).
 constexpr double kThinVoxelDepth = 0.25;
+// The sun's trilinear transmittance below which a view keeps it as it is (sunTransmittanceAt
+// would change light of at most this fraction of the sun's): deep in a thick cloud's shadow,
+// where most of a backlit view's samples lie.
+constexpr float kDarkSun = 1e-3f;
 
 void validateOptions(const BakeRenderOptions& o, double voxel_size) {
   if (!std::isfinite(o.step) || o.step < 0) {
@@ -1069,7 +1073,11 @@ class BakeMarcher {
     const Vec3& d = rs->d;
     readSources(c);
     const float* v = c.record;
-    s->tsun = sun_characteristic_ && thickBlock(c, *rs) ? sunTransmittanceAt(c, *rs) : v[kTsun];
+    // Where even the trilinear transmittance (an overestimate: see sunTransmittanceAt) is under
+    // kDarkSun, the characteristic would change light no image shows.
+    s->tsun = sun_characteristic_ && v[kTsun] >= kDarkSun && thickBlock(c, *rs)
+                  ? sunTransmittanceAt(c, *rs)
+                  : v[kTsun];
     if (tally_) {
       tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
     } else if (!msh_.empty() && fieldAt(c.t)) {
