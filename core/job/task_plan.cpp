@@ -303,9 +303,18 @@ FarmTask readTask(const shotjson::Reader& r, const Json& v, const std::string& p
   }
   t.cost_seconds = r.numberIn(o.required("cost_seconds"), o.path("cost_seconds"), 0, 1e12);
   t.summary = r.string(o.required("summary"), o.path("summary"));
+  // The range a task of this kind has in this shot, as taskJson writes it: another key would
+  // be read against the wrong limit (an outside probe's forged plan ran frames past the views).
+  const std::string expected = methodOf(shot).info().animates && t.scope.part == Part::kRender
+                                   ? "frames"
+                                   : rangeKey(t.scope.part);
   for (const char* key : {"views", "frames", "basic_volumes"}) {
     const Json* range = o.find(key);
     if (!range) continue;
+    if (key != expected) {
+      r.fail(o.path(key), std::string("a '") + partName(t.scope.part) + "' task of this shot has " +
+                              (expected.empty() ? "no range" : "the range '" + expected + "'"));
+    }
     if (!range->is_array() || range->size() != 2) r.fail(o.path(key), "must be [begin, end]");
     t.scope.begin = int(r.integer((*range)[0], o.path(key) + "/0", 0, 10000000));
     t.scope.end = int(r.integer((*range)[1], o.path(key) + "/1", t.scope.begin + 1, 10000000));

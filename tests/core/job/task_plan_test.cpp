@@ -246,6 +246,15 @@ TEST(TaskPlan, APlanFileRoundTripsAndAnEditedOrMalformedOneIsRefused) {
       nlohmann::json past = j;
       past["tasks"][i][key] = {0, 1000000};
       refused(past, "/tasks/" + std::to_string(i) + "/" + key + "/1");
+      // Another kind of range than the task's is refused, not read against no limit (an
+      // outside probe: a render task's "frames" in a plan of views ran silently clamped).
+      for (const char* other : {"views", "frames", "basic_volumes"}) {
+        if (std::string(other) == key) continue;
+        nlohmann::json swapped = j;
+        swapped["tasks"][i].erase(key);
+        swapped["tasks"][i][other] = {0, 1};
+        refused(swapped, "/tasks/" + std::to_string(i) + "/" + other);
+      }
     }
   }
   EXPECT_THROW(planFromJson("{\"format\": ", "plan.json"), InputError);
