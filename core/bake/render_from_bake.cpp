@@ -1013,8 +1013,8 @@ class BakeMarcher {
   /// Whether c lies in an 8^3 block whose densest voxel is optically thicker than
   /// kThinVoxelDepth: there the sun's transmittance takes the short characteristic, elsewhere
   /// its 3D interpolation, within about 1 % there (docs/methods.md) and cheaper.
-  bool thickBlock(const Cell& c, const RayState& rs) const {
-    const Vec3 w = rs.w0 + rs.dw * c.t;
+  /// `w`: the sample's block-space position.
+  bool thickBlock(const Vec3& w) const {
     int b[3];
     const int nb[3] = {nbx_, nby_, nbz_};
     for (int a = 0; a < 3; ++a) b[a] = std::min(std::max(int(w[a] / kBlock), 0), nb[a] - 1);
@@ -1030,8 +1030,9 @@ class BakeMarcher {
   /// bound from above that convexity gives (the optical depth interpolated instead was too dark
   /// where a low sun grazes a cloud's top). Measured in docs/methods.md ("The sun's
   /// transmittance between voxels").
-  double sunTransmittanceAt(const Cell& c, const RayState& rs) const {
-    const Vec3 u = rs.w0 + rs.dw * c.t - Vec3(1.0);
+  /// `w`: c's block-space position (index + 1).
+  double sunTransmittanceAt(const Cell& c, const Vec3& w) const {
+    const Vec3 u = w - Vec3(1.0);
     const int a = sun_axis_;
     const double la = sun_dir_[a];
     const double plane = la > 0 ? std::floor(u[a]) + 1 : std::ceil(u[a]) - 1;
@@ -1075,9 +1076,11 @@ class BakeMarcher {
     const float* v = c.record;
     // Where even the trilinear transmittance (an overestimate: see sunTransmittanceAt) is under
     // kDarkSun, the characteristic would change light no image shows.
-    s->tsun = sun_characteristic_ && v[kTsun] >= kDarkSun && thickBlock(c, *rs)
-                  ? sunTransmittanceAt(c, *rs)
-                  : v[kTsun];
+    s->tsun = v[kTsun];
+    if (sun_characteristic_ && v[kTsun] >= kDarkSun) {
+      const Vec3 w = rs->w0 + rs->dw * c.t;
+      if (thickBlock(w)) s->tsun = sunTransmittanceAt(c, w);
+    }
     if (tally_) {
       tallySources(rs, c.t, &s->ms, &s->ssky, &s->csky);
     } else if (!msh_.empty() && fieldAt(c.t)) {

@@ -470,8 +470,7 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
   if (queue_.size() >= options_.queue_bound) {
     throw queueFull(queue_.size(), options_.queue_bound);
   }
-  store_->save(job->record);  // durable before the client hears of it; throws when it is not
-  publishLocked(*job);
+  saveOrRefuseLocked(*job, job->record);  // durable before the client hears of it
   pushEventLocked(*job, "queued", 0, "queued at position " + std::to_string(queue_.size() + 1));
   jobs_[id] = job;
   queue_.push_back(job);
@@ -604,10 +603,8 @@ JobRecord JobManager::cancel(const std::string& id) {
     cancelled.state = JobState::kCancelled;
     cancelled.finished = unixNow();
     cancelled.stage = "cancelled";
-    store_->save(cancelled);
+    saveOrRefuseLocked(*job, cancelled);
     queue_.erase(std::remove(queue_.begin(), queue_.end(), job), queue_.end());
-    job->record = cancelled;
-    publishLocked(*job);
     pushEventLocked(*job, "cancelled", job->record.fraction, "cancelled while queued");
   } else if (job->record.state == JobState::kRunning) {
     job->cancel = true;  // the runner records the final state when the work has stopped
@@ -849,6 +846,12 @@ void JobManager::saveLocked(const Job& job) {
   } catch (const std::exception& e) {
     spdlog::error("job {}: cannot save record: {}", job.record.id, e.what());
   }
+  publishLocked(job);
+}
+
+void JobManager::saveOrRefuseLocked(Job& job, const JobRecord& next) {
+  store_->save(next);  // throws (StorageFullError on a full volume) before anything changes
+  job.record = next;
   publishLocked(job);
 }
 

@@ -232,7 +232,11 @@ class JobManager {
   void prune();
   void pushEventLocked(Job& job, const std::string& stage, double fraction,
                        const std::string& message);
+  /// Saves job's record, logging a failure (a state the runner reaches on its own).
   void saveLocked(const Job& job);
+  /// Saves `next` as job's record, then sets and publishes it; a failed save (a full volume)
+  /// throws with nothing changed, so a client is never told what a restart would undo.
+  void saveOrRefuseLocked(Job& job, const JobRecord& next);
   /// Publishes the job to shared_dir (when set); failures are logged, not fatal.
   void publishLocked(const Job& job);
   void publishFinished(const Job& job);

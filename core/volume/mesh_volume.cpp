@@ -260,11 +260,12 @@ double meshVoxelSize(const MeshSourceOptions& o, const Bounds3& b) {
     }
     h = extent / o.resolution;
   }
+  // Errors below name the key that set the voxel.
+  const std::string field = o.path + ": mesh." + (has_size ? "voxel_size" : "resolution") + ": ";
   if (!(h >= kMinVoxelSize)) {
     std::ostringstream os;
-    os << o.path << ": mesh." << (has_size ? "voxel_size" : "resolution") << ": gives voxels of "
-       << exactNumber(h) << " world units, below the smallest " << exactNumber(kMinVoxelSize)
-       << ": scale the mesh up";
+    os << field << "gives voxels of " << exactNumber(h) << " world units, below the smallest "
+       << exactNumber(kMinVoxelSize) << ": scale the mesh up";
     throw InputError(os.str());
   }
   double total = 1;
@@ -272,7 +273,7 @@ double meshVoxelSize(const MeshSourceOptions& o, const Bounds3& b) {
     if (!(std::abs(b.min[a] / h) < 1e9 && std::abs(b.max[a] / h) < 1e9)) {
       // OpenVDB's index coordinates are 32-bit: the mesh is too far out for this voxel.
       std::ostringstream os;
-      os << o.path << ": mesh." << (has_size ? "voxel_size" : "resolution") << ": the mesh reaches "
+      os << field << "the mesh reaches "
          << exactNumber(std::max(std::abs(b.min[a]), std::abs(b.max[a])))
          << " world units from the origin, beyond 1e9 voxels of " << exactNumber(h)
          << " (the grid's index range); move it nearer the origin or use coarser voxels";
@@ -282,9 +283,8 @@ double meshVoxelSize(const MeshSourceOptions& o, const Bounds3& b) {
   }
   if (!(total <= static_cast<double>(kMaxMeshVoxels))) {
     std::ostringstream os;
-    os << o.path << ": mesh." << (has_size ? "voxel_size" : "resolution") << ": "
-       << (has_size ? exactNumber(o.voxel_size) : std::to_string(o.resolution)) << " needs "
-       << (total < 1e18 ? exactNumber(total) : std::string("more than 1e18"))
+    os << field << (has_size ? exactNumber(o.voxel_size) : std::to_string(o.resolution))
+       << " needs " << (total < 1e18 ? exactNumber(total) : std::string("more than 1e18"))
        << " voxels, more than the limit of " << kMaxMeshVoxels
        << " (1024^3); use a coarser voxel size";
     throw InputError(os.str());

@@ -171,14 +171,11 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
                     {"reference_mean", s.mean_ref},
                     {"rmse", s.rmse},
                     {"rel_rmse", defined ? nlohmann::json(s.rel_rmse) : nlohmann::json()}};
+      char rel[32] = "undefined";
+      if (defined) std::snprintf(rel, sizeof rel, "%.4f", s.rel_rmse);
       char row[256];
-      if (defined) {
-        std::snprintf(row, sizeof row, "%-10s %14.6g %14.6g %10.4f\n", label.c_str(), s.mean_test,
-                      s.mean_ref, s.rel_rmse);
-      } else {
-        std::snprintf(row, sizeof row, "%-10s %14.6g %14.6g %10s\n", label.c_str(), s.mean_test,
-                      s.mean_ref, "undefined");
-      }
+      std::snprintf(row, sizeof row, "%-10s %14.6g %14.6g %10s\n", label.c_str(), s.mean_test,
+                    s.mean_ref, rel);
       table += row;
     }
     if (out.empty()) throw InputError(opt->test + ": no layer in common with " + opt->ref);
