@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -27,6 +28,7 @@
 #include "core/bake/render_from_bake.h"
 #include "core/bake/single_bake.h"
 #include "core/bake/sky_sh_scatter.h"
+#include "core/bake/sparse_film.h"
 #include "core/error.h"
 #include "core/methods/common.h"
 #include "core/methods/photon.h"
@@ -48,6 +50,9 @@ struct Args {
   std::string view_shot = "bench/speed/view_mie.json";
   std::string frame_shot = "bench/speed/frames.json";
   std::string bake_shot = "bench/speed/bunny_pointcloud.json";
+  // Views: the sparse film's largest spacings (render_from_bake.h, max_film_spacing) to time,
+  // each with its error against every pixel traced.
+  std::vector<int> film_spacings{4};
 };
 
 std::vector<std::string> split(const std::string& s) {
@@ -80,6 +85,9 @@ Args parseArgs(int argc, char** argv) {
       a.frame_shot = v;
     } else if (k == "--bake-shot") {
       a.bake_shot = v;
+    } else if (k == "--film-spacing") {
+      a.film_spacings.clear();
+      for (const std::string& f : split(v)) a.film_spacings.push_back(std::stoi(f));
     } else {
       throw InputError("unknown option " + k);
     }
@@ -132,6 +140,40 @@ ShotSpec shotWithMethod(const std::string& path, const std::string& method) {
   return parseShot(j.dump(), slash == std::string::npos ? "." : path.substr(0, slash), po);
 }
 
+// The cloud's own light (sun + sky layers, channel sum) of `a` against `ref` over the pixels
+// where ref's alpha is at least 0.05: relative RMSE, mean ratio and the largest relative
+// difference of a pixel (over the cloud's mean).
+void printFilmError(const RenderLayers& a, const RenderLayers& ref) {
+  double se = 0, sum_a = 0, sum_r = 0, worst = 0;
+  int64_t n = 0;
+  std::vector<double> diffs;
+  for (int y = 0; y < ref.beauty.height; ++y) {
+    for (int x = 0; x < ref.beauty.width; ++x) {
+      if (ref.beauty.at(x, y)[3] < 0.05) continue;
+      double va = 0, vr = 0;
+      for (int c = 0; c < 3; ++c) {
+        va += a.sun.at(x, y)[c] + a.sky.at(x, y)[c];
+        vr += ref.sun.at(x, y)[c] + ref.sky.at(x, y)[c];
+      }
+      se += (va - vr) * (va - vr);
+      sum_a += va;
+      sum_r += vr;
+      diffs.push_back(std::fabs(va - vr));
+      ++n;
+    }
+  }
+  if (n == 0 || !(sum_r > 0)) {
+    std::printf("  against every pixel traced: no cloud in the view\n");
+    return;
+  }
+  const double mean = sum_r / double(n);
+  for (double d : diffs) worst = std::max(worst, d / mean);
+  std::printf(
+      "  against every pixel traced: relative RMSE %.5f, mean ratio %.5f, worst pixel %.4f"
+      " (of the mean), %lld cloud pixels\n",
+      std::sqrt(se / double(n)) / mean, sum_a / sum_r, worst, (long long)n);
+}
+
 void viewPart(const Args& a) {
   const Scene shot_scene = buildScene(parseShotFile(a.view_shot), a.view_shot);
   for (const std::string& m : a.methods) {
@@ -144,10 +186,19 @@ void viewPart(const Args& a) {
       const std::string label = "view " + m + " '" + camera.name + "' " +
                                 std::to_string(camera.width_px) + "x" +
                                 std::to_string(camera.height_px);
-      timeAtThreads(a, label, [&](int threads) {
-        renderFromBake(bake, scene.medium, scene.sun, scene.sky, camera,
-                       bakeRenderOptions(shot, threads));
-      });
+      BakeRenderOptions every = bakeRenderOptions(shot, 0);
+      every.max_film_spacing = 1;
+      const RenderLayers full =
+          renderFromBake(bake, scene.medium, scene.sun, scene.sky, camera, every);
+      for (int spacing : a.film_spacings) {
+        RenderLayers layers;
+        timeAtThreads(a, label + " film " + std::to_string(spacing), [&](int threads) {
+          BakeRenderOptions o = bakeRenderOptions(shot, threads);
+          o.max_film_spacing = spacing;
+          layers = renderFromBake(bake, scene.medium, scene.sun, scene.sky, camera, o);
+        });
+        printFilmError(layers, full);
+      }
     }
   }
 }
@@ -183,10 +234,14 @@ void framePart(const Args& a) {
     light =
         lightAnimationFrame(db, bf, sunDirection(shot), lights.medium.albedo, sky_sh, fo, &stats);
   };
+  // The view at the last film spacing asked for (render_from_bake.h, max_film_spacing).
+  const int film = a.film_spacings.empty() ? kMaxFilmSpacing : a.film_spacings.back();
   const auto render = [&](int threads) {
-    renderFromBake(light, lights.medium, lights.sun, lights.sky, camera,
-                   frameRenderOptions(shot, light, threads));
+    BakeRenderOptions ro = frameRenderOptions(shot, light, threads);
+    ro.max_film_spacing = film;
+    renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro);
   };
+  std::printf("frame: views at a film spacing of at most %d\n", film);
   timeAtThreads(a, "frame precomputed: light", [&](int) { lightFrame(); });
   // The stages of the last frame lit (at the last thread count).
   std::printf(
@@ -196,6 +251,13 @@ void framePart(const Args& a) {
       stats.seconds_receivers, stats.seconds_orders, stats.seconds_multiple, stats.seconds_finish,
       stats.orders);
   timeAtThreads(a, "frame precomputed: view '" + camera.name + "'", render);
+  {
+    BakeRenderOptions every = frameRenderOptions(shot, light, 0), sparse = every;
+    every.max_film_spacing = 1;
+    sparse.max_film_spacing = film;
+    printFilmError(renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, sparse),
+                   renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, every));
+  }
   timeAtThreads(a, "frame precomputed: light + view", [&](int threads) {
     lightFrame();
     render(threads);

@@ -94,6 +94,7 @@
 #include "core/bake/phase_lut.h"
 #include "core/bake/photon_bake.h"
 #include "core/bake/sky_sh_scatter.h"
+#include "core/bake/sparse_film.h"
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
 #include "core/format.h"
@@ -153,6 +154,10 @@ void validateOptions(const BakeRenderOptions& o, double voxel_size) {
   }
   if (o.threads < 0 || o.threads > 4096) {
     throw InputError("threads: must be in 0..4096 (0 = the caller's arena), got " + str(o.threads));
+  }
+  if (o.max_film_spacing < 1 || o.max_film_spacing > kMaxFilmSpacing) {
+    throw InputError("film_spacing: must be in 1.." + str(kMaxFilmSpacing) + " pixels, got " +
+                     str(o.max_film_spacing));
   }
 }
 
@@ -1307,11 +1312,190 @@ class BakeMarcher {
   double field_near_ = 0;  // samples nearer the eye than this keep the per-ray weights
 };
 
-void store(Image& im, int x, int y, const Rgb& v, double scale) {
-  float* p = im.at(x, y);
-  p[0] = static_cast<float>(v.x * scale);
-  p[1] = static_cast<float>(v.y * scale);
-  p[2] = static_cast<float>(v.z * scale);
+// Below this fraction of the light's scale (an isotropic scattering of the sun, plus the sky's
+// mean), a film cell's differences are not worth tracing its pixels for.
+constexpr double kFilmLightFloor = 1e-3;
+// The share of a sparse film's progress its first pass reports.
+constexpr double kFilmFirstPass = 0.3;
+
+void put(FilmPixel* p, int k, const Rgb& v, double scale) {
+  p->v[k] = static_cast<float>(v.x * scale);
+  p->v[k + 1] = static_cast<float>(v.y * scale);
+  p->v[k + 2] = static_cast<float>(v.z * scale);
+}
+
+// A pixel's layers as stored (sparse_film.h's layout): the per-ray sums over the rays.
+FilmPixel filmPixel(const PixelSum& sum, double inv_spp) {
+  FilmPixel p;
+  const Rgb sun_total = sum.sun_single + sum.multiple;
+  const Rgb sky_total = sum.sky + sum.sky_multiple;
+  put(&p, 0, sun_total + sky_total + sum.background, inv_spp);
+  p.v[3] = static_cast<float>(sum.alpha * inv_spp);
+  put(&p, 4, sum.background, inv_spp);
+  put(&p, 7, sun_total, inv_spp);
+  put(&p, 10, sky_total, inv_spp);
+  put(&p, 13, sum.sun_single + sum.sky, inv_spp);
+  put(&p, 16, sum.multiple + sum.sky_multiple, inv_spp);
+  return p;
+}
+
+void storeFilm(RenderLayers& out, int x, int y, const FilmPixel& p) {
+  std::copy(p.v, p.v + 4, out.beauty.at(x, y));
+  std::copy(p.v + 4, p.v + 7, out.background.at(x, y));
+  std::copy(p.v + 7, p.v + 10, out.sun.at(x, y));
+  std::copy(p.v + 10, p.v + 13, out.sky.at(x, y));
+  std::copy(p.v + 13, p.v + 16, out.single.at(x, y));
+  std::copy(p.v + 16, p.v + 19, out.multiple.at(x, y));
+}
+
+// The width of a pixel, world units, where it is widest over the lattice: at the lattice's
+// farthest corner from the eye for a pinhole (by the centre pixel's angle, the widest of a
+// planar film), everywhere the same for an orthographic camera.
+double pixelFootprint(const CameraRays& rays, const Camera& camera, const BakeGrid& grid) {
+  const double cx = 0.5 * camera.width_px, cy = 0.5 * camera.height_px;
+  const Ray a = rays.generate(cx, cy), b = rays.generate(cx + 1, cy), c = rays.generate(cx, cy + 1);
+  if (camera.type != Camera::Type::kPerspective) {
+    return std::max(length(b.o - a.o), length(c.o - a.o));
+  }
+  const double angle = std::max(std::acos(std::clamp(dot(a.d, b.d), -1.0, 1.0)),
+                                std::acos(std::clamp(dot(a.d, c.d), -1.0, 1.0)));
+  const Bounds3 box = grid.bounds();
+  double far = 0;
+  for (int q = 0; q < 8; ++q) {
+    const Vec3 p(q & 1 ? box.max.x : box.min.x, q & 2 ? box.max.y : box.min.y,
+                 q & 4 ? box.max.z : box.min.z);
+    far = std::max(far, length(p - a.o));
+  }
+  return far * angle;
+}
+
+// Whether film column (or row) x of `size` is traced in every view of a sparse film: every
+// `spacing`-th, and the last.
+bool onFilmLine(int x, int size, int spacing) { return x % spacing == 0 || x == size - 1; }
+
+// The film's traced columns (or rows), in order.
+std::vector<int> filmLine(int size, int spacing) {
+  std::vector<int> xs;
+  for (int x = 0; x < size; ++x) {
+    if (onFilmLine(x, size, spacing)) xs.push_back(x);
+  }
+  return xs;
+}
+
+FilmPixel readFilm(const RenderLayers& out, int x, int y) {
+  FilmPixel p;
+  std::copy(out.beauty.at(x, y), out.beauty.at(x, y) + 4, p.v);
+  std::copy(out.background.at(x, y), out.background.at(x, y) + 3, p.v + 4);
+  std::copy(out.sun.at(x, y), out.sun.at(x, y) + 3, p.v + 7);
+  std::copy(out.sky.at(x, y), out.sky.at(x, y) + 3, p.v + 10);
+  std::copy(out.single.at(x, y), out.single.at(x, y) + 3, p.v + 13);
+  std::copy(out.multiple.at(x, y), out.multiple.at(x, y) + 3, p.v + 16);
+  return p;
+}
+
+// Per film position in [lo, hi): the index of the traced position at or before it in xs, and
+// whether it is one.
+void locateOnLine(const std::vector<int>& xs, int lo, int hi, std::vector<int>* cell,
+                  std::vector<uint8_t>* on) {
+  cell->assign(size_t(hi - lo), 0);
+  on->assign(size_t(hi - lo), 0);
+  size_t i = 0;
+  for (int x = lo; x < hi; ++x) {
+    while (i + 1 < xs.size() && xs[i + 1] <= x) ++i;
+    (*cell)[size_t(x - lo)] = int(i);
+    (*on)[size_t(x - lo)] = xs[i] == x;
+  }
+}
+
+// The traced positions of the film line `all` that a tile's pixels [lo, hi) read: the corners
+// of their cells and two more on each side, so that each of their cells, and each cell beside
+// them, is judged with its corners' second differences (as over the whole film: the image does
+// not depend on the tiling).
+std::vector<int> tileLine(const std::vector<int>& all, int lo, int hi, int spacing) {
+  const int last = int(all.size()) - 1;
+  const int a = std::max(0, lo / spacing - 2), b = std::min(last, (hi - 1) / spacing + 3);
+  return std::vector<int>(all.begin() + a, all.begin() + b + 1);
+}
+
+// One tile of a sparse film after its traced pixels are stored in `out` (sparse_film.h): every
+// other pixel traced where a cell it lies in or borders varies, interpolated elsewhere.
+template <typename Trace>
+void fillSparseTile(const TileRect& t, const std::vector<int>& film_xs,
+                    const std::vector<int>& film_ys, int spacing, const FilmTolerance& tol,
+                    const TilePoll& poll, RenderLayers& out, Trace&& trace) {
+  const std::vector<int> xs = tileLine(film_xs, t.x0, t.x1, spacing);
+  const std::vector<int> ys = tileLine(film_ys, t.y0, t.y1, spacing);
+  const int nx = int(xs.size()), ny = int(ys.size());
+  std::vector<FilmPixel> grid(size_t(nx) * ny);
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) grid[size_t(j) * nx + i] = readFilm(out, xs[i], ys[j]);
+  }
+  const std::vector<uint8_t> cells = filmCellsToTrace(grid, xs, ys, tol);
+  auto traced = [&](int i, int j) {
+    return i >= 0 && j >= 0 && i < nx - 1 && j < ny - 1 && cells[size_t(j) * (nx - 1) + i];
+  };
+  auto at = [&](int i, int j) -> const FilmPixel& { return grid[size_t(j) * nx + i]; };
+  std::vector<int> ci, cj;
+  std::vector<uint8_t> on_x, on_y;
+  locateOnLine(xs, t.x0, t.x1, &ci, &on_x);
+  locateOnLine(ys, t.y0, t.y1, &cj, &on_y);
+  for (int y = t.y0; y < t.y1; ++y) {
+    const int j = cj[size_t(y - t.y0)];
+    const bool row = on_y[size_t(y - t.y0)];
+    for (int x = t.x0; x < t.x1; ++x) {
+      const int i = ci[size_t(x - t.x0)];
+      const bool col = on_x[size_t(x - t.x0)];
+      if (row && col) continue;  // traced in the first pass
+      // A pixel on a traced row or column borders the cells on both sides of it.
+      if (traced(i, j) || (row && traced(i, j - 1)) || (col && traced(i - 1, j))) {
+        if (poll.stop()) return;
+        storeFilm(out, x, y, trace(x, y));
+        continue;
+      }
+      const int i1 = col ? i : i + 1, j1 = row ? j : j + 1;
+      const double fx = col ? 0.0 : double(x - xs[i]) / (xs[i1] - xs[i]);
+      const double fy = row ? 0.0 : double(y - ys[j]) / (ys[j1] - ys[j]);
+      storeFilm(out, x, y, interpolateFilm(at(i, j), at(i1, j), at(i, j1), at(i1, j1), fx, fy));
+    }
+  }
+}
+
+// Renders a film of w x h pixels into `out`, each traced by trace_pixel(x, y, rng, scratch):
+// every pixel (spacing 1), or a sparse film in two passes over the tiles (sparse_film.h), the
+// traced pixels and then the cells between them. `setup` runs first, in the render's arena.
+// False if `progress` cancelled it.
+template <typename TracePixel>
+bool renderFilm(int w, int h, int spacing, const FilmTolerance& tolerance, int threads,
+                const ProgressFn& progress, RenderLayers& out, TracePixel&& trace_pixel,
+                const std::function<void()>& setup) {
+  auto trace_tile = [&](const TileRect& t, const TilePoll& poll) {
+    Rng rng;
+    BakeMarcher::Scratch scratch;
+    for (int y = t.y0; y < t.y1; ++y) {
+      if (!onFilmLine(y, h, spacing)) continue;
+      for (int x = t.x0; x < t.x1; ++x) {
+        if (!onFilmLine(x, w, spacing)) continue;
+        if (poll.stop()) return;
+        storeFilm(out, x, y, trace_pixel(x, y, rng, &scratch));
+      }
+    }
+  };
+  if (spacing == 1) return renderTiles(w, h, kTileSize, threads, progress, trace_tile, setup);
+  const std::vector<int> film_xs = filmLine(w, spacing), film_ys = filmLine(h, spacing);
+  auto fill_tile = [&](const TileRect& t, const TilePoll& poll) {
+    Rng rng;
+    BakeMarcher::Scratch scratch;
+    fillSparseTile(t, film_xs, film_ys, spacing, tolerance, poll, out,
+                   [&](int x, int y) { return trace_pixel(x, y, rng, &scratch); });
+  };
+  // The traced pixels are about a third of the work, the cells that bend the rest.
+  ProgressFn first, second;
+  if (progress) {
+    first = [&](double f) { return progress(kFilmFirstPass * f); };
+    second = [&](double f) { return progress(kFilmFirstPass + (1 - kFilmFirstPass) * f); };
+  }
+  return renderTiles(w, h, kTileSize, threads, first, trace_tile, setup) &&
+         renderTiles(w, h, kTileSize, threads, second, fill_tile);
 }
 
 void validateBake(const BakedLight& bake) {
@@ -1393,48 +1577,41 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
 
   RenderLayers out = makeRenderLayers(w, h);
   std::optional<BakeMarcher> marcher;
-  auto render_tile = [&](const TileRect& t, const TilePoll& poll) {
-    Rng rng;
-    BakeMarcher::Scratch scratch;
-    for (int y = t.y0; y < t.y1; ++y) {
-      for (int x = t.x0; x < t.x1; ++x) {
-        if (poll.stop()) return;
-        PixelSum sum;
-        if (spp == 1) {
-          marcher->trace(rays.generate(x + 0.5, y + 0.5), &sum, &scratch);
+  auto trace_pixel = [&](int x, int y, Rng& rng, BakeMarcher::Scratch* scratch) {
+    PixelSum sum;
+    if (spp == 1) {
+      marcher->trace(rays.generate(x + 0.5, y + 0.5), &sum, scratch);
+    } else {
+      // One stream per pixel: the image depends neither on threads nor on tiling.
+      const uint64_t pixel = uint64_t(y) * uint64_t(w) + uint64_t(x);
+      rng.setSeed(mixBits(options.seed, pixel), mixBits(pixel, options.seed));
+      for (int s = 0; s < spp; ++s) {
+        double fx, fy;
+        if (s < sx * sy) {
+          fx = x + ((s % sx) + rng.uniform()) / sx;
+          fy = y + ((s / sx) + rng.uniform()) / sy;
         } else {
-          // One stream per pixel: the image depends neither on threads nor on tiling.
-          const uint64_t pixel = uint64_t(y) * uint64_t(w) + uint64_t(x);
-          rng.setSeed(mixBits(options.seed, pixel), mixBits(pixel, options.seed));
-          for (int s = 0; s < spp; ++s) {
-            double fx, fy;
-            if (s < sx * sy) {
-              fx = x + ((s % sx) + rng.uniform()) / sx;
-              fy = y + ((s / sx) + rng.uniform()) / sy;
-            } else {
-              fx = x + rng.uniform();
-              fy = y + rng.uniform();
-            }
-            marcher->trace(rays.generate(fx, fy), &sum, &scratch);
-          }
+          fx = x + rng.uniform();
+          fy = y + rng.uniform();
         }
-        const Rgb sun_total = sum.sun_single + sum.multiple;
-        const Rgb sky_total = sum.sky + sum.sky_multiple;
-        store(out.beauty, x, y, sun_total + sky_total + sum.background, inv_spp);
-        out.beauty.at(x, y)[3] = static_cast<float>(sum.alpha * inv_spp);
-        store(out.background, x, y, sum.background, inv_spp);
-        store(out.sun, x, y, sun_total, inv_spp);
-        store(out.sky, x, y, sky_total, inv_spp);
-        store(out.single, x, y, sum.sun_single + sum.sky, inv_spp);
-        store(out.multiple, x, y, sum.multiple + sum.sky_multiple, inv_spp);
+        marcher->trace(rays.generate(fx, fy), &sum, scratch);
       }
     }
+    return filmPixel(sum, inv_spp);
   };
+  const int spacing = options.max_film_spacing > 1 && w > 1 && h > 1
+                          ? sparseFilmSpacing(pixelFootprint(rays, camera, bake.grid),
+                                              bake.grid.voxel_size, options.max_film_spacing)
+                          : 1;
+  FilmTolerance tolerance;
+  tolerance.light_floor =
+      kFilmLightFloor * (maxComponent(sun.irradiance) * kInv4Pi + maxComponent(sky_mean));
   // The marcher is built inside the render's arena: its block maxima are computed in parallel.
-  const bool finished = renderTiles(w, h, kTileSize, options.threads, progress, render_tile, [&] {
-    marcher.emplace(bake, medium, sun, sky_light, sky_mean, sun_dir, step,
-                    options.min_transmittance, view);
-  });
+  const bool finished =
+      renderFilm(w, h, spacing, tolerance, options.threads, progress, out, trace_pixel, [&] {
+        marcher.emplace(bake, medium, sun, sky_light, sky_mean, sun_dir, step,
+                        options.min_transmittance, view);
+      });
   if (!finished) throw Cancelled("render from bake of view '" + camera.name + "' cancelled");
   return out;
 }

@@ -28,6 +28,9 @@ struct BakeRenderOptions {
   /// view (render_from_bake.cpp, buildViewField) where it pays; false: weight the tallies per
   /// ray everywhere (the same image within the field's second-order difference; for tests).
   bool view_field = true;
+  /// The largest spacing of a sparse film (core/bake/sparse_film.h), 1..4 pixels, rounded down
+  /// to a power of two; 1 traces every pixel.
+  int max_film_spacing = 4;
 };
 
 /// Whether a photon view builds its field of the tallies' light towards the camera

@@ -8,6 +8,7 @@
 
 #include "core/bake/bake_lattice.h"
 #include "core/bake/baked_light_vdb.h"
+#include "core/bake/sparse_film.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/transport/layers_exr.h"
@@ -131,6 +132,16 @@ Knob stepKnob(const char* derived_default) {
       .viewOnly();
 }
 
+Knob filmSpacingKnob() {
+  return Knob::integer(
+             "film_spacing", 1, kMaxFilmSpacing, kMaxFilmSpacing,
+             "pixels: the largest spacing (1, 2 or 4; 3 reads as 2) of the pixels a view traces "
+             "first where the lattice's voxels are wider than that many pixels; the pixels between "
+             "are traced where the image bends there and interpolated elsewhere; 1 traces every "
+             "pixel (not part of the bake's cache key)")
+      .viewOnly();
+}
+
 Knob lightResolutionKnob(int64_t default_resolution, bool aligned_to_grid) {
   return Knob::integer(
       "light_resolution", 8, 1024, default_resolution,
@@ -158,6 +169,8 @@ nlohmann::json wholeMediumLightKey(const BakeMethod& method, const ShotSpec& sho
 BakeRenderOptions bakeRenderOptions(const ShotSpec& shot, int threads) {
   BakeRenderOptions o;
   o.step = shot.bake.knobs.optionalNumber("step").value_or(0.0);
+  o.max_film_spacing =
+      int(shot.bake.knobs.optionalInteger("film_spacing").value_or(kMaxFilmSpacing));
   o.samples_per_pixel = shot.bake.samples;
   o.seed = shot.bake.seed;
   o.threads = threads;

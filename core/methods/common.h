@@ -34,6 +34,8 @@ bool needsSun(const ShotSpec& shot);
 /// The knobs of every method that renders views from a lattice; `derived_default` says what a
 /// step left out is.
 Knob stepKnob(const char* derived_default = "half a lattice voxel");
+/// The views' sparse film (core/bake/sparse_film.h): the largest spacing of traced pixels.
+Knob filmSpacingKnob();
 Knob lightResolutionKnob(int64_t default_resolution, bool aligned_to_grid);
 
 /// How views of a lattice method are rendered: `step`, bake.samples rays per pixel, bake.seed.

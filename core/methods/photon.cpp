@@ -15,6 +15,7 @@ std::vector<Knob> photonKnobs() {
   const PhotonBakeOptions d;
   return {
       stepKnob(),
+      filmSpacingKnob(),
       lightResolutionKnob(d.light_resolution, true),
       Knob::integer("photons", 1000, int64_t(1) << 28, d.photons,
                     "photons traced from the sun (and as many from the sky when it is not "
@@ -56,7 +57,7 @@ class PhotonMethod final : public BakeMethod {
         "1977, "
         "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
         "approximation (JQSRT), for a droplet's forward peak split off";
-    info_.version = 9;
+    info_.version = 10;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = photonKnobs();

@@ -11,6 +11,7 @@ std::vector<Knob> pointcloudKnobs() {
   const PointcloudOptions d;
   return {
       stepKnob(),
+      filmSpacingKnob(),
       lightResolutionKnob(d.light_resolution, true),
       Knob::integer("points", 64, int64_t(1) << 24, d.points,
                     "points inside the volume (density-weighted): the quality knob"),
@@ -40,7 +41,7 @@ class PointcloudMethod final : public BakeMethod {
     info_.citation =
         "Reimschuessel 2011, \"Rendering Realistic Cloud Effects for Computer Generated Films\" "
         "(BYU thesis)";
-    info_.version = 6;
+    info_.version = 7;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = pointcloudKnobs();

@@ -28,6 +28,7 @@ std::vector<Knob> precomputedKnobs() {
   const PrecomputedShotOptions d;
   return {
       stepKnob("one lattice voxel"),
+      filmSpacingKnob(),
       lightResolutionKnob(d.light_resolution, false),
       Knob::integer("sample_points", 1, int64_t(1) << 20, d.precompute.sample_points,
                     "K: sample points of the multiple-scattering transfer, shared by every "
@@ -319,7 +320,7 @@ class PrecomputedMethod final : public BakeMethod {
     info_.citation =
         "Iwasaki, Nishino and Dobashi 2011, \"Real-time rendering of endless cloud animation\" "
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
-    info_.version = 5;
+    info_.version = 6;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.animates = true;

@@ -15,10 +15,11 @@ class SingleMethod final : public BakeMethod {
     info_.citation =
         "slsdo 2010, \"Volumetric Clouds: a volume renderer that utilizes ray casting and ray "
         "marching through a 3D voxel grid\"";
-    info_.version = 4;
+    info_.version = 5;
     info_.default_samples = 1;
     info_.bakes_light = true;
-    info_.knobs = {stepKnob(), lightResolutionKnob(SingleBakeOptions{}.light_resolution, true)};
+    info_.knobs = {stepKnob(), filmSpacingKnob(),
+                   lightResolutionKnob(SingleBakeOptions{}.light_resolution, true)};
   }
   const MethodInfo& info() const override { return info_; }
 

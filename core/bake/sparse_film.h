@@ -1,0 +1,60 @@
+// A view's film traced sparsely where its pixels are much finer than the bake's lattice: every
+// s-th pixel in x and y is traced, and the cells between them are traced pixel by pixel only
+// where their corners say the image varies there (a silhouette, a shadow's edge, a peak between
+// corners); elsewhere the pixels are interpolated bilinearly from the corners.
+//
+// Why it holds: everything a view from a bake reads is interpolated trilinearly from the lattice,
+// so the image has no structure finer than a voxel's projection. Where the farthest voxel still
+// covers s pixels or more (sparseFilmSpacing), a corner is at most one voxel from the next, and
+// the test (filmCellsToTrace) catches what bilinear interpolation would miss: a range across a
+// cell's corners, or a second difference across them, over a fraction of their magnitude.
+// Measured against every pixel traced in docs/methods.md ("A sparse film").
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace cloudbake {
+
+/// Floats of one pixel as renderFromBake stores its layers: beauty RGBA (0-3), background
+/// (4-6), sun (7-9), sky (10-12), single (13-15), multiple (16-18).
+constexpr int kFilmFloats = 19;
+
+struct FilmPixel {
+  float v[kFilmFloats] = {};
+};
+
+/// The largest film spacing a view of a bake may take: 1, 2 or 4 pixels.
+constexpr int kMaxFilmSpacing = 4;
+
+/// The spacing of the traced pixels, a power of two up to `max_spacing` (1 disables): the
+/// largest s with s pixels at most one voxel wide where a pixel is widest over the lattice
+/// (`pixel_footprint`, world units, at the lattice's farthest point from the eye).
+int sparseFilmSpacing(double pixel_footprint, double voxel_size, int max_spacing);
+
+/// How much a cell's corners may vary before its pixels are traced. A quantity q (each float of
+/// a pixel) bends where its second difference at a traced pixel, along x or y, exceeds
+/// `curvature` x (the largest |q| of the three + its floor): bilinear interpolation errs by about
+/// an eighth of that at the cell's middle, and an edge or a peak between traced pixels bends the
+/// ones beside it. A linear ramp, however steep, does not. `light_floor` (radiance) keeps faint
+/// light from being traced for differences no image shows.
+struct FilmTolerance {
+  double curvature = 0.1;
+  double light_floor = 0;
+  double alpha_floor = 0.5;
+};
+
+/// Which cells of a grid of traced pixels (`nx` x `ny`, row-major, at film columns `xs` and
+/// rows `ys`) must be traced pixel by pixel: (nx - 1) x (ny - 1) flags, row-major; a cell is
+/// where one of its corners bends. A grid under 3 traced pixels along x or y has no second
+/// differences along it, so all of its cells are traced.
+std::vector<uint8_t> filmCellsToTrace(const std::vector<FilmPixel>& grid,
+                                      const std::vector<int>& xs, const std::vector<int>& ys,
+                                      const FilmTolerance& tol);
+
+/// The pixel at (x, y) inside the cell of corners c00 (x0, y0), c10 (x1, y0), c01 (x0, y1) and
+/// c11 (x1, y1), interpolated bilinearly.
+FilmPixel interpolateFilm(const FilmPixel& c00, const FilmPixel& c10, const FilmPixel& c01,
+                          const FilmPixel& c11, double fx, double fy);
+
+}  // namespace cloudbake
