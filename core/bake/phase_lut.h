@@ -22,7 +22,8 @@ namespace cloudbake {
 class PhaseLut {
  public:
   explicit PhaseLut(const PhaseFunction& phase, int bins = 4096);
-  /// The same table of any function of cos theta (such as a phase convolved with a PeakKernel).
+  /// The same table of any function of cos theta (such as a phase convolved with a PeakKernel),
+  /// which it calls from several threads at once.
   PhaseLut(const std::function<Rgb(double)>& p, int bins);
   Rgb eval(double cos_theta) const {
     const double c = cos_theta > 1 ? 1 : (cos_theta < -1 ? -1 : cos_theta);

@@ -394,16 +394,23 @@ LargeArray<float> packChannels(const std::vector<PackedChannel>& channels, size_
                                size_t stride) {
   LargeArray<float> pack(voxels * stride);
   constexpr size_t kChunk = 1 << 14;
+  // Voxels whose records stay in the core's cache while every channel is copied into them: a
+  // photon tally's records are up to 208 floats, and a chunk's 13 MB of them went through
+  // memory once per channel (69 times), a tenth of a small photon view.
+  constexpr size_t kBlock = 64;
   parallelFor(0, int64_t((voxels + kChunk - 1) / kChunk), [&](int64_t chunk) {
     const size_t v0 = size_t(chunk) * kChunk, v1 = std::min(voxels, v0 + kChunk);
-    // Zeroed here, chunk by chunk in parallel: the slots no channel fills read as 0.
-    std::fill(pack.data() + v0 * stride, pack.data() + v1 * stride, 0.f);
-    for (const PackedChannel& ch : channels) {
-      const size_t n = size_t(ch.components);
-      for (size_t v = v0; v < v1; ++v) {
-        float* out = pack.data() + v * stride + size_t(ch.slot);
-        const float* in = ch.data + v * n;
-        for (size_t k = 0; k < n; ++k) out[k] = in[k];
+    for (size_t b0 = v0; b0 < v1; b0 += kBlock) {
+      const size_t b1 = std::min(v1, b0 + kBlock);
+      // Zeroed here, in parallel: the slots no channel fills read as 0.
+      std::fill(pack.data() + b0 * stride, pack.data() + b1 * stride, 0.f);
+      for (const PackedChannel& ch : channels) {
+        const size_t n = size_t(ch.components);
+        for (size_t v = b0; v < b1; ++v) {
+          float* out = pack.data() + v * stride + size_t(ch.slot);
+          const float* in = ch.data + v * n;
+          for (size_t k = 0; k < n; ++k) out[k] = in[k];
+        }
       }
     }
   });

@@ -131,16 +131,4 @@ PeakKernel::PeakKernel(const ForwardPeak& split, const std::function<Rgb(double)
   for (int j = 0; j < kAzimuthNodes; ++j) cos_phi_.push_back(std::cos((j + 0.5) * dphi));
 }
 
-Rgb PeakKernel::convolve(const std::function<Rgb(double)>& f, double cos_theta) const {
-  if (nodes_.empty()) return f(cos_theta);
-  const double c = std::clamp(cos_theta, -1.0, 1.0), s = std::sqrt(std::max(0.0, 1 - c * c));
-  Rgb out(0.0);
-  for (const Node& n : nodes_) {
-    Rgb ring(0.0);
-    for (double cp : cos_phi_) ring += f(c * n.cos_t + s * n.sin_t * cp);
-    out += n.weight * ring;
-  }
-  return out;
-}
-
 }  // namespace cloudbake
