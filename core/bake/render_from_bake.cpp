@@ -1550,6 +1550,12 @@ Rgb meanSkyRadiance(const Sky& sky, const SkyLight& light) {
   return sum / (double(kNz) * kNphi);
 }
 
+int filmSpacingOf(const BakedLight& bake, const Camera& camera, const BakeRenderOptions& options) {
+  if (options.max_film_spacing <= 1 || camera.width_px < 2 || camera.height_px < 2) return 1;
+  return sparseFilmSpacing(pixelFootprint(CameraRays(camera), camera, bake.grid),
+                           bake.grid.voxel_size, options.max_film_spacing);
+}
+
 RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const Sun& sun,
                             const Sky& sky, const Camera& camera, const BakeRenderOptions& options,
                             const ProgressFn& progress) {
@@ -1606,10 +1612,7 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
     }
     return filmPixel(sum, inv_spp);
   };
-  const int spacing = options.max_film_spacing > 1 && w > 1 && h > 1
-                          ? sparseFilmSpacing(pixelFootprint(rays, camera, bake.grid),
-                                              bake.grid.voxel_size, options.max_film_spacing)
-                          : 1;
+  const int spacing = filmSpacingOf(bake, camera, options);
   FilmTolerance tolerance;
   tolerance.light_floor =
       kFilmLightFloor * (maxComponent(sun.irradiance) * kInv4Pi + maxComponent(sky_mean));

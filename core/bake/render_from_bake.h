@@ -38,6 +38,11 @@ struct BakeRenderOptions {
 /// lattice's `tally_voxels`, since the field costs about as much per voxel as a ray's reads.
 inline bool viewFieldPays(double rays, double tally_voxels) { return 4 * rays >= tally_voxels; }
 
+/// The spacing of the traced pixels of a view of `bake` by `camera` (core/bake/sparse_film.h): 1
+/// where every pixel is traced, else 2 or 4 (at most options.max_film_spacing). Recorded in each
+/// view's EXR as cloudbake:film_spacing.
+int filmSpacingOf(const BakedLight& bake, const Camera& camera, const BakeRenderOptions& options);
+
 /// The sky's radiance averaged over the sphere (exact for a constant sky, else an equal-area
 /// 256 x 512 quadrature, exact for the gradient sky): the scale of every per-unit-radiance sky
 /// term of a bake.

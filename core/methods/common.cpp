@@ -352,7 +352,8 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
                                          [&](double f) { return run.poll(v0 + (v1 - v0) * f, f); });
     std::map<std::string, std::string> attributes = {
         {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
-        {"cloudbake:seed", std::to_string(ro.seed)}};
+        {"cloudbake:seed", std::to_string(ro.seed)},
+        {"cloudbake:film_spacing", std::to_string(filmSpacingOf(light, camera, ro))}};
     if (shot.lighting.has_sun) addLitFrom(shot, light.sun_direction, &attributes);
     const double write_s =
         run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)), attributes);

@@ -288,13 +288,14 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
     RenderLayers layers =
         renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
                        [&](double fr) { return run.poll(progress.at(f, 1 + i + fr), fr); });
-    const double write_s =
-        run.writeView(frameStem(camera.name, f), camera, renderLayersToExr(std::move(layers)),
-                      {{"cloudbake:frame", std::to_string(f)},
-                       {"cloudbake:blend", std::to_string(bf.a) + " " + std::to_string(bf.b) + " " +
-                                               std::to_string(bf.w)},
-                       {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
-                       {"cloudbake:seed", std::to_string(ro.seed)}});
+    const double write_s = run.writeView(
+        frameStem(camera.name, f), camera, renderLayersToExr(std::move(layers)),
+        {{"cloudbake:frame", std::to_string(f)},
+         {"cloudbake:blend",
+          std::to_string(bf.a) + " " + std::to_string(bf.b) + " " + std::to_string(bf.w)},
+         {"cloudbake:samples", std::to_string(ro.samples_per_pixel)},
+         {"cloudbake:seed", std::to_string(ro.seed)},
+         {"cloudbake:film_spacing", std::to_string(filmSpacingOf(light, camera, ro))}});
     ++run.result().views_from_bake;
     run.result().steps.push_back(
         {"view", camera.name, f, secondsSince(t_view), {{"write", write_s}}});

@@ -35,7 +35,7 @@ constexpr const char* kGrid =
         "size": [2, 2, 2], "resolution": 12, "cover": 0.6, "density": 1}})";
 
 std::string goldenShot(const std::string& method, const std::string& knobs,
-                       const std::string& volume) {
+                       const std::string& volume, int resolution) {
   return R"({"version": 1, "name": "golden",
     "volume": )" +
          volume + R"(,
@@ -45,7 +45,8 @@ std::string goldenShot(const std::string& method, const std::string& knobs,
     "bake": {"method": ")" +
          method + "\"" + knobs + R"(},
     "views": [{"name": "v", "camera": {"type": "orthographic", "position": [0, -5, 0],
-               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [16, 16]}]})";
+               "look_at": [0, 0, 0], "up": [0, 0, 1], "width": 2.5}, "resolution": [)" +
+         std::to_string(resolution) + ", " + std::to_string(resolution) + "]}]}";
 }
 
 struct Golden {
@@ -55,6 +56,7 @@ struct Golden {
   std::map<std::string, double> mean;  // per layer: mean of R, G, B over the image
   double pixel;                        // beauty R at the centre pixel
   const char* volume = kSphere;        // the shot's volume (JSON)
+  int resolution = 16;                 // the view's pixels a side (16: every pixel traced)
 };
 
 // The pinned values (see the file comment for how to re-pin).
@@ -83,6 +85,8 @@ const std::vector<Golden>& goldens() {
       // single 2, pointcloud 3, photon 6), every other row's lattice the box means.
       {"single", R"(, "light_resolution": 12)", 5, {{"", 0.00487296373}, {"sun", 0.000981170792}, {"sky", 0.00389179295}, {"single", 0.00487296374}, {"multiple", 0}}, 0.0295169204, kGrid},
       {"pointcloud", R"(, "light_resolution": 12, "points": 1024, "passes": 4)", 7, {{"", 0.00999274232}, {"sun", 0.00313073408}, {"sky", 0.00686200824}, {"single", 0.00487296374}, {"multiple", 0.00511977855}}, 0.086234197, kGrid},
+      // Views of 96 pixels a side trace a sparse film of spacing 4 (render_from_bake 6).
+      {"single", R"(, "light_resolution": 16)", 5, {{"", 0.0178786745}, {"sun", 0.0038703323}, {"sky", 0.0140083422}, {"single", 0.0178786744}, {"multiple", 0}}, 0.0183678493, kSphere, 96},
       {"photon", R"(, "light_resolution": 12, "photons": 20000, "order": 2, "tally_resolution": 8)", 10, {{"", 0.00965919426}, {"sun", 0.0029117155}, {"sky", 0.00674747879}, {"single", 0.00457105015}, {"multiple", 0.00508814417}}, 0.082989499, kGrid},
       // clang-format on
   };
@@ -92,6 +96,7 @@ const std::vector<Golden>& goldens() {
 struct Measured {
   std::map<std::string, double> mean;
   double pixel = 0;
+  std::string film_spacing;  // the EXR's cloudbake:film_spacing (views from a bake)
 };
 
 Measured measure(const Golden& g) {
@@ -99,7 +104,8 @@ Measured measure(const Golden& g) {
   RunOptions opt;
   opt.out_dir = dir.string();
   opt.threads = 2;
-  const RunResult r = runShot(parseShot(goldenShot(g.method, g.knobs, g.volume), ""), opt);
+  const RunResult r =
+      runShot(parseShot(goldenShot(g.method, g.knobs, g.volume, g.resolution), ""), opt);
   std::string exr;
   for (const OutputFile& f : r.files) {
     if (f.name.size() > 4 && f.name.substr(f.name.size() - 4) == ".exr") exr = f.path;
@@ -116,6 +122,9 @@ Measured measure(const Golden& g) {
       m.pixel = im.data[size_t((im.height / 2 * im.width + im.width / 2) * im.channels)];
     }
   }
+  const auto attributes = readExr(exr).attributes;
+  const auto it = attributes.find("cloudbake:film_spacing");
+  if (it != attributes.end()) m.film_spacing = it->second;
   fs::remove_all(dir);
   return m;
 }
@@ -149,7 +158,11 @@ TEST(Golden, OutputsMatchThePinnedValuesOfTheirVersion) {
       for (const char* l : {"", "sun", "sky", "single", "multiple"}) {
         std::printf("{\"%s\", %.9g}%s", l, m.mean.at(l), std::string(l) == "multiple" ? "" : ", ");
       }
-      std::printf("}, %.9g%s},\n", m.pixel, g.volume == kGrid ? ", kGrid" : "");
+      std::printf("}, %.9g%s},\n", m.pixel,
+                  g.resolution != 16
+                      ? (std::string(", kSphere, ") + std::to_string(g.resolution)).c_str()
+                  : g.volume == kGrid ? ", kGrid"
+                                      : "");
       continue;
     }
     ASSERT_EQ(version, g.version) << "method '" << g.method << "' is now version " << version
@@ -163,6 +176,10 @@ TEST(Golden, OutputsMatchThePinnedValuesOfTheirVersion) {
           << "method '" << g.method << "' layer '" << layer << "' mean " << m.mean.at(layer)
           << ", pinned " << pinned << ". Its output changed: bump its algorithm version in "
           << versionFile(g.method) << ", then re-pin (see " << __FILE__ << ")";
+    }
+    // The film the views traced: every pixel at 16 a side; a voxel covers 6 pixels at 96.
+    if (g.method != "pathtrace") {
+      EXPECT_EQ(m.film_spacing, g.resolution == 16 ? "1" : "4");
     }
     EXPECT_TRUE(close(m.pixel, g.pixel))
         << "method '" << g.method << "' centre pixel " << m.pixel << ", pinned " << g.pixel
