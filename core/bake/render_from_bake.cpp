@@ -1376,6 +1376,17 @@ double pixelFootprint(const CameraRays& rays, const Camera& camera, const BakeGr
   return far * angle;
 }
 
+// An interpolated pixel's background and beauty: the sky behind it (its rays' mean radiance)
+// times its interpolated transmittance, 1 - alpha, as the march gives a traced ray's, since the
+// sky (a map's detail) is not read from the lattice and may vary faster than it.
+void seeSkyThrough(const Rgb& sky, FilmPixel* p) {
+  const double transmittance = std::max(0.0, 1.0 - double(p->v[3]));
+  for (int c = 0; c < 3; ++c) {
+    p->v[4 + c] = static_cast<float>(sky[c] * transmittance);
+    p->v[c] = p->v[7 + c] + p->v[10 + c] + p->v[4 + c];
+  }
+}
+
 // Whether film column (or row) x of `size` is traced in every view of a sparse film: every
 // `spacing`-th, and the last.
 bool onFilmLine(int x, int size, int spacing) { return x % spacing == 0 || x == size - 1; }
@@ -1425,11 +1436,13 @@ std::vector<int> tileLine(const std::vector<int>& all, int lo, int hi, int spaci
 }
 
 // One tile of a sparse film after its traced pixels are stored in `out` (sparse_film.h): every
-// other pixel traced where a cell it lies in or borders varies, interpolated elsewhere.
-template <typename Trace>
+// other pixel traced where a cell it lies in or borders bends, interpolated elsewhere, with the
+// sky behind it (sky_behind(x, y)) seen through its interpolated transmittance.
+template <typename Trace, typename SkyBehind>
 void fillSparseTile(const TileRect& t, const std::vector<int>& film_xs,
                     const std::vector<int>& film_ys, int spacing, const FilmTolerance& tol,
-                    const TilePoll& poll, RenderLayers& out, Trace&& trace) {
+                    const TilePoll& poll, RenderLayers& out, Trace&& trace,
+                    SkyBehind&& sky_behind) {
   const std::vector<int> xs = tileLine(film_xs, t.x0, t.x1, spacing);
   const std::vector<int> ys = tileLine(film_ys, t.y0, t.y1, spacing);
   const int nx = int(xs.size()), ny = int(ys.size());
@@ -1462,19 +1475,22 @@ void fillSparseTile(const TileRect& t, const std::vector<int>& film_xs,
       const int i1 = col ? i : i + 1, j1 = row ? j : j + 1;
       const double fx = col ? 0.0 : double(x - xs[i]) / (xs[i1] - xs[i]);
       const double fy = row ? 0.0 : double(y - ys[j]) / (ys[j1] - ys[j]);
-      storeFilm(out, x, y, interpolateFilm(at(i, j), at(i1, j), at(i, j1), at(i1, j1), fx, fy));
+      FilmPixel p = interpolateFilm(at(i, j), at(i1, j), at(i, j1), at(i1, j1), fx, fy);
+      seeSkyThrough(sky_behind(x, y), &p);
+      storeFilm(out, x, y, p);
     }
   }
 }
 
 // Renders a film of w x h pixels into `out`, each traced by trace_pixel(x, y, rng, scratch):
 // every pixel (spacing 1), or a sparse film in two passes over the tiles (sparse_film.h), the
-// traced pixels and then the cells between them. `setup` runs first, in the render's arena.
-// False if `progress` cancelled it.
-template <typename TracePixel>
+// traced pixels and then the cells between them, whose interpolated pixels see the sky
+// sky_behind(x, y, rng) through the cloud. `setup` runs first, in the render's arena. False if
+// `progress` cancelled it.
+template <typename TracePixel, typename SkyBehind>
 bool renderFilm(int w, int h, int spacing, const FilmTolerance& tolerance, int threads,
                 const ProgressFn& progress, RenderLayers& out, TracePixel&& trace_pixel,
-                const std::function<void()>& setup) {
+                SkyBehind&& sky_behind, const std::function<void()>& setup) {
   auto trace_tile = [&](const TileRect& t, const TilePoll& poll) {
     Rng rng;
     BakeMarcher::Scratch scratch;
@@ -1492,8 +1508,10 @@ bool renderFilm(int w, int h, int spacing, const FilmTolerance& tolerance, int t
   auto fill_tile = [&](const TileRect& t, const TilePoll& poll) {
     Rng rng;
     BakeMarcher::Scratch scratch;
-    fillSparseTile(t, film_xs, film_ys, spacing, tolerance, poll, out,
-                   [&](int x, int y) { return trace_pixel(x, y, rng, &scratch); });
+    fillSparseTile(
+        t, film_xs, film_ys, spacing, tolerance, poll, out,
+        [&](int x, int y) { return trace_pixel(x, y, rng, &scratch); },
+        [&](int x, int y) { return sky_behind(x, y, rng); });
   };
   // The traced pixels are about a third of the work, the cells that bend the rest.
   ProgressFn first, second;
@@ -1590,35 +1608,47 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
 
   RenderLayers out = makeRenderLayers(w, h);
   std::optional<BakeMarcher> marcher;
+  // Calls f(ray) for each of pixel (x, y)'s rays.
+  auto for_each_ray = [&](int x, int y, Rng& rng, auto&& f) {
+    if (spp == 1) {
+      f(rays.generate(x + 0.5, y + 0.5));
+      return;
+    }
+    // One stream per pixel: the image depends neither on threads nor on tiling.
+    const uint64_t pixel = uint64_t(y) * uint64_t(w) + uint64_t(x);
+    rng.setSeed(mixBits(options.seed, pixel), mixBits(pixel, options.seed));
+    for (int s = 0; s < spp; ++s) {
+      double fx, fy;
+      if (s < sx * sy) {
+        fx = x + ((s % sx) + rng.uniform()) / sx;
+        fy = y + ((s / sx) + rng.uniform()) / sy;
+      } else {
+        fx = x + rng.uniform();
+        fy = y + rng.uniform();
+      }
+      f(rays.generate(fx, fy));
+    }
+  };
   auto trace_pixel = [&](int x, int y, Rng& rng, BakeMarcher::Scratch* scratch) {
     PixelSum sum;
-    if (spp == 1) {
-      marcher->trace(rays.generate(x + 0.5, y + 0.5), &sum, scratch);
-    } else {
-      // One stream per pixel: the image depends neither on threads nor on tiling.
-      const uint64_t pixel = uint64_t(y) * uint64_t(w) + uint64_t(x);
-      rng.setSeed(mixBits(options.seed, pixel), mixBits(pixel, options.seed));
-      for (int s = 0; s < spp; ++s) {
-        double fx, fy;
-        if (s < sx * sy) {
-          fx = x + ((s % sx) + rng.uniform()) / sx;
-          fy = y + ((s / sx) + rng.uniform()) / sy;
-        } else {
-          fx = x + rng.uniform();
-          fy = y + rng.uniform();
-        }
-        marcher->trace(rays.generate(fx, fy), &sum, scratch);
-      }
-    }
+    for_each_ray(x, y, rng, [&](const Ray& ray) { marcher->trace(ray, &sum, scratch); });
     return filmPixel(sum, inv_spp);
+  };
+  // The sky behind an interpolated pixel: its rays' mean sky radiance (sparse_film.h).
+  auto sky_behind = [&](int x, int y, Rng& rng) {
+    Rgb sum(0.0);
+    if (!sky_light.black()) {
+      for_each_ray(x, y, rng, [&](const Ray& ray) { sum += sky_light.radiance(ray.d); });
+    }
+    return sum * inv_spp;
   };
   const int spacing = filmSpacingOf(bake, camera, options);
   FilmTolerance tolerance;
   tolerance.light_floor =
       kFilmLightFloor * (maxComponent(sun.irradiance) * kInv4Pi + maxComponent(sky_mean));
   // The marcher is built inside the render's arena: its block maxima are computed in parallel.
-  const bool finished =
-      renderFilm(w, h, spacing, tolerance, options.threads, progress, out, trace_pixel, [&] {
+  const bool finished = renderFilm(
+      w, h, spacing, tolerance, options.threads, progress, out, trace_pixel, sky_behind, [&] {
         marcher.emplace(bake, medium, sun, sky_light, sky_mean, sun_dir, step,
                         options.min_transmittance, view);
       });

@@ -26,6 +26,7 @@ double floorOf(int k, const FilmTolerance& tol) {
 bool curved(const FilmPixel& a, const FilmPixel& b, const FilmPixel& c, double h1, double h2,
             const FilmTolerance& tol) {
   for (int k = 0; k < kFilmFloats; ++k) {
+    if (!judgedFloat(k)) continue;
     const double d = 2 * (h1 * c.v[k] - (h1 + h2) * b.v[k] + h2 * a.v[k]) / (h1 + h2);
     const double m = std::max({std::fabs(a.v[k]), std::fabs(b.v[k]), std::fabs(c.v[k])});
     if (std::fabs(d) > tol.curvature * (m + floorOf(k, tol))) return true;

@@ -3,12 +3,16 @@
 // where their corners say the image varies there (a silhouette, a shadow's edge, a peak between
 // corners); elsewhere the pixels are interpolated bilinearly from the corners.
 //
-// Why it holds: everything a view from a bake reads is interpolated trilinearly from the lattice,
-// so the image has no structure finer than a voxel's projection. Where the farthest voxel still
-// covers s pixels or more (sparseFilmSpacing), a corner is at most one voxel from the next, and
-// the test (filmCellsToTrace) catches what bilinear interpolation would miss: a range across a
-// cell's corners, or a second difference across them, over a fraction of their magnitude.
-// Measured against every pixel traced in docs/methods.md ("A sparse film").
+// Why it holds: the cloud's light and transmittance in a view from a bake are marched through
+// grids interpolated trilinearly from the lattice, so they have no structure finer than a
+// voxel's projection but what the march's own step adds (in optically thick lattices, a few
+// per cent at single pixels). Where the farthest voxel still covers s pixels or more
+// (sparseFilmSpacing), a traced pixel is at most one voxel from the next, and the test
+// (filmCellsToTrace) catches what bilinear interpolation would miss: a second difference across
+// traced pixels over a fraction of their magnitude. The sky seen through the cloud is not read
+// from the lattice: an interpolated pixel takes it along its own rays (judgedFloat). Measured
+// against every pixel traced, and against a march of an eighth of the step, in docs/methods.md
+// ("A sparse film").
 #pragma once
 
 #include <cstdint>
@@ -24,6 +28,12 @@ struct FilmPixel {
   float v[kFilmFloats] = {};
 };
 
+/// Whether the cells' test judges float k: alpha and the layers read from the lattice (sun, sky,
+/// single, multiple). Beauty and background hold the sky seen through the cloud, which is not
+/// read from the lattice (a sky map's detail can be finer than any voxel), so an interpolated
+/// pixel takes the sky behind it along its own rays, times its interpolated transmittance.
+constexpr bool judgedFloat(int k) { return k == 3 || k >= 7; }
+
 /// The largest film spacing a view of a bake may take: 1, 2 or 4 pixels.
 constexpr int kMaxFilmSpacing = 4;
 
@@ -32,8 +42,8 @@ constexpr int kMaxFilmSpacing = 4;
 /// (`pixel_footprint`, world units, at the lattice's farthest point from the eye).
 int sparseFilmSpacing(double pixel_footprint, double voxel_size, int max_spacing);
 
-/// How much a cell's corners may vary before its pixels are traced. A quantity q (each float of
-/// a pixel) bends where its second difference at a traced pixel, along x or y, exceeds
+/// How much a cell's corners may vary before its pixels are traced. A quantity q (each judged
+/// float of a pixel) bends where its second difference at a traced pixel, along x or y, exceeds
 /// `curvature` x (the largest |q| of the three + its floor): bilinear interpolation errs by about
 /// an eighth of that at the cell's middle, and an edge or a peak between traced pixels bends the
 /// ones beside it. A linear ramp, however steep, does not. `light_floor` (radiance) keeps faint
