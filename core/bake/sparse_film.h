@@ -62,8 +62,8 @@ std::vector<uint8_t> filmCellsToTrace(const std::vector<FilmPixel>& grid,
                                       const std::vector<int>& xs, const std::vector<int>& ys,
                                       const FilmTolerance& tol);
 
-/// The pixel at (x, y) inside the cell of corners c00 (x0, y0), c10 (x1, y0), c01 (x0, y1) and
-/// c11 (x1, y1), interpolated bilinearly.
+/// The pixel at fractions fx (from x0 towards x1) and fy (from y0 towards y1) of the cell of
+/// corners c00 (x0, y0), c10 (x1, y0), c01 (x0, y1) and c11 (x1, y1), interpolated bilinearly.
 FilmPixel interpolateFilm(const FilmPixel& c00, const FilmPixel& c10, const FilmPixel& c01,
                           const FilmPixel& c11, double fx, double fy);
 

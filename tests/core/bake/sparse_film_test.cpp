@@ -80,6 +80,22 @@ TEST(SparseFilm, APeakOrAnEdgeBetweenTracedPixelsTracesTheCellsBesideIt) {
   }
 }
 
+TEST(SparseFilm, TheSkyBehindTheCloudIsNotJudged) {
+  const std::vector<int> xs = line(5, 2), ys = line(5, 2);
+  // A sky map's line through one traced pixel: beauty and background peak, nothing else does.
+  auto g = gridOf(xs, ys, [](int, int) { return 1.0; });
+  for (int k = 0; k < kFilmFloats; ++k) {
+    if (!judgedFloat(k)) g[2 * 5 + 2].v[k] = 10.f;
+  }
+  EXPECT_EQ(count(filmCellsToTrace(g, xs, ys, FilmTolerance{})), 0);
+  // The same peak in alpha or in a light layer is traced.
+  for (int k : {3, 7, 13, 18}) {
+    auto h = gridOf(xs, ys, [](int, int) { return 1.0; });
+    h[2 * 5 + 2].v[k] = 10.f;
+    EXPECT_GT(count(filmCellsToTrace(h, xs, ys, FilmTolerance{})), 0) << k;
+  }
+}
+
 TEST(SparseFilm, FaintLightAndAGridWithoutSecondDifferences) {
   const std::vector<int> xs = line(5, 2), ys = line(5, 2);
   FilmTolerance tol;
