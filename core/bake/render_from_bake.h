@@ -5,6 +5,7 @@
 #include <cstdint>
 
 #include "core/bake/baked_light.h"
+#include "core/bake/sparse_film.h"
 #include "core/transport/path_tracer.h"
 #include "core/transport/scene.h"
 
@@ -30,7 +31,7 @@ struct BakeRenderOptions {
   bool view_field = true;
   /// The largest spacing of a sparse film (core/bake/sparse_film.h), 1..4 pixels, rounded down
   /// to a power of two; 1 traces every pixel.
-  int max_film_spacing = 4;
+  int max_film_spacing = kMaxFilmSpacing;
 };
 
 /// Whether a photon view builds its field of the tallies' light towards the camera
