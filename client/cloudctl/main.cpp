@@ -745,7 +745,9 @@ void printPlan(const Client& c, const v1::JobPlan& p) {
   std::cout << "shot '" << p.shot_name() << "', method " << p.method() << "\n";
   for (const auto& line : p.components()) std::cout << "  " << line << "\n";
   std::cout << "  estimated cost: " << p.pixel_samples()
-            << (p.method() == "pathtrace" ? " paths\n" : " view rays, after the bake\n");
+            << (p.method() == "pathtrace"
+                    ? " paths\n"
+                    : " view rays at most (a sparse film traces fewer), after the bake\n");
   std::cout << "  bake key: " << p.bake_key() << "\n";
 }
 

@@ -69,7 +69,10 @@ std::vector<std::string> dryRun(const ShotSpec& shot, const RunOptions& run) {
   const MethodPlan plan =
       methodOf(resolved).plan(resolved, ShotCacheKeys{}, [](const std::string&) { return false; });
   lines.insert(lines.end(), plan.components.begin(), plan.components.end());
-  lines.push_back("paths or rays: " + exactNumber(plan.pixel_samples));
+  // A view from a bake may trace a sparse film (docs/methods.md): its rays are a bound.
+  lines.push_back(
+      std::string(resolved.bake.method == "pathtrace" ? "paths: " : "view rays, at most: ") +
+      exactNumber(plan.pixel_samples));
   return lines;
 }
 
