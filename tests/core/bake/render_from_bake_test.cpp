@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -439,6 +440,19 @@ TEST(BakeRender, ExtremeMediaStayFiniteAndBounded) {
 }
 
 // Identical images whatever the number of threads (jittered spp), and cooperative cancellation.
+// Runs `render` with a progress callback that lets it finish: the fractions it reports rise
+// monotonically and end at 1.
+void expectProgressRisesToOne(const std::function<void(const ProgressFn&)>& render) {
+  std::vector<double> fractions;
+  render([&](double f) {
+    fractions.push_back(f);
+    return true;
+  });
+  ASSERT_FALSE(fractions.empty());
+  EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
+  for (size_t i = 1; i < fractions.size(); ++i) EXPECT_GE(fractions[i], fractions[i - 1]);
+}
+
 TEST(BakeRender, DeterministicAcrossThreadsAndCancellable) {
   BakedLight bake = boxBake(Vec3(-0.5, -0.5, 0), Vec3(0.5, 0.5, 0.5), 1.0 / 16, 2, 1.0,
                             Vec3(0.2, 0.1, 1), 4.0, true);
@@ -476,14 +490,8 @@ TEST(BakeRender, DeterministicAcrossThreadsAndCancellable) {
   const RenderLayers other = renderFromBake(bake, m, sunOf(bake, Rgb(1)), sky, cam, opt);
   EXPECT_NE(one.beauty.data, other.beauty.data);
 
-  std::vector<double> fractions;
-  renderFromBake(bake, m, sunOf(bake, Rgb(1)), sky, cam, {}, [&](double f) {
-    fractions.push_back(f);
-    return true;
-  });
-  ASSERT_FALSE(fractions.empty());
-  EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
-  for (size_t i = 1; i < fractions.size(); ++i) EXPECT_GE(fractions[i], fractions[i - 1]);
+  expectProgressRisesToOne(
+      [&](const ProgressFn& p) { renderFromBake(bake, m, sunOf(bake, Rgb(1)), sky, cam, {}, p); });
   int calls = 0;
   EXPECT_THROW(renderFromBake(bake, m, sunOf(bake, Rgb(1)), sky, cam, {},
                               [&](double) { return ++calls < 2; }),
@@ -591,14 +599,8 @@ TEST(BakeRender, SparseFilmAgreesWithEveryPixelTraced) {
   EXPECT_EQ(one_thread.beauty.data, two_threads.beauty.data);
   EXPECT_EQ(one_thread.multiple.data, two_threads.multiple.data);
   // Progress rises to 1 across both passes, and a cancel in the second pass stops the render.
-  std::vector<double> fractions;
-  renderFromBake(bake, m, sunOf(bake, Rgb(2)), sky, cam, {}, [&](double f) {
-    fractions.push_back(f);
-    return true;
-  });
-  ASSERT_FALSE(fractions.empty());
-  EXPECT_DOUBLE_EQ(fractions.back(), 1.0);
-  for (size_t i = 1; i < fractions.size(); ++i) EXPECT_GE(fractions[i], fractions[i - 1]);
+  expectProgressRisesToOne(
+      [&](const ProgressFn& p) { renderFromBake(bake, m, sunOf(bake, Rgb(2)), sky, cam, {}, p); });
   EXPECT_THROW(
       renderFromBake(bake, m, sunOf(bake, Rgb(2)), sky, cam, {}, [&](double f) { return f < 0.5; }),
       Cancelled);
