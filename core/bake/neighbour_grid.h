@@ -33,11 +33,20 @@ class PointGrid {
     const double r2 = radius * radius;
     const Vec3 lo = (p - Vec3(radius) - origin_) / cell_;
     const Vec3 hi = (p + Vec3(radius) - origin_) / cell_;
-    const int i0 = clampCell(lo.x, nx_), i1 = clampCell(hi.x, nx_);
     const int j0 = clampCell(lo.y, ny_), j1 = clampCell(hi.y, ny_);
     const int k0 = clampCell(lo.z, nz_), k1 = clampCell(hi.z, nz_);
+    const Vec3 q = (p - origin_) / cell_;  // in cells
     for (int k = k0; k <= k1; ++k) {
+      const double dz = gapToCell(q.z, k, nz_) * cell_;
       for (int j = j0; j <= j1; ++j) {
+        // Only the part of the row within the sphere's chord at the row's nearest y and z: the
+        // box's corners hold most of its volume. A margin keeps every point the distance test
+        // below would take (it alone decides, so the sequence is the full box's, filtered).
+        const double dy = gapToCell(q.y, j, ny_) * cell_;
+        const double h2 = r2 - dy * dy - dz * dz;
+        if (h2 < -1e-9 * r2) continue;
+        const double h = std::sqrt(std::max(h2, 0.0)) * (1 + 1e-9) + 1e-9 * radius;
+        const int i0 = clampCell(q.x - h / cell_, nx_), i1 = clampCell(q.x + h / cell_, nx_);
         const size_t row = (size_t(k) * size_t(ny_) + size_t(j)) * size_t(nx_);
         const uint32_t b = start_[row + size_t(i0)], e = start_[row + size_t(i1) + 1];
         for (uint32_t s = b; s < e; ++s) {
@@ -75,6 +84,14 @@ class PointGrid {
   double cellSize() const { return cell_; }
 
  private:
+  // Distance, in cells, from coordinate c to cell `i` of an axis of n (the outer cells reach to
+  // infinity, as clampCell puts everything beyond them there).
+  static double gapToCell(double c, int i, int n) {
+    if (i > 0 && c < i) return i - c;
+    if (i < n - 1 && c > i + 1) return c - (i + 1);
+    return 0;
+  }
+
   static int clampCell(double c, int n) {
     if (!(c > 0)) return 0;
     if (c >= n - 1) return n - 1;

@@ -1,6 +1,7 @@
 #include "core/bake/scattering_passes.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -173,7 +174,82 @@ struct SunOrders {
   std::vector<double> incoming, total_incoming;  // lum of the gathered light, likewise
   std::vector<Rgb> co;                           // the orders so far
   std::vector<double> ci_reduced;                // order 0: Ci' = Ci^s
+  // The reduced (isotropic) passes defer the flux: it is linear in what each source emits, so
+  // sum_k F^k_j = sum_i w_ij lum(b^k_i summed over k) w_ij, gathered once after the passes.
+  // emitted: each source's lum(b) summed over the passes so far; last_emitted: the last pass's.
+  std::vector<double> emitted, last_emitted;
 };
+
+// Delta^{k+1} of one pass, in the reduced medium's passes (R = 0 everywhere, so every source
+// emits isotropically and its flux is only summed, deferredSunFlux). Each pair then costs a
+// weighted sum of three floats: no direction, no phase.
+void gatherIsotropicSunOrder(const PassInputs& in, const std::vector<double>& self,
+                             const PointCloudResult& out, int pass, SunOrders& o,
+                             std::vector<std::array<float, 3>>& emit) {
+  const size_t n = emit.size();
+  for (size_t i = 0; i < n; ++i) {
+    const Rgb b = o.delta[i] * (kInv4Pi * double(out.transfer_scale[i]));
+    emit[i] = {float(b.x), float(b.y), float(b.z)};
+    const double lum = luminance(Rgb(emit[i][0], emit[i][1], emit[i][2]));
+    o.emitted[i] += lum;
+    o.last_emitted[i] = lum;
+  }
+  const NeighbourPairs& pairs = in.pairs;
+  forEachDestination(in, n, pass, [&](size_t j) {
+    double sr = 0, sg = 0, sb = 0;
+    const uint64_t e = pairs.offset[j + 1];
+    for (uint64_t k = pairs.offset[j]; k < e; ++k) {
+      const std::array<float, 3>& s = emit[pairs.source[k]];
+      const double w = pairs.weight[k];
+      sr += w * s[0];
+      sg += w * s[1];
+      sb += w * s[2];
+    }
+    const Rgb in_light = Rgb(sr, sg, sb) + o.delta[j] * self[j];
+    o.next[j] = in.ts.albedo * in_light;
+    o.incoming[j] = luminance(in_light);
+    o.next_dir[j] = Vec3(0.0);
+    o.next_ratio[j] = 0;
+  });
+}
+
+// The flux of every reduced pass at once, with the tail's share of the last pass (weight
+// `tail`): sum over pairs of w_ij (emitted_i + tail last_emitted_i) times the unit vector from i
+// to j, added to total_flux.
+void deferredSunFlux(const PassInputs& in, const PointCloudResult& out, int last_pass, double tail,
+                     SunOrders& o) {
+  const PointCloud& pc = out.cloud;
+  const size_t n = pc.size();
+  std::vector<std::array<float, 4>> src(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Vec3 p = pc.position[i];
+    src[i] = {float(p.x), float(p.y), float(p.z), float(o.emitted[i] + tail * o.last_emitted[i])};
+  }
+  const NeighbourPairs& pairs = in.pairs;
+  ParallelOptions chunks;  // polled as the end of the last pass: progress never goes back
+  chunks.grain = kDestinationGrain;
+  if (in.cancelled) chunks.cancelled = [&](double) { return in.cancelled(1.0, last_pass); };
+  parallelFor(
+      0, int64_t(n),
+      [&](int64_t jj) {
+        const size_t j = size_t(jj);
+        const float qx = float(pc.position[j].x), qy = float(pc.position[j].y),
+                    qz = float(pc.position[j].z);
+        double fx = 0, fy = 0, fz = 0;
+        const uint64_t e = pairs.offset[j + 1];
+        for (uint64_t k = pairs.offset[j]; k < e; ++k) {
+          const std::array<float, 4>& s = src[pairs.source[k]];
+          const float dx = qx - s[0], dy = qy - s[1], dz = qz - s[2];
+          const float inv = 1.f / std::sqrt(dx * dx + dy * dy + dz * dz);
+          const double l = double(pairs.weight[k]) * s[3];
+          fx += l * (dx * inv);
+          fy += l * (dy * inv);
+          fz += l * (dz * inv);
+        }
+        o.total_flux[j] += Vec3(fx, fy, fz);
+      },
+      chunks);
+}
 
 // One pass of the sun's orders: Delta^{k+1}, and its flux for the next R and L.
 void gatherSunOrder(const PassInputs& in, const PhaseLut& lut, const std::vector<double>& self,
@@ -359,11 +435,26 @@ void runNormalised(const PassInputs& in, PointCloudResult& out) {
   std::fill(o.ratio.begin(), o.ratio.end(), in.ts.isotropic ? 0.0 : 1.0);
   out.order_luminance.assign(1, order_sum);
   double prev_sum = order_sum;
-  for (int pass = 0; pass < in.options.passes; ++pass) {
-    gatherSunOrder(in, lut, self, out, pass, o, src);
+  std::vector<std::array<float, 3>> emit;
+  if (in.ts.isotropic) {
+    emit.resize(n);
+    o.emitted.assign(n, 0.0);
+    o.last_emitted.assign(n, 0.0);
+  }
+  int pass = 0;
+  for (; pass < in.options.passes; ++pass) {
+    if (in.ts.isotropic) {
+      gatherIsotropicSunOrder(in, self, out, pass, o, emit);
+    } else {
+      gatherSunOrder(in, lut, self, out, pass, o, src);
+    }
     double sum = 0;
     if (addSunOrder(in, pass, prev_sum, o, out, &sum)) break;
     prev_sum = sum;
+  }
+  if (in.ts.isotropic) {
+    const double q = out.tail_ratio;
+    deferredSunFlux(in, out, std::min(pass, in.options.passes - 1), q > 0 ? q / (1 - q) : 0.0, o);
   }
   finishSunOrders(in, o, out);
   if (in.true_visibility) {
@@ -453,14 +544,17 @@ NeighbourPairs normalisedPairs(const PointGrid& point_grid, const PointCloud& pc
     const double r = std::cbrt(3 * pc.mass / (4 * kPi * pc.density[i]));
     clamp_r2[i] = float(r * r);
   }
-  const double em = ext * pc.mass;
-  // sampleTrilinear bit for bit, without its bounds checks inside the lattice.
+  const double em = ext * pc.mass, ext6 = ext / 6;
+  // sampleTrilinear bit for bit, without its bounds checks inside the lattice, at the midpoint
+  // of the points' lattice coordinates (affine in their positions: no division per pair).
   const TransmittanceMarcher lookup(grid, density.data(), ext);
+  std::vector<Vec3> u(n);
+  for (size_t i = 0; i < n; ++i) u[i] = grid.toIndex(pc.position[i]);
   auto weight = [&](uint32_t dst, uint32_t src, double d) -> float {
     const double ends = double(pc.density[src]) + double(pc.density[dst]);
-    if (ext * d * ends / 6 > 16.2) return 0.f;  // T < 1e-7 whatever the midpoint holds
-    const double mid = lookup.density((pc.position[src] + pc.position[dst]) * 0.5);
-    const double tau = ext * d * (ends + 4 * mid) / 6;
+    if (ext6 * d * ends > 16.2) return 0.f;  // T < 1e-7 whatever the midpoint holds
+    const double mid = lookup.densityAtIndex((u[src] + u[dst]) * 0.5);
+    const double tau = ext6 * d * (ends + 4 * mid);
     if (tau > 16.2) return 0.f;
     return float(em * std::exp(-tau) / std::max(d * d, double(clamp_r2[src])));
   };
@@ -492,7 +586,7 @@ NeighbourPairs findNeighbours(const BakeGrid& grid, const std::vector<float>& de
     throw InputError("radius: " + str(out.radius) + " is larger than the volume (lattice " +
                      "diagonal " + str(diagonal) + " world units)");
   }
-  const PointGrid point_grid(pc.position, out.radius);
+  const PointGrid point_grid(pc.position, 0.5 * out.radius);
   const double max_mean = kMaxNeighbourPairs / double(n);
   const double mean_estimate =
       estimateMeanNeighbours(point_grid, pc.position, out.radius, 256, max_mean);

@@ -41,7 +41,7 @@ class PointcloudMethod final : public BakeMethod {
     info_.citation =
         "Reimschuessel 2011, \"Rendering Realistic Cloud Effects for Computer Generated Films\" "
         "(BYU thesis)";
-    info_.version = 7;
+    info_.version = 8;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.knobs = pointcloudKnobs();

@@ -129,25 +129,34 @@ TEST(PointCloud, EmptyVolumeGivesAZeroBake) {
   EXPECT_THROW(placePoints(l.grid, l.density, 100, 1), InputError);
 }
 
+// Cells of the radius and finer (whose queries skip the rows and columns outside the sphere),
+// with points on a lattice of the radius' own spacing, so that many lie exactly on its surface.
 TEST(NeighbourGrid, FindsExactlyThePointsWithinTheRadius) {
   Rng rng(3);
   std::vector<Vec3> pts(1500);
   for (Vec3& p : pts) p = Vec3(rng.uniform(), 2 * rng.uniform(), 0.5 * rng.uniform());
-  for (const double radius : {1e-4, 0.03, 0.2, 0.9}) {
-    const PointGrid grid(pts, radius);
-    for (size_t q = 0; q < pts.size(); q += 37) {
-      std::vector<uint32_t> found, expected;
-      grid.forEachWithin(pts[q], radius, [&](uint32_t i, double d2) {
-        found.push_back(i);
-        const Vec3 d = pts[i] - pts[q];
-        EXPECT_DOUBLE_EQ(d2, dot(d, d));
-      });
-      for (size_t i = 0; i < pts.size(); ++i) {
-        const Vec3 d = pts[i] - pts[q];
-        if (dot(d, d) <= radius * radius) expected.push_back(uint32_t(i));
+  for (int i = 0; i < 6; ++i) {
+    for (int j = 0; j < 6; ++j) {
+      for (int k = 0; k < 6; ++k) pts.push_back(Vec3(0.2 * i, 0.2 * j, 0.1 * k));
+    }
+  }
+  for (const double cell : {1.0, 0.5, 0.3}) {
+    for (const double radius : {1e-4, 0.03, 0.1, 0.2, 0.9}) {
+      const PointGrid grid(pts, cell * radius);
+      for (size_t q = 0; q < pts.size(); q += 37) {
+        std::vector<uint32_t> found, expected;
+        grid.forEachWithin(pts[q], radius, [&](uint32_t i, double d2) {
+          found.push_back(i);
+          const Vec3 d = pts[i] - pts[q];
+          EXPECT_DOUBLE_EQ(d2, dot(d, d));
+        });
+        for (size_t i = 0; i < pts.size(); ++i) {
+          const Vec3 d = pts[i] - pts[q];
+          if (dot(d, d) <= radius * radius) expected.push_back(uint32_t(i));
+        }
+        std::sort(found.begin(), found.end());
+        EXPECT_EQ(found, expected) << "radius " << radius << ", cells of " << cell << " radius";
       }
-      std::sort(found.begin(), found.end());
-      EXPECT_EQ(found, expected) << "radius " << radius;
     }
   }
 }
