@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <functional>
+#include <optional>
 #include <string>
 
 #include "core/bake/neighbour_grid.h"
@@ -180,36 +181,100 @@ struct SunOrders {
   std::vector<double> emitted, last_emitted;
 };
 
-// Delta^{k+1} of one pass, in the reduced medium's passes (R = 0 everywhere, so every source
-// emits isotropically and its flux is only summed, deferredSunFlux). Each pair then costs a
-// weighted sum of three floats: no direction, no phase.
-void gatherIsotropicSunOrder(const PassInputs& in, const std::vector<double>& self,
-                             const PointCloudResult& out, int pass, SunOrders& o,
-                             std::vector<std::array<float, 3>>& emit) {
-  const size_t n = emit.size();
-  for (size_t i = 0; i < n; ++i) {
-    const Rgb b = o.delta[i] * (kInv4Pi * double(out.transfer_scale[i]));
-    emit[i] = {float(b.x), float(b.y), float(b.z)};
-    const double lum = luminance(Rgb(emit[i][0], emit[i][1], emit[i][2]));
-    o.emitted[i] += lum;
-    o.last_emitted[i] = lum;
+// Sky light (header, step 8): the same transfers for a uniform sky of unit radiance, as state
+// that each pass advances, so that the reduced medium's passes can gather the sun's orders and
+// the sky's in one read of the pairs (gatherReducedPass).
+struct SkyOrders {
+  SkyOrders(const PassInputs& in, const PointCloud& pc)
+      : d(pc.size()), next(pc.size()), acc(pc.size(), Rgb(0.0)), beam(pc.size()) {
+    for (size_t j = 0; j < pc.size(); ++j) {
+      const double vr = sampleTrilinear(*in.grid, in.escape_visibility->data(), pc.position[j]);
+      const double vt = sampleTrilinear(*in.grid, in.true_visibility->data(), pc.position[j]);
+      d[j] = Rgb(4 * kPi * vr);
+      beam[j] = 4 * kPi * (vr - vt);  // signed, as the sun's beam (finishSunOrders)
+    }
   }
+
+  // What source i emits in this pass.
+  std::array<float, 3> emission(const PointCloudResult& out, size_t i) const {
+    const Rgb e = d[i] * (out.transfer_scale[i] * kInv4Pi);
+    return {float(e.x), float(e.y), float(e.z)};
+  }
+
+  // Adds the order just gathered into `next`; true when the passes stop (converged or the
+  // last), after adding the geometric tail of the orders not computed.
+  bool add(const PassInputs& in, int pass, PointCloudResult& out) {
+    double sum = 0, acc_sum = 0;
+    for (size_t j = 0; j < acc.size(); ++j) {
+      acc[j] += next[j];
+      sum += luminance(next[j]);
+      acc_sum += luminance(acc[j]);
+    }
+    d.swap(next);
+    out.pair_interactions += in.pairs.size();
+    const bool done = !(acc_sum > 0) || sum / acc_sum < in.options.tolerance;
+    if (!done && pass + 1 != in.options.passes) {
+      prev = sum;
+      return false;
+    }
+    const double q = prev > 0 ? sum / prev : 0.0;
+    if (in.geometric_tail && q > 0 && q < 1) {
+      for (size_t j = 0; j < acc.size(); ++j) acc[j] += d[j] * (q / (1 - q));
+    }
+    return true;
+  }
+
+  void finish(PointCloudResult& out) const {
+    out.co_sky.resize(acc.size());
+    for (size_t j = 0; j < acc.size(); ++j) out.co_sky[j] = max(acc[j] + Rgb(beam[j]), Rgb(0.0));
+  }
+
+  std::vector<Rgb> d, next, acc;  // this order, the next, all so far
+  std::vector<double> beam;
+  double prev = 0;  // lum of the order before d
+};
+
+// What each source emits in one pass, for the gather loop: the sun's order and the sky's, three
+// floats each (Delta_i k_i / (4 pi), with R = 0 in the reduced medium).
+struct PassEmission {
+  std::array<float, 3> sun, sky;
+};
+
+// One pass over the pairs: Delta^{k+1} of the sun's orders where kSun (in the reduced medium's
+// passes, where R = 0 everywhere: every source emits isotropically and its flux is only summed,
+// deferredSunFlux) and the sky's next order where kSky. Each pair costs a weighted sum of three
+// floats for each: no direction, no phase; and the two share one read of the pair arrays, which
+// bounds these passes more than their arithmetic.
+template <bool kSun, bool kSky>
+void gatherReducedPass(const PassInputs& in, const std::vector<double>& self,
+                       const std::vector<PassEmission>& emit, int pass, SunOrders& o,
+                       SkyOrders* sky) {
   const NeighbourPairs& pairs = in.pairs;
-  forEachDestination(in, n, pass, [&](size_t j) {
-    double sr = 0, sg = 0, sb = 0;
+  forEachDestination(in, emit.size(), pass, [&](size_t j) {
+    double sr = 0, sg = 0, sb = 0, kr = 0, kg = 0, kb = 0;
     const uint64_t e = pairs.offset[j + 1];
     for (uint64_t k = pairs.offset[j]; k < e; ++k) {
-      const std::array<float, 3>& s = emit[pairs.source[k]];
+      const PassEmission& s = emit[pairs.source[k]];
       const double w = pairs.weight[k];
-      sr += w * s[0];
-      sg += w * s[1];
-      sb += w * s[2];
+      if constexpr (kSun) {
+        sr += w * s.sun[0];
+        sg += w * s.sun[1];
+        sb += w * s.sun[2];
+      }
+      if constexpr (kSky) {
+        kr += w * s.sky[0];
+        kg += w * s.sky[1];
+        kb += w * s.sky[2];
+      }
     }
-    const Rgb in_light = Rgb(sr, sg, sb) + o.delta[j] * self[j];
-    o.next[j] = in.ts.albedo * in_light;
-    o.incoming[j] = luminance(in_light);
-    o.next_dir[j] = Vec3(0.0);
-    o.next_ratio[j] = 0;
+    if constexpr (kSun) {
+      const Rgb in_light = Rgb(sr, sg, sb) + o.delta[j] * self[j];
+      o.next[j] = in.ts.albedo * in_light;
+      o.incoming[j] = luminance(in_light);
+      o.next_dir[j] = Vec3(0.0);
+      o.next_ratio[j] = 0;
+    }
+    if constexpr (kSky) sky->next[j] = in.ts.albedo * (Rgb(kr, kg, kb) + sky->d[j] * self[j]);
   });
 }
 
@@ -364,54 +429,76 @@ void finishSunOrders(const PassInputs& in, SunOrders& o, PointCloudResult& out) 
   }
 }
 
-// Sky light (header, step 8): the same transfers for a uniform sky of unit radiance.
-void runSkyOrders(const PassInputs& in, const std::vector<double>& self, PointCloudResult& out) {
-  const PointCloud& pc = out.cloud;
-  const size_t n = pc.size();
-  const NeighbourPairs& pairs = in.pairs;
-  std::vector<Rgb> d(n), nx(n), acc(n, Rgb(0.0)), src_sky(n);
-  std::vector<double> beam(n);
-  for (size_t j = 0; j < n; ++j) {
-    const double vr = sampleTrilinear(*in.grid, in.escape_visibility->data(), pc.position[j]);
-    const double vt = sampleTrilinear(*in.grid, in.true_visibility->data(), pc.position[j]);
-    d[j] = Rgb(4 * kPi * vr);
-    beam[j] = 4 * kPi * (vr - vt);  // signed, as the sun's beam (finishSunOrders)
+// The reduced medium's passes (every phase with g != 0): the sun's orders and, with a sky, the
+// sky's, gathered together while both run; then the sun's flux of all of them at once.
+void runReducedPasses(const PassInputs& in, const std::vector<double>& self, SunOrders& o,
+                      PointCloudResult& out) {
+  const size_t n = o.co.size();
+  std::optional<SkyOrders> sky;
+  if (in.true_visibility) sky.emplace(in, out.cloud);
+  std::vector<PassEmission> emit(n);
+  o.emitted.assign(n, 0.0);
+  o.last_emitted.assign(n, 0.0);
+  bool sun_on = true, sky_on = sky.has_value();
+  double prev_sum = out.order_luminance.front();
+  int last = 0;
+  for (int pass = 0; pass < in.options.passes && (sun_on || sky_on); ++pass) {
+    last = pass;
+    for (size_t i = 0; i < n; ++i) {
+      if (sun_on) {
+        const Rgb b = o.delta[i] * (kInv4Pi * double(out.transfer_scale[i]));
+        emit[i].sun = {float(b.x), float(b.y), float(b.z)};
+        const double lum = luminance(Rgb(emit[i].sun[0], emit[i].sun[1], emit[i].sun[2]));
+        o.emitted[i] += lum;
+        o.last_emitted[i] = lum;
+      }
+      if (sky_on) emit[i].sky = sky->emission(out, i);
+    }
+    if (sun_on && sky_on) {
+      gatherReducedPass<true, true>(in, self, emit, pass, o, &*sky);
+    } else if (sun_on) {
+      gatherReducedPass<true, false>(in, self, emit, pass, o, nullptr);
+    } else {
+      gatherReducedPass<false, true>(in, self, emit, pass, o, &*sky);
+    }
+    if (sun_on) {
+      double sum = 0;
+      sun_on = !addSunOrder(in, pass, prev_sum, o, out, &sum);
+      prev_sum = sum;
+    }
+    if (sky_on) sky_on = !sky->add(in, pass, out);
   }
-  double prev = 0;
+  const double q = out.tail_ratio;
+  deferredSunFlux(in, out, last, q > 0 ? q / (1 - q) : 0.0, o);
+  finishSunOrders(in, o, out);
+  if (sky) sky->finish(out);
+}
+
+// The beam model's passes (g = 0, where the reduction is the identity): the sun's orders with
+// their R and L, then the sky's orders.
+void runBeamPasses(const PassInputs& in, const PhaseLut& lut, const std::vector<double>& self,
+                   SunOrders& o, PointCloudResult& out) {
+  const size_t n = o.co.size();
+  std::vector<NormalisedSource> src(n);
+  double prev_sum = out.order_luminance.front();
   for (int pass = 0; pass < in.options.passes; ++pass) {
-    for (size_t i = 0; i < n; ++i) src_sky[i] = d[i] * (out.transfer_scale[i] * kInv4Pi);
-    forEachDestination(in, n, pass, [&](size_t j) {
-      double sr = 0, sg = 0, sb = 0;
-      const uint64_t e = pairs.offset[j + 1];
-      for (uint64_t q = pairs.offset[j]; q < e; ++q) {
-        const Rgb& s = src_sky[pairs.source[q]];
-        const double w = pairs.weight[q];
-        sr += w * s.x;
-        sg += w * s.y;
-        sb += w * s.z;
-      }
-      nx[j] = in.ts.albedo * (Rgb(sr, sg, sb) + d[j] * self[j]);
-    });
-    double sum = 0, acc_sum = 0;
-    for (size_t j = 0; j < n; ++j) {
-      acc[j] += nx[j];
-      sum += luminance(nx[j]);
-      acc_sum += luminance(acc[j]);
-    }
-    d.swap(nx);
-    out.pair_interactions += pairs.size();
-    const bool done = !(acc_sum > 0) || sum / acc_sum < in.options.tolerance;
-    if (done || pass + 1 == in.options.passes) {
-      const double q = prev > 0 ? sum / prev : 0.0;
-      if (in.geometric_tail && q > 0 && q < 1) {
-        for (size_t j = 0; j < n; ++j) acc[j] += d[j] * (q / (1 - q));
-      }
-      break;
-    }
-    prev = sum;
+    gatherSunOrder(in, lut, self, out, pass, o, src);
+    double sum = 0;
+    if (addSunOrder(in, pass, prev_sum, o, out, &sum)) break;
+    prev_sum = sum;
   }
-  out.co_sky.resize(n);
-  for (size_t j = 0; j < n; ++j) out.co_sky[j] = max(acc[j] + Rgb(beam[j]), Rgb(0.0));
+  finishSunOrders(in, o, out);
+  if (!in.true_visibility) return;
+  PassInputs sky_in = in;
+  sky_in.cancelled = in.sky_cancelled;
+  SkyOrders sky(in, out.cloud);
+  std::vector<PassEmission> emit(n);
+  for (int pass = 0; pass < in.options.passes; ++pass) {
+    for (size_t i = 0; i < n; ++i) emit[i].sky = sky.emission(out, i);
+    gatherReducedPass<false, true>(sky_in, self, emit, pass, o, &sky);
+    if (sky.add(in, pass, out)) break;
+  }
+  sky.finish(out);
 }
 
 // The normalised rule (derivation in the header). The passes run on the similarity-reduced
@@ -420,10 +507,8 @@ void runSkyOrders(const PassInputs& in, const std::vector<double>& self, PointCl
 void runNormalised(const PassInputs& in, PointCloudResult& out) {
   const PointCloud& pc = out.cloud;
   const size_t n = pc.size();
-  const PhaseLut lut(*in.medium.phase);
   const std::vector<double> self = scaledOwnSpheres(in, out);
   SunOrders o(n, in.sun_dir);
-  std::vector<NormalisedSource> src(n);
   // Order 0 of the reduced problem: the sun's beam attenuated by the reduced extinction, which
   // counts light scattered into the forward peak as not scattered: Ci' = Ci^s.
   double order_sum = 0;
@@ -434,33 +519,10 @@ void runNormalised(const PassInputs& in, PointCloudResult& out) {
   }
   std::fill(o.ratio.begin(), o.ratio.end(), in.ts.isotropic ? 0.0 : 1.0);
   out.order_luminance.assign(1, order_sum);
-  double prev_sum = order_sum;
-  std::vector<std::array<float, 3>> emit;
   if (in.ts.isotropic) {
-    emit.resize(n);
-    o.emitted.assign(n, 0.0);
-    o.last_emitted.assign(n, 0.0);
-  }
-  int pass = 0;
-  for (; pass < in.options.passes; ++pass) {
-    if (in.ts.isotropic) {
-      gatherIsotropicSunOrder(in, self, out, pass, o, emit);
-    } else {
-      gatherSunOrder(in, lut, self, out, pass, o, src);
-    }
-    double sum = 0;
-    if (addSunOrder(in, pass, prev_sum, o, out, &sum)) break;
-    prev_sum = sum;
-  }
-  if (in.ts.isotropic) {
-    const double q = out.tail_ratio;
-    deferredSunFlux(in, out, std::min(pass, in.options.passes - 1), q > 0 ? q / (1 - q) : 0.0, o);
-  }
-  finishSunOrders(in, o, out);
-  if (in.true_visibility) {
-    PassInputs sky = in;
-    sky.cancelled = in.sky_cancelled;
-    runSkyOrders(sky, self, out);
+    runReducedPasses(in, self, o, out);
+  } else {
+    runBeamPasses(in, PhaseLut(*in.medium.phase), self, o, out);
   }
 }
 
@@ -701,13 +763,14 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   const int passes = options.passes;
   PassInputs in{pairs, medium, sun_dir, options, geometric_tail};
   if (progress) {
-    // The sun's passes, then as many for the sky: one range, never going back.
+    // The sun's passes, then as many for the sky: one range, never going back. The reduced
+    // medium's passes gather both at once.
     const bool sky = normalised && options.sky && sky_visibility.size() == grid.voxelCount();
-    const double all = passes * (sky ? 2.0 : 1.0);
-    in.cancelled = [&progress, passes, all, sky](double f, int pass) {
-      const std::string stage =
-          std::string(sky ? "sun pass " : "pass ") + str(pass + 1) + "/" + str(passes);
-      return !progress(0.3 + 0.7 * (pass + f) / all, stage);
+    const bool apart = sky && !ts.isotropic;
+    const double all = passes * (apart ? 2.0 : 1.0);
+    const std::string name = apart ? "sun pass " : sky ? "sun and sky pass " : "pass ";
+    in.cancelled = [&progress, passes, all, name](double f, int pass) {
+      return !progress(0.3 + 0.7 * (pass + f) / all, name + str(pass + 1) + "/" + str(passes));
     };
     in.sky_cancelled = [&progress, passes, all](double f, int pass) {
       const std::string stage = "sky pass " + str(pass + 1) + "/" + str(passes);

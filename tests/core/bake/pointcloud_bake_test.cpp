@@ -496,6 +496,51 @@ TEST(NormalisedRule, TinyRadiusSkyOrdersAreTheOwnSphereSeries) {
   }
 }
 
+// The reduced medium's passes gather the sun's orders and the sky's in one loop over the pairs.
+// Against the isotropic phase's passes, which run apart (g = 0 takes the beam model, the same
+// physics for an isotropic phase), a phase of g = 1e-4 gives the same light to about 1e-4; and
+// the sun's light is the same bits with the sky's passes or without them.
+TEST(NormalisedRule, SunAndSkyPassesTogetherMatchThemApart) {
+  const Lattice l = sphereLattice(1, 1, 16);
+  const double ext = 3;
+  BakedLight vis;
+  vis.grid = l.grid;
+  vis.density = l.density;
+  computeSkyVisibility(vis, ext);
+  const std::vector<float>& v = vis.channels.at(bake_grids::kSkyVisibility).data;
+  PointcloudOptions o;
+  o.points = 3000;
+  o.passes = 6;
+  o.tolerance = 1e-9;
+  o.sky = true;
+  auto run = [&](std::shared_ptr<const PhaseFunction> phase, bool sky) {
+    PointcloudOptions oo = o;
+    oo.sky = sky;
+    return runPointcloud(l.grid, l.density, sky ? v : std::vector<float>(),
+                         sphereMedium(1, ext, Rgb(0.9), phase), Vec3(0, 0, 1), oo);
+  };
+  const auto hg = std::make_shared<HenyeyGreensteinPhase>(1e-4);
+  const PointCloudResult apart = run(isotropic(), true), together = run(hg, true);
+  ASSERT_EQ(together.co_sky.size(), apart.co_sky.size());
+  double sky = 0, sky_diff = 0, sun = 0, sun_diff = 0;
+  for (size_t j = 0; j < apart.cloud.size(); ++j) {
+    sky += apart.co_sky[j].x;
+    sky_diff += std::abs(together.co_sky[j].x - apart.co_sky[j].x);
+    sun += apart.co[j].x;
+    sun_diff += std::abs(together.co[j].x - apart.co[j].x);
+  }
+  EXPECT_GT(sky, 0);
+  EXPECT_LT(sky_diff, 5e-4 * sky);
+  EXPECT_LT(sun_diff, 5e-4 * sun);
+  const auto hg6 = std::make_shared<HenyeyGreensteinPhase>(0.6);
+  const PointCloudResult with_sky = run(hg6, true), without = run(hg6, false);
+  for (size_t j = 0; j < with_sky.cloud.size(); ++j) {
+    ASSERT_EQ(with_sky.co[j], without.co[j]) << j;
+    ASSERT_EQ(with_sky.light_dir[j], without.light_dir[j]) << j;
+    ASSERT_EQ(with_sky.mie_ratio[j], without.mie_ratio[j]) << j;
+  }
+}
+
 TEST(NormalisedRule, MieRatioIsHigherOnTheShadowSide) {
   // Seed 000's Figure 8: on the lit side light arrives forward and back scattered (more
   // isotropic), in the shadow it flows on, away from the sun (more beam-like).
@@ -756,6 +801,31 @@ TEST(Pointcloud, ProgressGoesOnThroughTheSkysPasses) {
   EXPECT_TRUE(sun);
   EXPECT_TRUE(sky);
   EXPECT_DOUBLE_EQ(last, 1.0);
+}
+
+// With a phase the passes reduce, the sun's and the sky's orders share their passes: one range.
+TEST(Pointcloud, ProgressCountsTheSharedPassesOnce) {
+  const Medium m = sphereMedium(1, 3, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.7));
+  PointcloudOptions o = smallBake();
+  o.tolerance = 1e-9;  // every pass runs
+  o.sky = true;
+  double last = -1;
+  bool monotone = true, last_pass = false;
+  auto progress = [&](double f, const std::string& stage) {
+    monotone = monotone && f >= last && f <= 1;
+    last = f;
+    last_pass = last_pass || stage.rfind("sun and sky pass 8/8", 0) == 0;
+    return true;
+  };
+  bakePointcloud(m, Vec3(0, 0, 1), o, progress);
+  EXPECT_TRUE(monotone);
+  EXPECT_TRUE(last_pass);
+  EXPECT_DOUBLE_EQ(last, 1.0);
+  // A cancel during the shared passes stops the bake.
+  auto cancel = [&](double, const std::string& stage) {
+    return stage.rfind("sun and sky pass 3/", 0) != 0;
+  };
+  EXPECT_THROW(bakePointcloud(m, Vec3(0, 0, 1), o, cancel), Cancelled);
 }
 
 // Speed on the Stanford bunny (not run by ctest): 100k points, 8 passes, 1 and 2 threads.
