@@ -31,31 +31,37 @@ class PointGrid {
   template <class F>
   void forEachWithin(const Vec3& p, double radius, F&& f) const {
     const double r2 = radius * radius;
-    const Vec3 lo = (p - Vec3(radius) - origin_) / cell_;
-    const Vec3 hi = (p + Vec3(radius) - origin_) / cell_;
-    const int j0 = clampCell(lo.y, ny_), j1 = clampCell(hi.y, ny_);
-    const int k0 = clampCell(lo.z, nz_), k1 = clampCell(hi.z, nz_);
-    const Vec3 q = (p - origin_) / cell_;  // in cells
-    for (int k = k0; k <= k1; ++k) {
-      const double dz = gapToCell(q.z, k, nz_) * cell_;
-      for (int j = j0; j <= j1; ++j) {
-        // Only the part of the row within the sphere's chord at the row's nearest y and z: the
-        // box's corners hold most of its volume. A margin keeps every point the distance test
-        // below would take (it alone decides, so the sequence is the full box's, filtered).
-        const double dy = gapToCell(q.y, j, ny_) * cell_;
-        const double h2 = r2 - dy * dy - dz * dz;
-        if (h2 < -1e-9 * r2) continue;
-        const double h = std::sqrt(std::max(h2, 0.0)) * (1 + 1e-9) + 1e-9 * radius;
-        const int i0 = clampCell(q.x - h / cell_, nx_), i1 = clampCell(q.x + h / cell_, nx_);
-        const size_t row = (size_t(k) * size_t(ny_) + size_t(j)) * size_t(nx_);
-        const uint32_t b = start_[row + size_t(i0)], e = start_[row + size_t(i1) + 1];
-        for (uint32_t s = b; s < e; ++s) {
-          const Vec3 d = sorted_[s] - p;
-          const double d2 = dot(d, d);
-          if (d2 <= r2) f(order_[s], d2);
-        }
+    forEachRow(p, radius, [&](uint32_t b, uint32_t e) {
+      for (uint32_t s = b; s < e; ++s) {
+        const Vec3 d = sorted_[s] - p;
+        const double d2 = dot(d, d);
+        if (d2 <= r2) f(order_[s], d2);
       }
-    }
+    });
+  }
+
+  /// A point found by collectWithin: its index and squared distance.
+  struct Found {
+    uint32_t index;
+    double d2;
+  };
+
+  /// Appends to `found` the points forEachWithin visits, in its order. The distance test is a
+  /// select, not a branch: about every other candidate of a query's cells is outside the
+  /// sphere, and a branch on it mispredicts as often.
+  void collectWithin(const Vec3& p, double radius, std::vector<Found>& found) const {
+    const double r2 = radius * radius;
+    forEachRow(p, radius, [&](uint32_t b, uint32_t e) {
+      size_t at = found.size();
+      found.resize(at + (e - b));
+      for (uint32_t s = b; s < e; ++s) {
+        const Vec3 d = sorted_[s] - p;
+        const double d2 = dot(d, d);
+        found[at] = {order_[s], d2};
+        at += d2 <= r2 ? 1 : 0;
+      }
+      found.resize(at);
+    });
   }
 
   /// Calls f(index, position) for every point in the cells that overlap the box [lo, hi]: every
@@ -84,6 +90,33 @@ class PointGrid {
   double cellSize() const { return cell_; }
 
  private:
+  // Calls rows(b, e) for the sorted slots [b, e) of each row of cells (z, then y ascending) that
+  // can hold points within `radius` of p. Only the part of a row within the sphere's chord at the
+  // row's nearest y and z: the box's corners hold most of its volume. A margin keeps every
+  // point the caller's distance test would take (it alone decides, so the sequence is the full
+  // box's, filtered).
+  template <class Rows>
+  void forEachRow(const Vec3& p, double radius, Rows&& rows) const {
+    const double r2 = radius * radius;
+    const Vec3 lo = (p - Vec3(radius) - origin_) / cell_;
+    const Vec3 hi = (p + Vec3(radius) - origin_) / cell_;
+    const int j0 = clampCell(lo.y, ny_), j1 = clampCell(hi.y, ny_);
+    const int k0 = clampCell(lo.z, nz_), k1 = clampCell(hi.z, nz_);
+    const Vec3 q = (p - origin_) / cell_;  // in cells
+    for (int k = k0; k <= k1; ++k) {
+      const double dz = gapToCell(q.z, k, nz_) * cell_;
+      for (int j = j0; j <= j1; ++j) {
+        const double dy = gapToCell(q.y, j, ny_) * cell_;
+        const double h2 = r2 - dy * dy - dz * dz;
+        if (h2 < -1e-9 * r2) continue;
+        const double h = std::sqrt(std::max(h2, 0.0)) * (1 + 1e-9) + 1e-9 * radius;
+        const int i0 = clampCell(q.x - h / cell_, nx_), i1 = clampCell(q.x + h / cell_, nx_);
+        const size_t row = (size_t(k) * size_t(ny_) + size_t(j)) * size_t(nx_);
+        rows(start_[row + size_t(i0)], start_[row + size_t(i1) + 1]);
+      }
+    }
+  }
+
   // Distance, in cells, from coordinate c to cell `i` of an axis of n (the outer cells reach to
   // infinity, as clampCell puts everything beyond them there).
   static double gapToCell(double c, int i, int n) {
@@ -185,17 +218,20 @@ NeighbourPairs buildNeighbourPairs(const PointGrid& grid, const std::vector<Vec3
           blk.count.clear();
           blk.within = 0;
           const size_t d0 = chunk + size_t(b) * kBlock, d1 = std::min(chunk_end, d0 + kBlock);
+          std::vector<PointGrid::Found> found;
           for (size_t dst = d0; dst < d1; ++dst) {
             uint32_t count = 0;
-            grid.forEachWithin(points[dst], radius, [&](uint32_t src, double d2) {
-              if (src == dst) return;
+            found.clear();
+            grid.collectWithin(points[dst], radius, found);
+            for (const PointGrid::Found& f : found) {
+              if (f.index == dst) continue;
               ++blk.within;
-              const float w = weight_fn(uint32_t(dst), src, std::sqrt(d2));
-              if (!(w > 0)) return;
-              blk.source.push_back(src);
+              const float w = weight_fn(uint32_t(dst), f.index, std::sqrt(f.d2));
+              if (!(w > 0)) continue;
+              blk.source.push_back(f.index);
               blk.weight.push_back(w);
               ++count;
-            });
+            }
             blk.count.push_back(count);
           }
         },

@@ -64,8 +64,9 @@ struct PassInputs {
   const PointcloudOptions& options;
   bool geometric_tail;
   // Polled with (fraction of the pass, pass) between chunks of destinations; may be empty.
-  // The sky's passes (normalised rule) poll sky_cancelled instead, so progress goes on past
-  // the sun's passes rather than starting them again.
+  // The sky's passes of the beam model (normalised rule, g = 0), which run after the sun's,
+  // poll sky_cancelled instead, so progress goes on past the sun's passes rather than starting
+  // them again; the reduced medium's passes gather the sun and the sky together.
   std::function<bool(double, int)> cancelled = {};
   std::function<bool(double, int)> sky_cancelled = {};
   // The normalised rule only: the lattice, the reduced medium's sky visibility (the escape

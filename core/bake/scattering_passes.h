@@ -88,7 +88,9 @@
 //    the scattered sky fluence is Co_sky = 4 pi (V' - V) + sum_k Delta'^k_sky, V the true
 //    visibility (whose direct light is the views' ambient term). Views add
 //    sigma_s * mean sky radiance * Co_sky / (4 pi): isotropic, as the sky's net flux is not kept.
-//    Only with options.sky (a black sky bakes nothing).
+//    Only with options.sky (a black sky bakes nothing). In the reduced medium (g != 0) each pass
+//    gathers both lights' orders in one loop over the pairs, and the sun's flux of every order
+//    in one loop after the last (it is linear in what each source emitted, summed over orders).
 // Check (a test): a thin homogeneous sphere of radius a, isotropic, albedo 1: the second order
 // (first scattered) fluence at the centre is Int sigma_s / (4 pi d^2) dV = sigma_s a.
 //
