@@ -4,6 +4,7 @@
 // overflow or gigabytes of memory. Header-only, beside exit_codes.h.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -26,7 +27,29 @@ struct JsonLimits {
 template <class Json = nlohmann::json>
 Json parseJsonLimited(
     const std::string& text, const std::string& what, const JsonLimits& limits = {},
-    const std::function<void(int, typename Json::parse_event_t, Json&)>& on_event = {}) {
+    const std::function<void(int, typename Json::parse_event_t, Json&)>& on_event = {});
+
+/// Where in `text` the token a position-less parse error quotes ("number overflow parsing
+/// '1e999'") lies, as " (key "k", line L, column C)"; empty where the message has a position or
+/// quotes nothing.
+inline std::string whereInJson(const std::string& text, const std::string& message,
+                               const std::string& last_key) {
+  if (message.find(" at line ") != std::string::npos) return "";
+  const size_t open = message.find('\''), close = message.rfind('\'');
+  if (open == std::string::npos || close <= open + 1) return "";
+  const size_t at = text.find(message.substr(open + 1, close - open - 1));
+  if (at == std::string::npos) return "";
+  const size_t line_start = text.rfind('\n', at);
+  const size_t line = size_t(std::count(text.begin(), text.begin() + int64_t(at), '\n')) + 1;
+  const size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
+  return std::string(" (") + (last_key.empty() ? "" : "after key \"" + last_key + "\", ") +
+         "line " + std::to_string(line) + ", column " + std::to_string(column) + ")";
+}
+
+template <class Json>
+Json parseJsonLimited(
+    const std::string& text, const std::string& what, const JsonLimits& limits,
+    const std::function<void(int, typename Json::parse_event_t, Json&)>& on_event) {
   if (text.size() > limits.max_bytes) {
     throw InputError(what + ": " + std::to_string(text.size()) + " bytes of JSON, more than the " +
                      std::to_string(limits.max_bytes) + " allowed");
@@ -36,8 +59,10 @@ Json parseJsonLimited(
     throw InputError(what + ": invalid JSON: a NUL byte at offset " + std::to_string(nul));
   }
   size_t depth = 0;
+  std::string last_key;  // for errors nlohmann reports without a position (number overflow)
   auto callback = [&](int level, typename Json::parse_event_t event, Json& parsed) {
     using E = typename Json::parse_event_t;
+    if (event == E::key && parsed.is_string()) last_key = parsed.template get<std::string>();
     if (event == E::object_start || event == E::array_start) {
       if (++depth > limits.max_depth) {
         throw InputError(what + ": nested deeper than " + std::to_string(limits.max_depth) +
@@ -57,7 +82,7 @@ Json parseJsonLimited(
     if (message.rfind("[json.exception", 0) == 0 && tag != std::string::npos) {
       message = message.substr(tag + 2);
     }
-    throw InputError(what + ": invalid JSON: " + message);
+    throw InputError(what + ": invalid JSON: " + message + whereInJson(text, message, last_key));
   }
 }
 

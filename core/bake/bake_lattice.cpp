@@ -122,6 +122,18 @@ BakeGrid bakeLatticeGeometry(const Bounds3& b, int resolution, const std::string
     throw InputError("volume: '" + what + "' has zero extent; nothing to bake");
   }
   const double h = longest / resolution;
+  // Far from the origin, world coordinates keep few digits of a voxel (a sphere of radius 1 at
+  // 1e40 had no extent along x, and its pointcloud bake crashed): beyond 4e9 voxels, refused.
+  double far = 0;
+  for (int a = 0; a < 3; ++a) far = std::max({far, std::abs(b.min[a]), std::abs(b.max[a])});
+  if (!(far / h <= kMaxLatticeOffsetVoxels)) {
+    throw InputError("volume: '" + what + "' reaches " + str(far) +
+                     " world units from the origin, more than " + str(kMaxLatticeOffsetVoxels) +
+                     " of its lattice's voxels of " + str(h) +
+                     " (their coordinates would lose their precision); move it nearer the "
+                     "origin or use a coarser " +
+                     knob);
+  }
   BakeGrid g;
   g.voxel_size = h;
   // Voxels covering the bounds, plus one empty voxel of margin on every face, centred on the

@@ -42,6 +42,9 @@ enum class LatticeSampling {
 BakedLight makeBakeLattice(const DensityField& field, int resolution,
                            LatticeSampling sampling = LatticeSampling::kBoxMean);
 
+/// How far from the origin, in its own voxels, a lattice may reach.
+constexpr double kMaxLatticeOffsetVoxels = 4e9;
+
 /// The geometry alone of such a lattice over world `bounds` (`what` describes the volume in
 /// errors, `knob` names the resolution's field): InputError as makeBakeLattice.
 BakeGrid bakeLatticeGeometry(const Bounds3& bounds, int resolution, const std::string& what,

@@ -26,7 +26,8 @@ class PhaseLut {
   /// which it calls from several threads at once.
   PhaseLut(const std::function<Rgb(double)>& p, int bins);
   Rgb eval(double cos_theta) const {
-    const double c = cos_theta > 1 ? 1 : (cos_theta < -1 ? -1 : cos_theta);
+    // NaN reads as -1 rather than an index outside the table.
+    const double c = cos_theta >= -1 ? (cos_theta > 1 ? 1 : cos_theta) : -1;
     const double x =
         c >= 0 ? std::sqrt(0.5 * (1 - c)) * scale_ : 2 * bins_ - std::sqrt(0.5 * (1 + c)) * scale_;
     int i = int(x);

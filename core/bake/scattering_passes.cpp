@@ -93,6 +93,11 @@ struct PaperSource {
   float cr, cg, cb;  // Ci
 };
 
+// A point's position relative to the cloud's first point: the gather loops keep positions in
+// single precision and use only their differences, and a cloud far from the origin kept none
+// of them in world coordinates (floats 1e6 world units out are 0.06 apart).
+Vec3 localPosition(const PointCloud& pc, size_t i) { return pc.position[i] - pc.position.front(); }
+
 // Runs `body(dst)` for every destination of a pass, in parallel, polling the cancellation.
 template <class Body>
 void forEachDestination(const PassInputs& in, size_t n, int pass, const Body& body) {
@@ -288,7 +293,7 @@ void deferredSunFlux(const PassInputs& in, const PointCloudResult& out, int last
   const size_t n = pc.size();
   std::vector<std::array<float, 4>> src(n);
   for (size_t i = 0; i < n; ++i) {
-    const Vec3 p = pc.position[i];
+    const Vec3 p = localPosition(pc, i);
     src[i] = {float(p.x), float(p.y), float(p.z), float(o.emitted[i] + tail * o.last_emitted[i])};
   }
   const NeighbourPairs& pairs = in.pairs;
@@ -299,8 +304,8 @@ void deferredSunFlux(const PassInputs& in, const PointCloudResult& out, int last
       0, int64_t(n),
       [&](int64_t jj) {
         const size_t j = size_t(jj);
-        const float qx = float(pc.position[j].x), qy = float(pc.position[j].y),
-                    qz = float(pc.position[j].z);
+        const Vec3 q = localPosition(pc, j);
+        const float qx = float(q.x), qy = float(q.y), qz = float(q.z);
         double fx = 0, fy = 0, fz = 0;
         const uint64_t e = pairs.offset[j + 1];
         for (uint64_t k = pairs.offset[j]; k < e; ++k) {
@@ -325,7 +330,7 @@ void gatherSunOrder(const PassInputs& in, const PhaseLut& lut, const std::vector
   const size_t n = pc.size();
   bool beam = false;
   for (size_t i = 0; i < n; ++i) {
-    const Vec3 p = pc.position[i];
+    const Vec3 p = localPosition(pc, i);
     const double r = o.ratio[i];
     const Vec3 l = r > 0 ? o.dir[i] : Vec3(0.0);
     const double k = out.transfer_scale[i];
@@ -338,7 +343,7 @@ void gatherSunOrder(const PassInputs& in, const PhaseLut& lut, const std::vector
   forEachDestination(in, n, pass, [&](size_t j) {
     double sr = 0, sg = 0, sb = 0, fx = 0, fy = 0, fz = 0;
     gatherTransfers(
-        in.pairs, src, beam ? &lut : nullptr, j, pc.position[j],
+        in.pairs, src, beam ? &lut : nullptr, j, localPosition(pc, j),
         [&](const NormalisedSource& s, double w, const Rgb& ph, float dx, float dy, float dz) {
           const double jr = w * (s.ar * ph.x + s.br), jg = w * (s.ag * ph.y + s.bg),
                        jb = w * (s.ab * ph.z + s.bb);
@@ -545,14 +550,14 @@ void runPaper(const PassInputs& in, PointCloudResult& out) {
   out.order_luminance.assign(1, ci_sum);
   for (int pass = 0; pass < in.options.passes; ++pass) {
     for (size_t i = 0; i < n; ++i) {
-      const Vec3 p = pc.position[i], l = dir[i];
+      const Vec3 p = localPosition(pc, i), l = dir[i];
       src[i] = {float(p.x), float(p.y),      float(p.z),     float(l.x),     float(l.y),
                 float(l.z), float(ratio[i]), float(ci[i].x), float(ci[i].y), float(ci[i].z)};
     }
     forEachDestination(in, n, pass, [&](size_t j) {
       double cr = 0, cg = 0, cb = 0, lx = 0, ly = 0, lz = 0;
       gatherTransfers(
-          in.pairs, src, &lut, j, pc.position[j],
+          in.pairs, src, &lut, j, localPosition(pc, j),
           [&](const PaperSource& s, double ad, const Rgb& ph, float dx, float dy, float dz) {
             const Rgb am = ph * (4 * kPi);
             const double r = s.r;

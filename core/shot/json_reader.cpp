@@ -220,6 +220,18 @@ Vec3 Reader::vec3(const Json& v, const std::string& ptr) const {
   return {number(v[0], ptr + "/0"), number(v[1], ptr + "/1"), number(v[2], ptr + "/2")};
 }
 
+Vec3 Reader::point(const Json& v, const std::string& ptr) const {
+  const Vec3 p = vec3(v, ptr);
+  for (int a = 0; a < 3; ++a) {
+    if (!(std::abs(p[a]) <= kMaxCoordinate)) {
+      fail(ptr + "/" + std::to_string(a),
+           "must be within +-" + exactNumber(kMaxCoordinate) + " world units, got " +
+               exactNumber(p[a]) + " (distances between such points overflow or lose every digit)");
+    }
+  }
+  return p;
+}
+
 Rgb Reader::rgb(const Json& v, const std::string& ptr, double lo, double hi,
                 bool allow_scalar) const {
   if (allow_scalar && !v.is_array()) {

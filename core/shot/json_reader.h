@@ -14,6 +14,15 @@
 
 namespace cloudbake::shotjson {
 
+/// World coordinates the shot may hold (camera positions, the centres of analytic volumes):
+/// far beyond any scene's scale, and small enough that distances between points stay finite
+/// and keep their digits.
+constexpr double kMaxCoordinate = 1e15;
+/// An analytic volume's centre lies within this many times its size of the origin: beyond,
+/// the lattices' voxels lose their precision in world coordinates (a sphere of radius 1 at 1e40
+/// had a zero extent along x).
+constexpr double kMaxOffsetOverSize = 1e6;
+
 using Json = nlohmann::json;
 
 /// Escapes one reference token of a JSON pointer ("~" -> "~0", "/" -> "~1").
@@ -47,6 +56,8 @@ class Reader {
   bool boolean(const Json& v, const std::string& ptr) const;
   std::string string(const Json& v, const std::string& ptr) const;
   Vec3 vec3(const Json& v, const std::string& ptr) const;  ///< [x, y, z], finite
+  /// A point in world units: vec3 with every coordinate within +-kMaxCoordinate.
+  Vec3 point(const Json& v, const std::string& ptr) const;
   /// RGB triple with each channel in [lo, hi]; a single number when `allow_scalar`.
   Rgb rgb(const Json& v, const std::string& ptr, double lo, double hi,
           bool allow_scalar = false) const;

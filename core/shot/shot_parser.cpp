@@ -254,8 +254,8 @@ Camera parseView(const Object& o) {
   } else {
     r.fail(c.path("type"), "unknown camera type '" + type + "' (known: perspective, orthographic)");
   }
-  cam.position = r.vec3(c.required("position"), c.path("position"));
-  cam.look_at = r.vec3(c.required("look_at"), c.path("look_at"));
+  cam.position = r.point(c.required("position"), c.path("position"));
+  cam.look_at = r.point(c.required("look_at"), c.path("look_at"));
   if (auto* v = c.find("up")) cam.up = r.vec3(*v, c.path("up"));
   const Vec3 forward = cam.look_at - cam.position;
   if (!(length(forward) > 0) || !std::isfinite(length(forward))) {

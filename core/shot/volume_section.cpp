@@ -1,5 +1,6 @@
 // Shot format v1: the `volume` section (box, sphere, vdb, mesh, procedural, sequence).
 #include <algorithm>
+#include <cmath>
 #include <string>
 
 #include "core/format.h"
@@ -43,11 +44,24 @@ BoxVolumeSpec parseBox(const Object& o) {
   return b;
 }
 
+// An analytic volume's centre within kMaxOffsetOverSize times its size of the origin.
+void checkOffset(const Reader& r, const std::string& ptr, const Vec3& center, double size,
+                 const char* size_name) {
+  const double offset = std::max({std::abs(center.x), std::abs(center.y), std::abs(center.z)});
+  if (offset > kMaxOffsetOverSize * size) {
+    r.fail(ptr, "lies " + exactNumber(offset) + " world units from the origin, more than " +
+                    exactNumber(kMaxOffsetOverSize) + " times its " + size_name + " (" +
+                    exactNumber(size) +
+                    "): its voxels would lose their precision; move the scene nearer the origin");
+  }
+}
+
 SphereVolumeSpec parseSphere(const Object& o) {
   const Reader& r = o.reader();
   SphereVolumeSpec s;
-  s.center = r.vec3(o.required("center"), o.path("center"));
+  s.center = r.point(o.required("center"), o.path("center"));
   s.radius = r.numberIn(o.required("radius"), o.path("radius"), 0, 1e12, true);
+  checkOffset(r, o.path("center"), s.center, s.radius, "radius");
   s.density = density(o);
   return s;
 }
@@ -93,7 +107,7 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
   }
   PerlinCloudOptions& c = p.perlin;
   if (auto* v = o.find("seed")) c.seed = r.unsignedInteger(*v, o.path("seed"));
-  if (auto* v = o.find("center")) c.center = r.vec3(*v, o.path("center"));
+  if (auto* v = o.find("center")) c.center = r.point(*v, o.path("center"));
   if (auto* v = o.find("size")) {
     c.size = r.vec3(*v, o.path("size"));
     for (int a = 0; a < 3; ++a) {
@@ -123,6 +137,8 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
   } catch (const InputError& e) {
     r.fail(o.ptr(), e.what());
   }
+  checkOffset(r, o.path("center"), c.center, std::max({c.size.x, c.size.y, c.size.z}),
+              "largest size");
   const double voxel = std::max({c.size.x, c.size.y, c.size.z}) / c.resolution;
   if (!(voxel >= kMinVoxelSize)) {
     r.fail(o.path("size"), "gives voxels of " + exactNumber(voxel) +

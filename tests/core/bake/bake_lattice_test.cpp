@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/bake/bake_grid.h"
+#include "core/error.h"
 #include "core/math/rng.h"
 #include "core/volume/analytic.h"
 #include "core/volume/sources.h"
@@ -89,6 +90,27 @@ TEST(BakeLattice, AlignedLatticeIsAboutTheRequestAndFallsBackToBoxMeans) {
   EXPECT_FALSE(analytic.sampleLattice());
   EXPECT_EQ(makeBakeLattice(analytic, 40, LatticeSampling::kFieldAligned).density,
             makeBakeLattice(analytic, 40).density);
+}
+
+// A lattice whose corners lie more than kMaxLatticeOffsetVoxels of its voxels from the origin is
+// refused (world coordinates there keep no digits of a voxel); one just within is built.
+TEST(BakeLattice, AVolumeTooFarFromTheOriginForItsVoxelsIsRefused) {
+  Bounds3 close;
+  close.expand(Vec3(1e3, 0, 0));
+  close.expand(Vec3(1e3 + 1, 1, 1));
+  const BakeGrid g = bakeLatticeGeometry(close, 64, "near");
+  EXPECT_EQ(g.nx, 66);
+  Bounds3 far;
+  far.expand(Vec3(0, 0, 1e12));
+  far.expand(Vec3(1, 1, 1e12 + 1));
+  std::string message = "no error";
+  try {
+    bakeLatticeGeometry(far, 64, "far");
+  } catch (const InputError& e) {
+    message = e.what();
+  }
+  EXPECT_EQ(message.rfind("volume: 'far' reaches 1e+12 world units from the origin", 0), 0u)
+      << message;
 }
 
 }  // namespace

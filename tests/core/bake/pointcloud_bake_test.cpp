@@ -541,6 +541,36 @@ TEST(NormalisedRule, SunAndSkyPassesTogetherMatchThemApart) {
   }
 }
 
+// The same cloud 5e5 world units from the origin (floats there are 0.03 apart, half the points'
+// spacing) gives the same light: the passes keep positions relative to the cloud. Both rules.
+TEST(Pointcloud, ACloudFarFromTheOriginGivesTheSameLight) {
+  const Lattice near = sphereLattice(1, 3, 16);
+  Lattice far = near;
+  far.grid.origin += Vec3(5e5, -2e5, 1e5);
+  using Rule = PointcloudOptions::Rule;
+  // The beam model (g = 0), the reduced medium's passes (g = 0.6) and the paper rule.
+  for (const auto& [g, rule] : {std::pair{0.0, Rule::kNormalized},
+                                std::pair{0.6, Rule::kNormalized}, std::pair{0.0, Rule::kPaper}}) {
+    const Medium m = sphereMedium(1, 3, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(g));
+    PointcloudOptions o;
+    o.points = 3000;
+    o.passes = 4;
+    o.rule = rule;
+    const PointCloudResult a = runPointcloud(near.grid, near.density, {}, m, Vec3(0, 0, 1), o);
+    const PointCloudResult b = runPointcloud(far.grid, far.density, {}, m, Vec3(0, 0, 1), o);
+    ASSERT_EQ(a.cloud.size(), b.cloud.size());
+    double sum = 0, diff = 0, dir = 0;
+    for (size_t j = 0; j < a.cloud.size(); ++j) {
+      sum += a.co[j].x;
+      diff += std::abs(a.co[j].x - b.co[j].x);
+      dir += length(a.light_dir[j] - b.light_dir[j]);
+    }
+    EXPECT_GT(sum, 0);
+    EXPECT_LT(diff, 1e-4 * sum) << "g " << g << ", rule " << int(rule);
+    EXPECT_LT(dir / double(a.cloud.size()), 1e-4) << "g " << g << ", rule " << int(rule);
+  }
+}
+
 TEST(NormalisedRule, MieRatioIsHigherOnTheShadowSide) {
   // Seed 000's Figure 8: on the lit side light arrives forward and back scattered (more
   // isotropic), in the shadow it flows on, away from the sun (more beam-like).

@@ -413,7 +413,9 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
        "/medium/albedo: must be a finite number; got the string 'NaN'"},
       {"-Infinity string", [](json& j) { j["lighting"]["sun"]["irradiance"][1] = "-Infinity"; },
        "/lighting/sun/irradiance/1: must be a finite number"},
-      {"number overflowing double", nullptr, "/: invalid JSON: number overflow parsing '1e999'",
+      {"number overflowing double", nullptr,
+       "/: invalid JSON: number overflow parsing '1e999' (after key \"extinction\", line 2, "
+       "column 36)",
        R"({"version": 1, "volume": {"box": {"min": [0,0,0], "max": [1,1,1]}},
           "medium": {"extinction": 1e999}})"},
       {"negative extinction", [](json& j) { j["medium"]["extinction"] = -1; },
@@ -557,6 +559,29 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["views"][0]["camera"]["up"] = {0, 0, 2};
        },
        "/views/0/camera/up: must not be parallel"},
+      {"camera beyond the world's coordinates",
+       [](json& j) {
+         j["views"][0]["camera"]["position"] = {0, -1e160, 0};
+       },
+       "/views/0/camera/position/1: must be within +-1e+15 world units, got -1e+160"},
+      {"sphere beyond the world's coordinates",
+       [](json& j) {
+         j["volume"] = {{"sphere", {{"center", {1e40, 0, 0}}, {"radius", 1}}}};
+       },
+       "/volume/sphere/center/0: must be within +-1e+15 world units"},
+      {"sphere far from the origin for its size",
+       [](json& j) {
+         j["volume"] = {{"sphere", {{"center", {0, -2e6, 0}}, {"radius", 1}}}};
+       },
+       "/volume/sphere/center: lies 2e+06 world units from the origin, more than 1e+06 times its "
+       "radius (1)"},
+      {"procedural cloud far from the origin for its size",
+       [](json& j) {
+         j["volume"] = {{"procedural",
+                         {{"type", "perlin_cloud"}, {"center", {0, 0, 5e6}}, {"size", {2, 4, 1}}}}};
+       },
+       "/volume/procedural/center: lies 5e+06 world units from the origin, more than 1e+06 times "
+       "its largest size (4)"},
       {"camera at its target",
        [](json& j) {
          j["views"][0]["camera"]["look_at"] = {0, 0, 10};
