@@ -19,6 +19,7 @@
 #include "core/methods/registry.h"
 #include "core/shot/shot_parser.h"
 #include "tools/cloudbake/commands.h"
+#include "tools/cloudbake/interrupt.h"
 
 namespace cloudbake::tool {
 namespace {
@@ -113,6 +114,7 @@ void runTaskCommand(const RunTaskOptions& opt) {
   ro.vdb_reader.command = vdbReaderCommand();  // a corrupt file fails the task, not the node's run
   std::string last;
   ro.progress = [&](const RunProgress& progress) {
+    if (interrupted()) return false;
     if (!opt.quiet && progress.message != last) {
       last = progress.message;
       std::fprintf(stderr, "%s: %s\n", opt.task.c_str(), last.c_str());
@@ -120,6 +122,7 @@ void runTaskCommand(const RunTaskOptions& opt) {
     return true;
   };
   const std::string markers = (fs::path(opt.cache_dir) / "tasks" / p.id).string();
+  installInterruptHandler();  // Slurm's scancel and time limit send SIGTERM first
   const TaskRunResult r = runTask(p, opt.task, ro, markers);
   if (r.already_done) {
     if (!opt.quiet)

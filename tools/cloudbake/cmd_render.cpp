@@ -26,6 +26,7 @@
 #include "core/methods/registry.h"
 #include "core/shot/shot_parser.h"
 #include "tools/cloudbake/commands.h"
+#include "tools/cloudbake/interrupt.h"
 
 namespace cloudbake::tool {
 namespace {
@@ -198,6 +199,7 @@ std::vector<std::string> render(const RenderOptions& opt) {
   std::unique_ptr<ProgressLine> line;
   std::string view, last_message;
   run.progress = [&](const RunProgress& p) {
+    if (interrupted()) return false;
     if (opt.quiet) return true;
     if (p.stage == "render") {
       if (!line || p.view != view) {
@@ -223,6 +225,7 @@ std::vector<std::string> render(const RenderOptions& opt) {
     for (const std::string& line : dryRun(shot, run)) std::cout << line << "\n";
     return {};
   }
+  installInterruptHandler();
   const RunResult result = runShot(shot, run);
   if (!opt.stats_json.empty()) writeStatsJson(opt.stats_json, shot, result);
   std::vector<std::string> written;

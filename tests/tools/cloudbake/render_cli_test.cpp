@@ -1,8 +1,11 @@
 // Runs `cloudbake render` on real shot files and checks exit codes, messages and outputs.
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -12,6 +15,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <thread>
 
 #include "core/io/exr_io.h"
 #include "core/io/vdb_io.h"
@@ -651,6 +655,43 @@ TEST_F(RenderCli, ASequenceFrameTooDenseForTheExtinctionIsRefused) {
   EXPECT_EQ(r.rc, 2) << r.err;
   EXPECT_NE(r.err.find("/medium/extinction"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("/volume/sequence/paths/1"), std::string::npos) << r.err;
+}
+
+// SIGINT (Ctrl-C) or SIGTERM (a farm's scancel) cancels the run: it stops within about a second
+// with exit code 6 and leaves none of its outputs (it was killed where it stood before, and could
+// leave a view's temporary file). The render would take minutes: a million paths a pixel.
+TEST_F(RenderCli, AnInterruptCancelsTheRunAndLeavesNoOutputs) {
+  json shot = slab();
+  shot["views"].push_back(shot["views"][0]);
+  shot["views"][1]["name"] = "second";
+  const fs::path path = writeShot("long.json", shot);
+  for (const int signal : {SIGINT, SIGTERM}) {
+    const fs::path out = dir_ / ("out" + std::to_string(signal)),
+                   err = dir_ / ("err" + std::to_string(signal) + ".txt");
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+      if (!std::freopen(err.c_str(), "w", stderr)) _exit(127);
+      execl(CLOUDBAKE_EXE, "cloudbake", "render", path.c_str(), "--out", out.c_str(), "--threads",
+            "1", "--samples", "1000000", static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    // Once the first view is being rendered.
+    for (int i = 0; i < 600 && slurp(err).find("0%") == std::string::npos; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ASSERT_EQ(kill(pid, signal), 0);
+    const auto t0 = std::chrono::steady_clock::now();
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ASSERT_TRUE(WIFEXITED(status)) << "signal " << signal << " killed it";
+    EXPECT_EQ(WEXITSTATUS(status), 6) << slurp(err);
+    EXPECT_LT(seconds, 10.0);  // a bound far above the second it takes, far below the run
+    EXPECT_NE(slurp(err).find("cloudbake: cancelled: "), std::string::npos) << slurp(err);
+    EXPECT_TRUE(!fs::exists(out) || fs::is_empty(out)) << "files left in " << out;
+  }
 }
 
 TEST_F(RenderCli, MistypedCommandIsNamedWithTheNearestOne) {

@@ -1,0 +1,30 @@
+#include "tools/cloudbake/interrupt.h"
+
+#include <atomic>
+#include <csignal>
+#include <cstring>
+
+namespace cloudbake::tool {
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+static_assert(std::atomic<bool>::is_always_lock_free, "set from a signal handler");
+
+extern "C" void onInterrupt(int) { g_interrupted.store(true, std::memory_order_relaxed); }
+
+}  // namespace
+
+void installInterruptHandler() {
+  struct sigaction sa;
+  std::memset(&sa, 0, sizeof sa);
+  sa.sa_handler = onInterrupt;
+  sigemptyset(&sa.sa_mask);
+  // The handler runs once: the next signal takes its default action and ends the process.
+  sa.sa_flags = SA_RESETHAND | SA_RESTART;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
+bool interrupted() { return g_interrupted.load(std::memory_order_relaxed); }
+
+}  // namespace cloudbake::tool
