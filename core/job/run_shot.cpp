@@ -320,10 +320,32 @@ std::string ShotRun::cached(const std::string& key,
       [&] { return opt_.progress && !opt_.progress(at); });
 }
 
+// A view whose pixels are not all finite is never written. An infinity is light beyond what an
+// EXR's 32-bit floats hold (pointcloud's rule "paper" grows without bound with its passes: at
+// a sun irradiance of 1e10 it wrote inf pixels and succeeded); a NaN is a bug.
+void checkFinitePixels(const std::vector<ExrLayer>& layers, const std::string& view) {
+  for (const ExrLayer& layer : layers) {
+    const std::vector<float>& d = layer.image.data;
+    const auto bad = std::find_if(d.begin(), d.end(), [](float v) { return !std::isfinite(v); });
+    if (bad == d.end()) continue;
+    const size_t pixel = size_t(bad - d.begin()) / size_t(std::max(layer.image.channels, 1));
+    const std::string where = "view '" + view + "': layer '" +
+                              (layer.name.empty() ? std::string("beauty") : layer.name) +
+                              "' at pixel (" + std::to_string(pixel % size_t(layer.image.width)) +
+                              ", " + std::to_string(pixel / size_t(layer.image.width)) + ")";
+    if (std::isnan(*bad)) throw InternalError(where + " is NaN; please report it with the shot");
+    throw InputError(where +
+                     " is infinite: its light exceeds what an EXR's 32-bit floats hold "
+                     "(3.4e38); lower the irradiance or radiance under /lighting, or the passes "
+                     "of pointcloud's rule 'paper', whose light grows with each");
+  }
+}
+
 double ShotRun::writeView(const std::string& stem, const Camera& camera,
                           const std::vector<ExrLayer>& layers,
                           const std::map<std::string, std::string>& attributes) {
   const auto t0 = std::chrono::steady_clock::now();
+  checkFinitePixels(layers, camera.name);
   std::map<std::string, std::string> header = {
       {"cloudbake:shot", shot_.name},
       {"cloudbake:view", camera.name},

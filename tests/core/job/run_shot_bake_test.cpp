@@ -177,6 +177,33 @@ TEST(RunShotBake, AFailedRunLeavesNoneOfItsOutputs) {
   fs::remove_all(dir);
 }
 
+// A view whose light overflows a float is refused, naming the view, the layer and the pixel,
+// and is not written: pointcloud's rule "paper", whose light grows without bound with its passes,
+// wrote infinite pixels at a sun of 1e10 and succeeded (an outside probe); its passes saturate at
+// 1e30, times this sun's 1e12.
+TEST(RunShotBake, AViewOfInfiniteLightIsRefusedNotWritten) {
+  const fs::path dir = freshDir("overflow");
+  RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  std::string message = "no error";
+  try {
+    runShot(parse(shot("pointcloud", R"(, "points": 2048, "passes": 40, "rule": "paper")",
+                       "[1e12, 1e12, 1e12]")),
+            opt);
+  } catch (const InputError& e) {
+    message = e.what();
+  }
+  EXPECT_EQ(message.rfind("view 'front': layer '", 0), 0u) << message;
+  EXPECT_NE(message.find(") is infinite: its light exceeds what an EXR's 32-bit floats hold"),
+            std::string::npos)
+      << message;
+  EXPECT_FALSE(fs::exists(dir / "out" / "front.exr"));
+  // The same shot at a sun of 1 is written, finite.
+  runShot(parse(shot("pointcloud", pointcloudKnobs(R"(, "rule": "paper")"))), opt);
+  EXPECT_TRUE(fs::exists(dir / "out" / "front.exr"));
+  fs::remove_all(dir);
+}
+
 // Progress is weighted by each part's predicted work and never goes back: the bake, most of the
 // work, takes most of the bar (it took 1 / (1 + views + vdb) of it, and a pointcloud bake sat at
 // 33% for 99% of its time).
