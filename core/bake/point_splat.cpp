@@ -18,12 +18,22 @@ namespace {
 // every voxel within the bound. Averaging Co_sky itself did not: voxels at the cloud's edge,
 // whose V is high, took the fluence of points deeper inside, and a white, thick sphere under a
 // uniform sky came out up to 1.5x brighter than the sky. Where the medium removes nothing (1 - V
-// below 1e-9) the point carries no scattered sky light.
-std::vector<Rgb> skyFractions(const BakeGrid& g, const float* vis, const PointCloudResult& r) {
+// below 1e-9) the point carries no scattered sky light. The passes' discretisation can put a
+// point's fraction above the bound (a white sphere of optical radius 20 under a sky alone: views
+// up to 1.055-1.097x the sky, an outside probe): such points are set to it and counted in
+// `capped`.
+std::vector<Rgb> skyFractions(const BakeGrid& g, const float* vis, const PointCloudResult& r,
+                              size_t* capped) {
   std::vector<Rgb> f(r.co_sky.size(), Rgb(0.0));
+  *capped = 0;
   for (size_t p = 0; p < f.size(); ++p) {
     const double removed = 4 * kPi * (1.0 - double(sampleTrilinear(g, vis, r.cloud.position[p])));
-    if (removed > 4 * kPi * 1e-9) f[p] = r.co_sky[p] / removed;
+    if (!(removed > 4 * kPi * 1e-9)) continue;
+    f[p] = r.co_sky[p] / removed;
+    if (maxComponent(f[p]) > 1) {
+      f[p] = min(f[p], Rgb(1.0));
+      ++*capped;
+    }
   }
   return f;
 }
@@ -163,7 +173,10 @@ double splatPoints(BakedLight& bake, const PointCloudResult& result,
   float* cs = sky ? bake.add(bake_grids::kSkyMultipleFluence, 3).data.data() : nullptr;
   const BakeChannel* vis_channel = sky ? bake.find(bake_grids::kSkyVisibility) : nullptr;
   const float* vis = vis_channel ? vis_channel->data.data() : nullptr;
-  const std::vector<Rgb> sky_fraction = vis ? skyFractions(g, vis, result) : std::vector<Rgb>();
+  size_t capped = 0;
+  const std::vector<Rgb> sky_fraction =
+      vis ? skyFractions(g, vis, result, &capped) : std::vector<Rgb>();
+  if (vis) bake.metadata["cloudbake:sky_fraction_capped"] = std::to_string(capped);
   const SplatTarget target{result, sky_fraction, vis, sky, co, ld, mr, cs};
   ParallelOptions slices;  // a z slice of rows between cancellation polls
   slices.cancelled = cancelled;

@@ -833,6 +833,30 @@ TEST(Pointcloud, ProgressGoesOnThroughTheSkysPasses) {
   EXPECT_DOUBLE_EQ(last, 1.0);
 }
 
+// Under a sky alone, a white cloud's scattered sky light is at most what the medium removes, in
+// every voxel: Co_sky <= 4 pi (1 - V). The passes put some points of this optically thick sphere
+// above it (views up to 1.055x the sky, an outside probe); they are set to the bound and counted.
+TEST(Pointcloud, ScatteredSkyLightStaysWithinTheFurnaceBound) {
+  const Medium m = sphereMedium(1, 20, Rgb(1.0), isotropic());
+  PointcloudOptions o;
+  o.points = 4096;
+  o.light_resolution = 32;
+  o.sky = true;
+  const BakedLight bake = bakePointcloud(m, Vec3(0, 0, 1), o);
+  const auto& co_sky = bake.find(bake_grids::kSkyMultipleFluence)->data;
+  const auto& vis = bake.find(bake_grids::kSkyVisibility)->data;
+  double worst = 0;
+  for (size_t v = 0; v < vis.size(); ++v) {
+    const double removed = 4 * kPi * (1 - double(vis[v]));
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_LE(co_sky[3 * v + c], removed * (1 + 1e-5) + 1e-7) << v;
+      if (removed > 1e-3) worst = std::max(worst, double(co_sky[3 * v + c]) / removed);
+    }
+  }
+  EXPECT_GT(worst, 0.9);  // the bound is nearly reached, as it is exactly in truth
+  EXPECT_GT(std::stoi(bake.metadata.at("cloudbake:sky_fraction_capped")), 0);
+}
+
 // With a phase the passes reduce, the sun's and the sky's orders share their passes: one range.
 TEST(Pointcloud, ProgressCountsTheSharedPassesOnce) {
   const Medium m = sphereMedium(1, 3, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.7));
