@@ -40,6 +40,11 @@ struct TransportScaling {
   double s = 1;
   Rgb albedo{1, 1, 1};
   bool isotropic = false;
+  // Each channel's own s_c = 1 - a_c g_c, for the sun's forward beam Ci^(s_c) - Ci: the light
+  // each channel scatters into its forward peak. With the shared s, a channel of low albedo got
+  // the beam of the luminance's: an albedo of (0.9, 0.5, 0.2) at g = 0.6 put 3.5x the path
+  // tracer's multiply scattered light in blue (an outside probe).
+  Rgb s_channel{1, 1, 1};
 };
 
 TransportScaling transportScaling(const Medium& medium) {
@@ -52,7 +57,10 @@ TransportScaling transportScaling(const Medium& medium) {
   }
   ts.s = 1 - luminance(a * g);
   ts.isotropic = true;
-  for (int c = 0; c < 3; ++c) ts.albedo[c] = reducedAlbedo(a[c], g[c]);
+  for (int c = 0; c < 3; ++c) {
+    ts.albedo[c] = reducedAlbedo(a[c], g[c]);
+    ts.s_channel[c] = 1 - a[c] * g[c];
+  }
   return ts;
 }
 
@@ -180,7 +188,7 @@ struct SunOrders {
   std::vector<Vec3> flux, total_flux;            // F of the last pass, and of all
   std::vector<double> incoming, total_incoming;  // lum of the gathered light, likewise
   std::vector<Rgb> co;                           // the orders so far
-  std::vector<double> ci_reduced;                // order 0: Ci' = Ci^s
+  std::vector<Rgb> ci_reduced;                   // Ci^(s_c): each channel's reduced beam
   // The reduced (isotropic) passes defer the flux: it is linear in what each source emits, so
   // sum_k F^k_j = sum_i w_ij lum(b^k_i summed over k) w_ij, gathered once after the passes.
   // emitted: each source's lum(b) summed over the passes so far; last_emitted: the last pass's.
@@ -419,10 +427,10 @@ void finishSunOrders(const PassInputs& in, SunOrders& o, PointCloudResult& out) 
   out.light_dir.resize(n);
   out.mie_ratio.resize(n);
   for (size_t j = 0; j < n; ++j) {
-    const double beam = o.ci_reduced[j] - double(pc.sun[j]);
-    o.co[j] = max(o.co[j] + Rgb(beam), Rgb(0.0));
-    o.total_flux[j] += -in.sun_dir * beam;
-    o.total_incoming[j] = std::max(0.0, o.total_incoming[j] + beam);
+    const Rgb beam = o.ci_reduced[j] - Rgb(double(pc.sun[j]));
+    o.co[j] = max(o.co[j] + beam, Rgb(0.0));
+    o.total_flux[j] += -in.sun_dir * luminance(beam);
+    o.total_incoming[j] = std::max(0.0, o.total_incoming[j] + luminance(beam));
     out.co[j] = o.co[j];
     const double fl = length(o.total_flux[j]);
     if (fl > 0 && o.total_incoming[j] > 0) {
@@ -516,11 +524,18 @@ void runNormalised(const PassInputs& in, PointCloudResult& out) {
   const std::vector<double> self = scaledOwnSpheres(in, out);
   SunOrders o(n, in.sun_dir);
   // Order 0 of the reduced problem: the sun's beam attenuated by the reduced extinction, which
-  // counts light scattered into the forward peak as not scattered: Ci' = Ci^s.
+  // counts light scattered into the forward peak as not scattered: Ci^s in the passes' shared
+  // medium. The beam added back at the end is each channel's own, Ci^(s_c) - Ci: with the
+  // probe's albedo (0.9, 0.5, 0.2), the multiple layer over the path tracer's measured 1.10 /
+  // 1.33 / 1.55, against 1.04 / 1.31 / 1.53 for grey media of each channel's albedo (0.94 /
+  // 1.44 / 3.49 with the shared beam; 1.30 / 1.32 / 1.45 with each channel's Ci^(s_c) as the
+  // passes' order 0 too, whose shared extinction then over-scatters the bright channel).
   double order_sum = 0;
   for (size_t j = 0; j < n; ++j) {
-    o.ci_reduced[j] = std::pow(double(pc.sun[j]), in.ts.s);
-    o.delta[j] = Rgb(o.ci_reduced[j]);
+    const double ci = pc.sun[j];
+    const Rgb& sc = in.ts.s_channel;
+    o.ci_reduced[j] = Rgb(std::pow(ci, sc.x), std::pow(ci, sc.y), std::pow(ci, sc.z));
+    o.delta[j] = Rgb(std::pow(ci, in.ts.s));
     order_sum += luminance(o.delta[j]);
   }
   std::fill(o.ratio.begin(), o.ratio.end(), in.ts.isotropic ? 0.0 : 1.0);
