@@ -321,7 +321,7 @@ class PrecomputedMethod final : public BakeMethod {
     info_.citation =
         "Iwasaki, Nishino and Dobashi 2011, \"Real-time rendering of endless cloud animation\" "
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
-    info_.version = 6;
+    info_.version = 7;
     info_.default_samples = 1;
     info_.bakes_light = true;
     info_.animates = true;
