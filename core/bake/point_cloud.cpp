@@ -71,11 +71,15 @@ PointCloud placePoints(const BakeGrid& grid, const std::vector<float>& density, 
 
 void computePointSunTransmittance(PointCloud& cloud, const BakeGrid& grid,
                                   const std::vector<float>& density, double extinction,
-                                  const Vec3& sun_dir, double step) {
+                                  const Vec3& sun_dir, double step,
+                                  const std::function<bool(double)>& cancelled) {
   cloud.sun.assign(cloud.size(), 0.f);
   const TransmittanceMarcher march(grid, density.data(), extinction);
-  parallelFor(0, int64_t(cloud.size()),
-              [&](size_t p) { cloud.sun[p] = float(march(cloud.position[p], sun_dir, step)); });
+  ParallelOptions chunks;
+  chunks.cancelled = cancelled;
+  parallelFor(
+      0, int64_t(cloud.size()),
+      [&](size_t p) { cloud.sun[p] = float(march(cloud.position[p], sun_dir, step)); }, chunks);
 }
 
 }  // namespace cloudbake

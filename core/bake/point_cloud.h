@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "core/bake/bake_grid.h"
@@ -39,9 +40,11 @@ PointCloud placePoints(const BakeGrid& grid, const std::vector<float>& density, 
 
 /// Fills cloud.sun: Ci_i = marchTransmittance from P_i towards the sun (`sun_dir`, unit, from
 /// the scene towards the sun) with steps of `step` world units (seed 000: light attenuated by ray
-/// marching). Parallel over points; deterministic.
+/// marching). Parallel over points; deterministic. `cancelled(fraction)` is polled between
+/// chunks of points (Cancelled when it returns true): millions of points take seconds.
 void computePointSunTransmittance(PointCloud& cloud, const BakeGrid& grid,
                                   const std::vector<float>& density, double extinction,
-                                  const Vec3& sun_dir, double step);
+                                  const Vec3& sun_dir, double step,
+                                  const std::function<bool(double)>& cancelled = {});
 
 }  // namespace cloudbake

@@ -769,7 +769,8 @@ PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& d
   report(0.0, "points");
   out.cloud = placePoints(grid, density, options.points, options.seed);
   computePointSunTransmittance(out.cloud, grid, density, medium.extinction, sun_dir,
-                               0.5 * grid.voxel_size);
+                               0.5 * grid.voxel_size,
+                               [&](double f) { return progress && !progress(0.1 * f, "points"); });
   out.seconds_points = secondsSince(t0);
 
   t0 = Clock::now();

@@ -33,8 +33,8 @@ double density(const Object& o) {
 BoxVolumeSpec parseBox(const Object& o) {
   const Reader& r = o.reader();
   BoxVolumeSpec b;
-  b.min = r.vec3(o.required("min"), o.path("min"));
-  b.max = r.vec3(o.required("max"), o.path("max"));
+  b.min = r.point(o.required("min"), o.path("min"));
+  b.max = r.point(o.required("max"), o.path("max"));
   for (int a = 0; a < 3; ++a) {
     if (!(b.max[a] > b.min[a])) {
       r.fail(o.path("max") + "/" + std::to_string(a), "must be greater than min on every axis");

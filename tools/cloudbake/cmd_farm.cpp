@@ -122,7 +122,6 @@ void runTaskCommand(const RunTaskOptions& opt) {
     return true;
   };
   const std::string markers = (fs::path(opt.cache_dir) / "tasks" / p.id).string();
-  installInterruptHandler();  // Slurm's scancel and time limit send SIGTERM first
   const TaskRunResult r = runTask(p, opt.task, ro, markers);
   if (r.already_done) {
     if (!opt.quiet)

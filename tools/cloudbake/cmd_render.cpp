@@ -222,10 +222,11 @@ std::vector<std::string> render(const RenderOptions& opt) {
     return true;
   };
   if (opt.dry_run) {
-    for (const std::string& line : dryRun(shot, run)) std::cout << line << "\n";
+    const std::vector<std::string> plan = dryRun(shot, run);
+    if (interrupted()) throw Cancelled();
+    for (const std::string& line : plan) std::cout << line << "\n";
     return {};
   }
-  installInterruptHandler();
   const RunResult result = runShot(shot, run);
   if (!opt.stats_json.empty()) writeStatsJson(opt.stats_json, shot, result);
   std::vector<std::string> written;

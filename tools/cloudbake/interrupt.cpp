@@ -3,6 +3,7 @@
 #include <atomic>
 #include <csignal>
 #include <cstring>
+#include <initializer_list>
 
 namespace cloudbake::tool {
 namespace {
@@ -21,8 +22,12 @@ void installInterruptHandler() {
   sigemptyset(&sa.sa_mask);
   // The handler runs once: the next signal takes its default action and ends the process.
   sa.sa_flags = SA_RESETHAND | SA_RESTART;
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
+  for (const int signal : {SIGINT, SIGTERM}) {
+    // A signal the parent set to be ignored stays ignored (nohup, a shell's background job).
+    struct sigaction old;
+    if (sigaction(signal, nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+    sigaction(signal, &sa, nullptr);
+  }
 }
 
 bool interrupted() { return g_interrupted.load(std::memory_order_relaxed); }

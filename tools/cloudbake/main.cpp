@@ -10,6 +10,7 @@
 #include "common/stdout_check.h"
 #include "core/io/exr_io.h"
 #include "tools/cloudbake/commands.h"
+#include "tools/cloudbake/interrupt.h"
 
 namespace {
 
@@ -52,6 +53,12 @@ int main(int argc, char** argv) {
   addMethodsCommand(app, &exit_code);
   addTranscodeCommand(app, &exit_code);
 
+  // The commands that run a shot take SIGINT and SIGTERM (Slurm's scancel and time limit) as a
+  // cancel from the start, before their options and the shot are even read: a signal there
+  // killed the process (an outside probe).
+  if (argc > 1 && (std::string(argv[1]) == "render" || std::string(argv[1]) == "run-task")) {
+    installInterruptHandler();
+  }
   try {
     // Every command that writes or reads an EXR compresses its line blocks on all cores;
     // `render` and `farm run-task` narrow this to their --threads.

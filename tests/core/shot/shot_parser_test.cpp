@@ -564,6 +564,11 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["views"][0]["camera"]["position"] = {0, -1e160, 0};
        },
        "/views/0/camera/position/1: must be within +-1e+15 world units, got -1e+160"},
+      {"box beyond the world's coordinates",
+       [](json& j) {
+         j["volume"] = {{"box", {{"min", {2e15, -1, -1}}, {"max", {2e15 + 1e10, 1, 1}}}}};
+       },
+       "/volume/box/min/0: must be within +-1e+15 world units"},
       {"sphere beyond the world's coordinates",
        [](json& j) {
          j["volume"] = {{"sphere", {{"center", {1e40, 0, 0}}, {"radius", 1}}}};
