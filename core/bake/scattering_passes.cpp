@@ -283,10 +283,9 @@ void gatherReducedPass(const PassInputs& in, const std::vector<double>& self,
     }
     if constexpr (kSun) {
       const Rgb in_light = Rgb(sr, sg, sb) + o.delta[j] * self[j];
+      // R stays 0 (addSunOrder sets it), so L is never read: next_dir and next_ratio are left.
       o.next[j] = in.ts.albedo * in_light;
       o.incoming[j] = luminance(in_light);
-      o.next_dir[j] = Vec3(0.0);
-      o.next_ratio[j] = 0;
     }
     if constexpr (kSky) sky->next[j] = in.ts.albedo * (Rgb(kr, kg, kb) + sky->d[j] * self[j]);
   });
@@ -297,14 +296,23 @@ void gatherReducedPass(const PassInputs& in, const std::vector<double>& self,
 // to j, added to total_flux.
 void deferredSunFlux(const PassInputs& in, const PointCloudResult& out, int last_pass, double tail,
                      SunOrders& o) {
+  // gatherTransfers' sources; L is read only with a phase table, which this gather has none of.
+  struct FluxSource {
+    float px, py, pz, lx, ly, lz, e;
+  };
   const PointCloud& pc = out.cloud;
   const size_t n = pc.size();
-  std::vector<std::array<float, 4>> src(n);
+  std::vector<FluxSource> src(n);
   for (size_t i = 0; i < n; ++i) {
     const Vec3 p = localPosition(pc, i);
-    src[i] = {float(p.x), float(p.y), float(p.z), float(o.emitted[i] + tail * o.last_emitted[i])};
+    src[i] = {float(p.x),
+              float(p.y),
+              float(p.z),
+              0.f,
+              0.f,
+              0.f,
+              float(o.emitted[i] + tail * o.last_emitted[i])};
   }
-  const NeighbourPairs& pairs = in.pairs;
   ParallelOptions chunks;  // polled as the end of the last pass: progress never goes back
   chunks.grain = kDestinationGrain;
   if (in.cancelled) chunks.cancelled = [&](double) { return in.cancelled(1.0, last_pass); };
@@ -312,19 +320,15 @@ void deferredSunFlux(const PassInputs& in, const PointCloudResult& out, int last
       0, int64_t(n),
       [&](int64_t jj) {
         const size_t j = size_t(jj);
-        const Vec3 q = localPosition(pc, j);
-        const float qx = float(q.x), qy = float(q.y), qz = float(q.z);
         double fx = 0, fy = 0, fz = 0;
-        const uint64_t e = pairs.offset[j + 1];
-        for (uint64_t k = pairs.offset[j]; k < e; ++k) {
-          const std::array<float, 4>& s = src[pairs.source[k]];
-          const float dx = qx - s[0], dy = qy - s[1], dz = qz - s[2];
-          const float inv = 1.f / std::sqrt(dx * dx + dy * dy + dz * dz);
-          const double l = double(pairs.weight[k]) * s[3];
-          fx += l * (dx * inv);
-          fy += l * (dy * inv);
-          fz += l * (dz * inv);
-        }
+        gatherTransfers(
+            in.pairs, src, nullptr, j, localPosition(pc, j),
+            [&](const FluxSource& s, double w, const Rgb&, float dx, float dy, float dz) {
+              const double l = w * s.e;
+              fx += l * dx;
+              fy += l * dy;
+              fz += l * dz;
+            });
         o.total_flux[j] += Vec3(fx, fy, fz);
       },
       chunks);
