@@ -23,13 +23,10 @@ OutputFile describeOutput(const std::string& out_dir, const std::string& name) {
   return f;
 }
 
-void addPreview(const RunOptions& opt, const std::string& stem, const std::string& exr_path,
+void addPreview(const RunOptions& opt, const std::string& stem, const Image& beauty,
                 RunResult& result) {
   const std::string png_name = stem + ".png";
-  // The beauty (the cloud over what is seen through it), not the cloud element alone.
-  const ExrContents exr = readExr(exr_path);
-  writePreviewPng((fs::path(opt.out_dir) / png_name).string(), exr.layers.at(beautyLayerName(exr)),
-                  opt.png_exposure);
+  writePreviewPng((fs::path(opt.out_dir) / png_name).string(), beauty, opt.png_exposure);
   result.files.push_back(describeOutput(opt.out_dir, png_name));
 }
 

@@ -17,9 +17,10 @@ namespace cloudbake {
 /// Name, path, size and SHA-256 of out_dir/name.
 OutputFile describeOutput(const std::string& out_dir, const std::string& name);
 
-/// DIR/<stem>.png beside an EXR (a display preview; the EXR is the product): exposure puts the
-/// 99th percentile of luminance at 0.8 unless opt.png_exposure is set, then sRGB.
-void addPreview(const RunOptions& opt, const std::string& stem, const std::string& exr_path,
+/// DIR/<stem>.png beside an EXR (a display preview of the view's `beauty`, written to the EXR
+/// or not; the EXR is the product): exposure puts the 99th percentile of luminance at 0.8
+/// unless opt.png_exposure is set, then sRGB.
+void addPreview(const RunOptions& opt, const std::string& stem, const Image& beauty,
                 RunResult& result);
 
 }  // namespace cloudbake

@@ -68,6 +68,25 @@ ExrCompression exrCompressionOf(const ShotSpec& shot, const std::string& source)
   return *c;
 }
 
+const ExrLayer& layerNamed(const std::vector<ExrLayer>& layers, const std::string& name) {
+  for (const ExrLayer& l : layers) {
+    if (l.name == name) return l;
+  }
+  throw InternalError("a view's layers lack '" + name + "'");
+}
+
+// The layers of outputs.exr_layers, in its order, from a view's every layer ("cloud" is the
+// unprefixed one). Copies: a view is written once, and the copy is small beside its compression.
+std::vector<ExrLayer> chosenLayers(const std::vector<ExrLayer>& layers,
+                                   const std::vector<std::string>& names) {
+  if (names.empty()) throw InternalError("outputs.exr_layers: no layer to write");
+  std::vector<ExrLayer> chosen;
+  for (const std::string& name : names) {
+    chosen.push_back(layerNamed(layers, name == "cloud" ? "" : name));
+  }
+  return chosen;
+}
+
 // MethodRun over runShot's options: the cache, the volume cache, the direction index, the
 // output folder and the progress callback. The method's fraction of its work is the run's.
 class ShotRun final : public MethodRun {
@@ -359,6 +378,9 @@ double ShotRun::writeView(const std::string& stem, const Camera& camera,
     header["cloudbake:sun_irradiance"] =
         exactNumber(e.x) + " " + exactNumber(e.y) + " " + exactNumber(e.z);
   }
+  std::string names;
+  for (const std::string& n : shot_.outputs.exr_layers) names += (names.empty() ? "" : " ") + n;
+  header[kExrLayersAttribute] = names;
   for (const auto& [k, v] : header_) header[k] = v;
   for (const auto& [k, v] : attributes) header[k] = v;
   // The camera in OpenEXR's standard attributes, which compositing packages read.
@@ -370,9 +392,14 @@ double ShotRun::writeView(const std::string& stem, const Camera& camera,
   }
   const std::string name = stem + ".exr";
   const std::string path = (fs::path(opt_.out_dir) / name).string();
-  writeExr(path, layers, header, matrices, exrCompressionOf(shot_, opt_.source));
+  const ExrCompression compression = exrCompressionOf(shot_, opt_.source);
+  if (shot_.outputs.exr_layers == kExrLayerNames) {  // every layer, as the methods give them
+    writeExr(path, layers, header, matrices, compression);
+  } else {
+    writeExr(path, chosenLayers(layers, shot_.outputs.exr_layers), header, matrices, compression);
+  }
   result_.files.push_back(describeOutput(opt_.out_dir, name));
-  if (opt_.png) addPreview(opt_, stem, path, result_);
+  if (opt_.png) addPreview(opt_, stem, layerNamed(layers, "beauty").image, result_);
   return secondsSince(t0);
 }
 

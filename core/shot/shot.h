@@ -81,6 +81,11 @@ struct BakeSpec {
   KnobValues knobs;
 };
 
+/// The layers a view's EXR can hold (outputs.exr_layers), in the file's order: "cloud" is the
+/// unprefixed R, G, B, A (docs/outputs.md).
+inline const std::vector<std::string> kExrLayerNames = {"cloud", "background", "beauty",  "sun",
+                                                        "sky",   "single",     "multiple"};
+
 /// `outputs`: which files a render writes.
 struct OutputSpec {
   bool exr = true;            ///< DIR/<view>.exr per view
@@ -88,6 +93,9 @@ struct OutputSpec {
   double vdb_voxel_size = 0;  ///< world units; required for box/sphere volumes when vdb
   /// Lossless compression of the EXRs: a name of kExrCompressionNames (core/io).
   std::string exr_compression = "zip";
+  /// The layers each view's EXR holds, in the file's order: names of kExrLayerNames ("cloud"
+  /// for the unprefixed R, G, B, A). Every layer by default.
+  std::vector<std::string> exr_layers = kExrLayerNames;
 };
 
 /// A whole shot, validated. `views` holds the cameras with their names and pixel sizes.

@@ -284,6 +284,30 @@ Camera parseView(const Object& o) {
   return cam;
 }
 
+// A non-empty list of distinct names of kExrLayerNames, kept in the file's order.
+std::vector<std::string> parseExrLayers(const Reader& r, const Json& v, const std::string& ptr) {
+  const std::string known = "known: cloud, background, beauty, sun, sky, single, multiple";
+  if (!v.is_array()) {
+    r.fail(ptr, "must be an array of layer names (" + known + "), got " + shotjson::typeName(v));
+  }
+  if (v.empty()) r.fail(ptr, "must name at least one layer (" + known + ")");
+  std::vector<bool> chosen(kExrLayerNames.size(), false);
+  for (size_t i = 0; i < v.size(); ++i) {
+    const std::string item = ptr + "/" + std::to_string(i);
+    const std::string name = r.string(v[i], item);
+    const auto it = std::find(kExrLayerNames.begin(), kExrLayerNames.end(), name);
+    if (it == kExrLayerNames.end()) r.fail(item, "unknown layer '" + name + "' (" + known + ")");
+    const size_t k = size_t(it - kExrLayerNames.begin());
+    if (chosen[k]) r.fail(item, "layer '" + name + "' is listed twice");
+    chosen[k] = true;
+  }
+  std::vector<std::string> layers;
+  for (size_t k = 0; k < kExrLayerNames.size(); ++k) {
+    if (chosen[k]) layers.push_back(kExrLayerNames[k]);
+  }
+  return layers;
+}
+
 OutputSpec parseOutputs(const Object& o) {
   const Reader& r = o.reader();
   OutputSpec out;
@@ -300,6 +324,10 @@ OutputSpec parseOutputs(const Object& o) {
                       "' (known: " + exrCompressionNamesList() + "; lossless only)");
     }
     if (!out.exr) r.fail(ptr, "applies only when /outputs/exr is true");
+  }
+  if (auto* v = o.find("exr_layers")) {
+    out.exr_layers = parseExrLayers(r, *v, o.path("exr_layers"));
+    if (!out.exr) r.fail(o.path("exr_layers"), "applies only when /outputs/exr is true");
   }
   return out;
 }
@@ -395,8 +423,8 @@ ShotSpec parseShot(const std::string& json_text, const std::string& base_dir,
   const Json* bake = root.find("bake");
   shot.bake = parseBake(Object(r, bake ? *bake : no_bake, "/bake"));
   if (auto* v = root.find("outputs")) {
-    shot.outputs = parseOutputs(
-        Object(r, *v, "/outputs", {"exr", "vdb", "vdb_voxel_size", "exr_compression"}));
+    shot.outputs = parseOutputs(Object(
+        r, *v, "/outputs", {"exr", "vdb", "vdb_voxel_size", "exr_compression", "exr_layers"}));
   }
   if (auto* v = root.find("views")) {
     if (!v->is_array())

@@ -159,7 +159,10 @@ std::string serializeShot(const ShotSpec& shot, const SerializeOptions& options)
   }
   if (options.outputs) {
     j["outputs"] = {{"exr", shot.outputs.exr}, {"vdb", shot.outputs.vdb}};
-    if (shot.outputs.exr) j["outputs"]["exr_compression"] = shot.outputs.exr_compression;
+    if (shot.outputs.exr) {
+      j["outputs"]["exr_compression"] = shot.outputs.exr_compression;
+      j["outputs"]["exr_layers"] = shot.outputs.exr_layers;
+    }
     if (shot.outputs.vdb_voxel_size > 0)
       j["outputs"]["vdb_voxel_size"] = shot.outputs.vdb_voxel_size;
   }

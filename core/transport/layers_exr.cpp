@@ -34,7 +34,8 @@ Image beautyRgb(const RenderLayers& layers) {
 }  // namespace
 
 std::string beautyLayerName(const ExrContents& exr) {
-  return exr.layers.count("beauty") ? "beauty" : "";
+  const bool layered = exr.layers.count("beauty") || exr.attributes.count(kExrLayersAttribute);
+  return layered ? "beauty" : "";
 }
 
 const std::vector<std::string>& renderLayerNames() {

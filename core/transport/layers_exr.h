@@ -17,8 +17,13 @@ std::vector<ExrLayer> renderLayersToExr(const RenderLayers& layers);
 /// The same, moving the images.
 std::vector<ExrLayer> renderLayersToExr(RenderLayers&& layers);
 
-/// The layer of `exr` that holds the beauty: "beauty" in views of this layout, "" (unprefixed)
-/// in older views and other renderers' files.
+/// The header attribute naming a view's layers in file order, "cloud" for the unprefixed one
+/// (outputs.exr_layers may leave any out).
+inline constexpr const char* kExrLayersAttribute = "cloudbake:layers";
+
+/// The layer of `exr` that holds the beauty: "beauty" in views of this layout (which may have
+/// left it out: see kExrLayersAttribute), "" (unprefixed) in older views and other renderers'
+/// files.
 std::string beautyLayerName(const ExrContents& exr);
 
 /// Their names in file order ("" first).

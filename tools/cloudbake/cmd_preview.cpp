@@ -24,8 +24,8 @@ std::string pickLayer(const ExrContents& exr, const std::string& layer, const st
     for (const auto& [n, image] : exr.layers) {
       if (image.channels >= 3) have += (have.empty() ? "" : ", ") + (n.empty() ? "cloud" : n);
     }
-    throw InputError("--layer: " + path + " has no RGB layer '" + layer + "' (it has: " + have +
-                     ")");
+    throw InputError("--layer: " + path + " has no RGB layer '" + (layer.empty() ? name : layer) +
+                     "' (it has: " + have + ")");
   }
   return name;
 }

@@ -2,6 +2,7 @@
 // single flight), runShot (outputs, cache reuse, cancellation) and the durable job store.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -27,6 +28,7 @@
 #include "core/job/volume_cache.h"
 #include "core/job/volume_limits.h"
 #include "core/shot/shot_parser.h"
+#include "core/transport/layers_exr.h"
 #include "tests/core/job/job_test_util.h"
 
 namespace cloudbake {
@@ -402,6 +404,40 @@ TEST(RunShot, OutputsExrCompressionChangesTheFilesNotThePixels) {
         << e.what();
   }
   EXPECT_FALSE(fs::exists(dir / "b44" / "front.exr"));
+  fs::remove_all(dir);
+}
+
+// outputs.exr_layers writes the layers it names, in the file's order, with the same pixels as a
+// view of every layer, and says which they are; the preview is the beauty's, written or not.
+TEST(RunShot, OutputsExrLayersWriteTheChosenLayersOnly) {
+  const fs::path dir = freshDir("layers");
+  RunOptions opt;
+  opt.png = true;
+  ShotSpec shot = parse(tinyShot());
+  shot.outputs.vdb = false;
+  opt.out_dir = (dir / "all").string();
+  runShot(shot, opt);
+  shot.outputs.exr_layers = {"cloud", "multiple"};
+  opt.out_dir = (dir / "two").string();
+  runShot(shot, opt);
+
+  const ExrContents all = readExr((dir / "all" / "front.exr").string());
+  const ExrContents two = readExr((dir / "two" / "front.exr").string());
+  EXPECT_EQ(all.layers.size(), 7u);
+  EXPECT_EQ(all.attributes.at("cloudbake:layers"),
+            "cloud background beauty sun sky single multiple");
+  ASSERT_EQ(two.layers.size(), 2u);
+  EXPECT_EQ(two.attributes.at("cloudbake:layers"), "cloud multiple");
+  for (const char* layer : {"", "multiple"}) {
+    EXPECT_EQ(two.layers.at(layer).data, all.layers.at(layer).data) << layer;
+  }
+  const std::vector<float>& multiple = all.layers.at("multiple").data;
+  EXPECT_GT(*std::max_element(multiple.begin(), multiple.end()), 0.0f);  // worth comparing
+  // Read by meaning, the unprefixed layer is the cloud: the beauty was left out.
+  EXPECT_EQ(beautyLayerName(two), "beauty");
+  EXPECT_EQ(readWholeFile((dir / "two" / "front.png").string()),
+            readWholeFile((dir / "all" / "front.png").string()));
+  EXPECT_LT(fs::file_size(dir / "two" / "front.exr"), fs::file_size(dir / "all" / "front.exr"));
   fs::remove_all(dir);
 }
 

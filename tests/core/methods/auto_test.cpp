@@ -510,6 +510,17 @@ TEST(AutoPilot, TraitsSayWhetherPhotonSplitsOrRefusesThePhase) {
   EXPECT_TRUE(back.photon_refuses);
 }
 
+// A view of fewer layers writes fewer channels: the write's price follows them (cloud 4 of 22).
+TEST(AutoPilot, TraitsPriceTheWriteOfTheLayersAsked) {
+  ShotSpec s = parseShot(shot(R"({"method": "auto", "tolerance": 0.2})"), "");
+  const Scene scene = buildScene(s, "shot.json");
+  const double every = measureSceneTraits(s, scene).write_seconds_per_pixel;
+  EXPECT_EQ(every, exrWriteSecondsPerPixel("zip"));
+  s.outputs.exr_layers = {"cloud", "sun"};
+  EXPECT_NEAR(measureSceneTraits(s, scene).write_seconds_per_pixel, every * 7.0 / 22.0,
+              1e-12 * every);
+}
+
 // Absorbing media scatter once at most: the pilot measures no multiple scattering there, and a
 // thick white one mostly multiple scattering.
 TEST(AutoPilot, MultipleFractionFollowsAlbedoAndThickness) {

@@ -179,7 +179,8 @@ TEST(ShotParser, CanonicalFormOfTheDesignExampleIsPinned) {
             R"("sun":{"direction":[0.0,0.0,1.0],"irradiance":[3.14159,3.14159,3.14159]}},)"
             R"("medium":{"albedo":[0.9,0.9,0.9],"extinction":2.0,)"
             R"("phase":{"g":0.75,"mie_ratio":1.0,"type":"hg"}},"name":"slab",)"
-            R"("outputs":{"exr":true,"exr_compression":"zip","vdb":false},"version":1,)"
+            R"("outputs":{"exr":true,"exr_compression":"zip","exr_layers":["cloud","background",)"
+            R"("beauty","sun","sky","single","multiple"],"vdb":false},"version":1,)"
             R"("views":[{"camera":{"look_at":[0.0,0.0,0.0],"position":[0.0,0.0,10.0],)"
             R"("type":"orthographic","up":[0.0,1.0,0.0],"width":2.0},"name":"nadir",)"
             R"("resolution":[32,32]}],)"
@@ -195,6 +196,9 @@ TEST(ShotParser, EveryVariantRoundTripsThroughTheCanonicalForm) {
       [](json& j) {
         j["volume"] = {{"sphere", {{"center", {1, 2, 3}}, {"radius", 2}, {"density", 0.5}}}};
         j["outputs"] = {{"vdb", true}, {"vdb_voxel_size", 0.25}, {"exr_compression", "piz"}};
+      },
+      [](json& j) {
+        j["outputs"]["exr_layers"] = {"multiple", "cloud"};
       },
       [](json& j) {
         j["volume"] = {{"vdb", {{"path", "a.vdb"}, {"grid", "smoke"}}}};
@@ -698,6 +702,29 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["outputs"]["exr_compression"] = "piz";
        },
        "/outputs/exr_compression: applies only when /outputs/exr is true"},
+      {"EXR layers not an array", [](json& j) { j["outputs"]["exr_layers"] = "beauty"; },
+       "/outputs/exr_layers: must be an array of layer names (known: cloud, background, beauty, "
+       "sun, sky, single, multiple), got a string"},
+      {"no EXR layer", [](json& j) { j["outputs"]["exr_layers"] = json::array(); },
+       "/outputs/exr_layers: must name at least one layer"},
+      {"an unknown EXR layer",
+       [](json& j) {
+         j["outputs"]["exr_layers"] = {"sun", "Beauty"};
+       },
+       "/outputs/exr_layers/1: unknown layer 'Beauty' (known: cloud,"},
+      {"an EXR layer twice",
+       [](json& j) {
+         j["outputs"]["exr_layers"] = {"sun", "sky", "sun"};
+       },
+       "/outputs/exr_layers/2: layer 'sun' is listed twice"},
+      {"an EXR layer that is not a string", [](json& j) { j["outputs"]["exr_layers"] = {1}; },
+       "/outputs/exr_layers/0: must be a string"},
+      {"EXR layers without EXR outputs",
+       [](json& j) {
+         j["outputs"]["exr"] = false;
+         j["outputs"]["exr_layers"] = {"sun"};
+       },
+       "/outputs/exr_layers: applies only when /outputs/exr is true"},
       {"shot name with a space", [](json& j) { j["name"] = "my shot"; }, "/name: must be 1 to 128"},
       {"box of the wrong shape",
        [](json& j) {
