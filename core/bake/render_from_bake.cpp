@@ -146,8 +146,9 @@ void validateOptions(const BakeRenderOptions& o, double voxel_size) {
                      "samples), got " +
                      str(o.step));
   }
-  if (o.samples_per_pixel < 1 || o.samples_per_pixel > 1024) {
-    throw InputError("samples_per_pixel: must be in 1..1024, got " + str(o.samples_per_pixel));
+  if (o.samples_per_pixel < 1 || o.samples_per_pixel > kMaxViewSamples) {
+    throw InputError("samples_per_pixel: must be in 1.." + std::to_string(kMaxViewSamples) +
+                     ", got " + str(o.samples_per_pixel));
   }
   if (!(o.min_transmittance >= 0 && o.min_transmittance < 1)) {  // also rejects NaN
     throw InputError("min_transmittance: must be in [0, 1), got " + str(o.min_transmittance));

@@ -11,6 +11,9 @@
 
 namespace cloudbake {
 
+/// The most rays per pixel a view from a bake traces (bake.samples of the light-bake methods).
+constexpr int kMaxViewSamples = 1024;
+
 class SkyLight;
 
 /// The longest march step a view takes, in lattice voxels (BakeRenderOptions::step).
@@ -19,7 +22,7 @@ constexpr double kMaxStepVoxels = 4;
 /// Options of renderFromBake.
 struct BakeRenderOptions {
   double step = 0;  ///< march step, world units, at most kMaxStepVoxels voxels; 0: half a voxel
-  int samples_per_pixel = 1;  ///< stratified jittered rays per pixel, [1, 1024]
+  int samples_per_pixel = 1;  ///< stratified jittered rays per pixel, [1, kMaxViewSamples]
   uint64_t seed = 1;          ///< jitter; same image at any thread count
   /// The march stops where the view transmittance falls below this (the rest is < 1e-4 of
   /// what is behind, and of the in-scattering left).

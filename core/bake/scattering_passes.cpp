@@ -138,6 +138,9 @@ void gatherTransfers(const NeighbourPairs& pairs, const std::vector<Source>& src
   }
 }
 
+// A point's discretised collision fraction below which k_i is left at 1 (scaledOwnSpheres).
+constexpr double kMinCaptured = 1e-30;
+
 // The normalised rule's own-sphere factor 1 - exp(-sigma_t r) per point, scaled by k_i, the
 // ratio of the medium's collision fraction 1 - P_escape to the discretised one c_i = self_i +
 // sum_j w_ij / (4 pi) (header, step 6); k_i and 1 - P_escape go to `out`.
@@ -160,7 +163,10 @@ std::vector<double> scaledOwnSpheres(const PassInputs& in, PointCloudResult& out
     const double vis = sampleTrilinear(*in.grid, in.escape_visibility->data(), pc.position[i]);
     const double target = std::clamp(1 - vis, 0.0, 1.0);
     out.collision[i] = float(target);
-    const double k = captured[i] > 0 ? target / captured[i] : 1.0;
+    // Below kMinCaptured a point scatters nothing a view can show, and the ratio of two such
+    // numbers (the target read from a float grid) is noise: at extinction 1e-320 it overflowed
+    // to inf, and inf times a zero sphere gave NaN.
+    const double k = captured[i] >= kMinCaptured ? target / captured[i] : 1.0;
     out.transfer_scale[i] = float(k);
     self[i] *= k;
   }

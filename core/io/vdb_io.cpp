@@ -68,14 +68,24 @@ void writeVdb(const std::string& path, const DensityField& density,
       throw InputError(path + ": extra vec3 grid name '" + g.name +
                        "' is empty, duplicated or has no value function");
 
-  DensityFieldPtr voxelized;
+  openvdb::FloatGrid::Ptr grid;
   const auto* volume = dynamic_cast<const GridVolume*>(&density);
-  if (!volume) {
-    voxelized = voxelize(density, options.voxel_size, options.max_voxels);
-    volume = dynamic_cast<const GridVolume*>(voxelized.get());
+  if (!volume && density.maxDensity() == 0) {
+    // An empty cloud is a valid shot: its grid has no active voxel, at the voxel size asked.
+    if (!std::isfinite(options.voxel_size) || !(options.voxel_size > 0)) {
+      throw InputError(path + ": voxel_size must be finite and > 0");
+    }
+    grid = openvdb::FloatGrid::create(0.f);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(options.voxel_size));
+  } else {
+    DensityFieldPtr voxelized;
+    if (!volume) {
+      voxelized = voxelize(density, options.voxel_size, options.max_voxels);
+      volume = dynamic_cast<const GridVolume*>(voxelized.get());
+    }
+    // A shallow copy shares the (immutable) tree; only its metadata changes.
+    grid = openvdb::ConstPtrCast<openvdb::FloatGrid>(openvdbGrid(*volume)->copy());
   }
-  // A shallow copy shares the (immutable) tree; only its metadata changes.
-  auto grid = openvdb::ConstPtrCast<openvdb::FloatGrid>(openvdbGrid(*volume)->copy());
   grid->setName("density");
   grid->setGridClass(openvdb::GRID_FOG_VOLUME);
   addMetadata(*grid, options.grid_metadata);

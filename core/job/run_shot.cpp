@@ -501,7 +501,16 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
     }
   }
   if (isAutoShot(shot)) shot = chosen->shot;
-  if (opt.samples != -1) shot.bake.samples = opt.samples;
+  if (opt.samples != -1) {
+    const MethodInfo& info = methodOf(shot).info();
+    if (opt.samples > info.max_samples) {
+      throw InputError("samples: method '" + info.name + "' takes at most " +
+                       std::to_string(info.max_samples) +
+                       (info.bakes_light ? " rays per pixel of a view from its bake" : " samples") +
+                       ", got " + std::to_string(opt.samples));
+    }
+    shot.bake.samples = opt.samples;
+  }
 
   const bool need_keys = opt.cache || opt.volumes;
   ShotRun run(shot, opt, need_keys ? computeCacheKeys(shot) : ShotCacheKeys{});

@@ -91,6 +91,15 @@ constexpr Vec3 cross(const Vec3& a, const Vec3& b) {
 }
 inline double length(const Vec3& v) { return std::sqrt(dot(v, v)); }
 inline Vec3 normalize(const Vec3& v) { return v / length(v); }
+/// The unit vector along v for any finite non-zero v, however tiny or huge its components (its
+/// length would underflow or overflow): v scaled by its largest component first. The zero
+/// vector where v is zero or not finite.
+inline Vec3 directionOf(const Vec3& v) {
+  const double m = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+  if (!(m > 0) || !std::isfinite(m)) return Vec3(0.0);
+  const Vec3 s = v / m;
+  return s / length(s);
+}
 inline Vec3 min(const Vec3& a, const Vec3& b) {
   return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
 }

@@ -30,6 +30,9 @@ struct MethodInfo {
   /// older build is never served (the golden tests in tests/core/methods fail until it is).
   int version = 1;
   int default_samples = 1;  ///< bake.samples when the shot omits it
+  /// bake.samples at most: the path tracer's paths per pixel, or a view's rays per pixel from a
+  /// bake (kMaxViewSamples).
+  int max_samples = 1000000;
   std::vector<Knob> knobs;
   bool runnable = true;      ///< false: parsed (shots can be written ahead), refused by runs
   bool bakes_light = false;  ///< views render from a baked-light lattice (bake.vdb is it)

@@ -76,7 +76,15 @@ void writeDensityVdb(MethodRun& run) {
     vdb.file_metadata = {{"cloudbake:shot", shot.name},
                          {"cloudbake:method", shot.bake.method},
                          {"cloudbake:volume", s.medium.density->describe()}};
-    writeVdb(path, *s.medium.density, vdb);
+    try {
+      writeVdb(path, *s.medium.density, vdb);
+    } catch (const MissingFileError&) {
+      throw;
+    } catch (const InputError& e) {
+      // An analytic volume no voxel centre of this size samples (a box thinner than a voxel).
+      if (std::string(e.what()).rfind("voxelize: ", 0) != 0) throw;
+      throw InputError(run.source() + ": /outputs/vdb_voxel_size: " + e.what());
+    }
   };
   if (!run.hasCache()) {
     run.writeOutput(kVdbFile, write);

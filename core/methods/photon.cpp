@@ -59,6 +59,7 @@ class PhotonMethod final : public BakeMethod {
         "approximation (JQSRT), for a droplet's forward peak split off";
     info_.version = 10;
     info_.default_samples = 1;
+    info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
     info_.knobs = photonKnobs();
   }

@@ -323,6 +323,7 @@ class PrecomputedMethod final : public BakeMethod {
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
     info_.version = 7;
     info_.default_samples = 1;
+    info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
     info_.animates = true;
     info_.knobs = precomputedKnobs();

@@ -17,6 +17,7 @@ class SingleMethod final : public BakeMethod {
         "marching through a 3D voxel grid\"";
     info_.version = 5;
     info_.default_samples = 1;
+    info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
     info_.knobs = {stepKnob(), filmSpacingKnob(),
                    lightResolutionKnob(SingleBakeOptions{}.light_resolution, true)};

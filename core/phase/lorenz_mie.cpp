@@ -21,6 +21,12 @@ Complex normalizeRefractiveIndex(Complex m) {
        << "got " << m.real() << (m.imag() < 0 ? " - " : " + ") << std::abs(m.imag()) << "i";
     throw InputError(os.str());
   }
+  if (std::abs(m) > kMaxRefractiveIndex) {
+    std::ostringstream os;
+    os << "mie.m: refractive index must have |m| <= " << kMaxRefractiveIndex << ", got |m| "
+       << std::abs(m);
+    throw InputError(os.str());
+  }
   return {m.real(), std::abs(m.imag())};
 }
 
@@ -32,6 +38,11 @@ void mieCoefficients(double x, Complex m_in, std::vector<Complex>* a, std::vecto
   }
   const Complex m = normalizeRefractiveIndex(m_in);
   const Complex mx = m * x;
+  if (std::abs(mx) > kMaxMieMx) {  // the downward recurrence holds about 1.1 |m x| terms
+    std::ostringstream os;
+    os << "mie.m: |m| x must be at most " << kMaxMieMx << ", got " << std::abs(mx);
+    throw InputError(os.str());
+  }
   const int n_stop = mieTermCount(x);
   // Start the downward recurrence far enough above both N and |mx| that the arbitrary start
   // value D = 0 has decayed to rounding level by n = N.

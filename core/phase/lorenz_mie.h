@@ -15,20 +15,29 @@ struct MieEfficiencies {
   int terms = 0;     ///< number of series terms N used
 };
 
+/// The largest |m| accepted: beyond every material's in the optics of clouds (water about 1.33,
+/// metals some tens), and a bound on the recurrence's length.
+constexpr double kMaxRefractiveIndex = 1000;
+/// The largest |m| x accepted: the downward recurrence holds about 1.1 |m x| complex terms
+/// (35 MB here).
+constexpr double kMaxMieMx = 2e6;
+
 /// Series length N = x + 4 x^(1/3) + 2 (Wiscombe 1980), at least 1.
 int mieTermCount(double x);
 
 /// Returns the refractive index in the e^{-i omega t} convention of Bohren & Huffman,
 /// m = n + i k with k >= 0 absorbing. Both signs of the imaginary part are accepted as the same
 /// absorption |k| (Wiscombe's MIEV0 writes m = n - i k), so 1.33 - 1e-5i == 1.33 + 1e-5i.
-/// Throws InputError ("mie.m: ...") unless n > 0 and both parts are finite.
+/// Throws InputError ("mie.m: ...") unless n > 0, both parts are finite and |m| <=
+/// kMaxRefractiveIndex.
 std::complex<double> normalizeRefractiveIndex(std::complex<double> m);
 
 /// Mie coefficients a_n, b_n for n = 1..N (stored at index n - 1) for size parameter
 /// x = 2 pi r / lambda and relative refractive index m (any sign convention, see above).
 /// The logarithmic derivative D_n(m x) uses downward recurrence from well above max(N, |m x|),
 /// which is stable for all m and x (Wiscombe 1980; Bohren & Huffman app. A).
-/// Throws InputError ("mie.x: ...") unless 1e-8 <= x <= 1e5.
+/// Throws InputError ("mie.x: ...") unless 1e-8 <= x <= 1e5, ("mie.m: ...") unless |m| x <=
+/// kMaxMieMx.
 void mieCoefficients(double x, std::complex<double> m, std::vector<std::complex<double>>* a,
                      std::vector<std::complex<double>>* b);
 

@@ -76,7 +76,7 @@ PhaseSpec parsePhase(const Object& o) {
 MediumSpec parseMedium(const Object& o) {
   const Reader& r = o.reader();
   MediumSpec m;
-  m.extinction = r.numberIn(o.required("extinction"), o.path("extinction"), 0, kMaxDensity);
+  m.extinction = densityNumber(r, o.required("extinction"), o.path("extinction"), false);
   if (auto* v = o.find("albedo")) m.albedo = r.rgb(*v, o.path("albedo"), 0, 1, true);
   if (auto* v = o.find("phase")) {
     m.phase = parsePhase(Object(r, *v, o.path("phase")));
@@ -113,13 +113,6 @@ Sky parseSky(const Object& o) {
 // The unit vector along `v`, scaled by its largest component first so that neither huge
 // components ([1e200, 1e200, 1e200]: its length overflows) nor tiny ones (1e-300: it underflows)
 // look like a zero vector; (0, 0, 0) for a zero or non-finite vector.
-Vec3 directionOf(const Vec3& v) {
-  const double m = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
-  if (!(m > 0) || !std::isfinite(m)) return Vec3(0.0);
-  const Vec3 s = v / m;
-  return s / length(s);
-}
-
 LightingSpec parseLighting(const Object& o) {
   const Reader& r = o.reader();
   LightingSpec l;
@@ -211,7 +204,8 @@ BakeSpec parseBake(const Object& o) {
              "method 'auto' chooses the samples with the method, from /bake/tolerance: leave it "
              "out (the command line's --samples overrides the choice)");
     }
-    b.samples = int(r.integer(*v, o.path("samples"), 1, kMaxSamples));
+    b.samples =
+        int(r.integer(*v, o.path("samples"), 1, std::min(kMaxSamples, int64_t(info.max_samples))));
   }
   if (auto* v = o.find("seed")) b.seed = r.unsignedInteger(*v, o.path("seed"));
   b.knobs = parseMethodKnobs(o, info);
@@ -258,9 +252,7 @@ Camera parseView(const Object& o) {
   cam.look_at = r.point(c.required("look_at"), c.path("look_at"));
   if (auto* v = c.find("up")) cam.up = r.vec3(*v, c.path("up"));
   const Vec3 forward = cam.look_at - cam.position;
-  if (!(length(forward) > 0) || !std::isfinite(length(forward))) {
-    r.fail(c.path("look_at"), "must differ from position");
-  }
+  if (!(length(directionOf(forward)) > 0)) r.fail(c.path("look_at"), "must differ from position");
   if (!(length(directionOf(cam.up)) > 0)) r.fail(c.path("up"), "must be a non-zero vector");
   if (length(cross(directionOf(forward), directionOf(cam.up))) < 1e-6) {
     r.fail(c.path("up"), "must not be parallel to the view direction (look_at - position)");

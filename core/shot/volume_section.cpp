@@ -9,6 +9,16 @@
 #include "core/volume/voxel_limits.h"
 
 namespace cloudbake::shotjson {
+
+double densityNumber(const Reader& r, const Json& v, const std::string& ptr, bool open_lo) {
+  const double d = r.numberIn(v, ptr, 0, kMaxDensity, open_lo);
+  if (d > 0 && d < kMinDensity) {
+    r.fail(ptr, std::string(open_lo ? "must be" : "must be 0 or") +
+                    " at least 1e-30 (the grids hold densities as floats), got " + exactNumber(d));
+  }
+  return d;
+}
+
 namespace {
 
 NoiseOptions parseNoise(const Object& o) {
@@ -27,7 +37,7 @@ NoiseOptions parseNoise(const Object& o) {
 
 double density(const Object& o) {
   const Json* v = o.find("density");
-  return v ? o.reader().numberIn(*v, o.path("density"), 0, kMaxDensity) : 1.0;
+  return v ? densityNumber(o.reader(), *v, o.path("density"), false) : 1.0;
 }
 
 BoxVolumeSpec parseBox(const Object& o) {
@@ -88,7 +98,7 @@ MeshVolumeSpec parseMesh(const Object& o) {
   if (vs) m.voxel_size = r.numberIn(*vs, o.path("voxel_size"), 0, 1e12, true);
   if (res) m.resolution = int(r.integer(*res, o.path("resolution"), 1, kMaxMeshResolution));
   if (auto* v = o.find("density")) {
-    m.density = r.numberIn(*v, o.path("density"), 0, kMaxDensity, true);
+    m.density = densityNumber(r, *v, o.path("density"), true);
   }
   if (auto* n = o.find("noise")) {
     m.noise_enabled = true;
@@ -111,7 +121,7 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
   if (auto* v = o.find("size")) {
     c.size = r.vec3(*v, o.path("size"));
     for (int a = 0; a < 3; ++a) {
-      r.numberIn((*v)[a], o.path("size") + "/" + std::to_string(a), 0, 1e12, true);
+      r.numberIn((*v)[a], o.path("size") + "/" + std::to_string(a), 0, 1e9, true);
     }
   }
   if (auto* v = o.find("resolution")) {
@@ -121,8 +131,7 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
   if (auto* v = o.find("sharpness")) {
     c.sharpness = r.numberIn(*v, o.path("sharpness"), 0, 1, true, true);
   }
-  if (auto* v = o.find("density"))
-    c.density = r.numberIn(*v, o.path("density"), 0, kMaxDensity, true);
+  if (auto* v = o.find("density")) c.density = densityNumber(r, *v, o.path("density"), true);
   if (auto* v = o.find("octaves")) c.octaves = int(r.integer(*v, o.path("octaves"), 1, 12));
   if (auto* v = o.find("frequency")) {
     c.frequency = r.numberIn(*v, o.path("frequency"), 0, 1e4, true);
@@ -131,14 +140,20 @@ ProceduralVolumeSpec parseProcedural(const Object& o) {
     c.persistence = r.numberIn(*v, o.path("persistence"), 0, 1, true);
   }
   if (auto* v = o.find("time")) c.time = r.numberIn(*v, o.path("time"), -1e6, 1e6);
-  // The remaining rule (at least 6 voxels along every axis) couples size and resolution.
+  checkOffset(r, o.path("center"), c.center, std::max({c.size.x, c.size.y, c.size.z}),
+              "largest size");
+  // The remaining rule (at least 6 voxels along every axis) couples size and resolution. The
+  // builder names the key it refuses ("perlin_cloud.size: ..."): the error names its pointer.
   try {
     validatePerlinCloudOptions(c);
   } catch (const InputError& e) {
-    r.fail(o.ptr(), e.what());
+    const std::string what = e.what(), prefix = "perlin_cloud.";
+    const size_t colon = what.find(": ");
+    if (what.rfind(prefix, 0) == 0 && colon != std::string::npos) {
+      r.fail(o.path(what.substr(prefix.size(), colon - prefix.size())), what.substr(colon + 2));
+    }
+    r.fail(o.ptr(), what);
   }
-  checkOffset(r, o.path("center"), c.center, std::max({c.size.x, c.size.y, c.size.z}),
-              "largest size");
   const double voxel = std::max({c.size.x, c.size.y, c.size.z}) / c.resolution;
   if (!(voxel >= kMinVoxelSize)) {
     r.fail(o.path("size"), "gives voxels of " + exactNumber(voxel) +
@@ -199,6 +214,12 @@ SequenceVolumeSpec parseSequence(const Object& o) {
     s.frames = int(r.integer(*frames, o.path("frames"), 2, kMaxFrames));
     if (auto* t = o.find("time_step"))
       s.time_step = r.numberIn(*t, o.path("time_step"), 0, 1e3, true);
+    // Frame f is the cloud at time + f x time_step, each within the time's range.
+    const double last = s.procedural->perlin.time + double(s.frames - 1) * s.time_step;
+    if (!(std::abs(last) <= 1e6)) {
+      r.fail(o.path("time_step"), "puts the last frame's time at " + exactNumber(last) +
+                                      " (time + (frames - 1) x time_step), beyond +-1e6");
+    }
   }
   return s;
 }

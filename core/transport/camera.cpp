@@ -12,21 +12,27 @@ namespace {
   throw InputError("view '" + camera.name + "': camera." + field + ": " + why);
 }
 
+// v itself where its length is a normal number (so every camera keeps the bits it had), else
+// the unit vector along it: an up of [0, 1e-200, 0] is a direction, though its length underflows.
+Vec3 tameLength(const Vec3& v) {
+  const double len = length(v);
+  return len > 1e-150 && len < 1e150 ? v : directionOf(v);
+}
+
 }  // namespace
 
 void validateCamera(const Camera& c) {
   if (!isFinite(c.position)) fail(c, "position", "must be finite, got " + str(c.position));
   if (!isFinite(c.look_at)) fail(c, "look_at", "must be finite, got " + str(c.look_at));
   if (!isFinite(c.up)) fail(c, "up", "must be finite, got " + str(c.up));
-  const Vec3 view = c.look_at - c.position;
-  const double view_len = length(view);
-  if (!(view_len > 0) || !std::isfinite(view_len)) {
+  const Vec3 view = normalize(tameLength(c.look_at - c.position));
+  if (!(length(view) > 0)) {
     fail(c, "look_at", "must differ from camera.position (both " + str(c.position) + ")");
   }
-  const double up_len = length(c.up);
-  if (!(up_len > 0) || !std::isfinite(up_len)) fail(c, "up", "must be a non-zero vector");
+  const Vec3 up = normalize(tameLength(c.up));
+  if (!(length(up) > 0)) fail(c, "up", "must be a non-zero vector");
   // Relative test: |sin(angle between up and view)| below 1e-6 leaves no usable right axis.
-  if (length(cross(view / view_len, c.up / up_len)) < 1e-6) {
+  if (length(cross(view, up)) < 1e-6) {
     fail(c, "up", "must not be parallel to the view direction, got " + str(c.up));
   }
   if (c.type == Camera::Type::kPerspective) {
@@ -51,8 +57,8 @@ void validateCamera(const Camera& c) {
 
 CameraRays::CameraRays(const Camera& camera) : camera_(camera) {
   validateCamera(camera);
-  forward_ = normalize(camera.look_at - camera.position);
-  right_ = normalize(cross(forward_, camera.up));
+  forward_ = normalize(tameLength(camera.look_at - camera.position));
+  right_ = normalize(cross(forward_, tameLength(camera.up)));
   up_ = cross(right_, forward_);
   const double aspect = static_cast<double>(camera.height_px) / camera.width_px;
   half_w_ = camera.type == Camera::Type::kPerspective ? std::tan(0.5 * camera.fov_deg * kPi / 180.0)

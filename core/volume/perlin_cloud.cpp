@@ -71,7 +71,7 @@ void validatePerlinCloudOptions(const PerlinCloudOptions& o) {
     fail("center", "finite (|c| <= 1e9)", vec(o.center));
   if (!isFinite(o.size) || !(o.size.x > 0 && o.size.y > 0 && o.size.z > 0) ||
       maxComponent(o.size) > 1e9)
-    fail("size", "finite and > 0 on every axis", vec(o.size));
+    fail("size", "finite and in (0, 1e9] on every axis", vec(o.size));
   if (o.resolution < 8 || o.resolution > 1024)
     fail("resolution", "in [8, 1024]", std::to_string(o.resolution));
   if (!(o.cover >= 0 && o.cover <= 1)) fail("cover", "in [0, 1]", num(o.cover));

@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/volume/openvdb_grid.h"
 #include "core/volume/sources.h"
 #include "core/volume/vdb_header_check.h"
@@ -45,6 +46,42 @@ void checkValues(const openvdb::FloatGrid& grid, const std::string& where) {
   tile.setMaxDepth(openvdb::FloatTree::ValueOnCIter::LEAF_DEPTH - 1);
   for (; tile; ++tile) {
     if (!std::isfinite(*tile) || *tile < 0.f) fail(tile.getCoord(), *tile);
+  }
+}
+
+// A grid's world extent is bounded as a shot's coordinates are (kMaxCoordinate in
+// core/shot/json_reader.h): beyond it a lattice has no float precision left.
+constexpr double kMaxWorldCoordinate = 1e15;
+
+// The grid's transform maps its voxels to a finite, non-degenerate box: a file may store a zero,
+// tiny, huge or NaN scale, which OpenVDB reads and only refuses (ArithmeticError) when the
+// transform is first inverted, or which makes the cloud's box infinite.
+void checkTransform(const openvdb::FloatGrid& grid, const std::string& where) {
+  const openvdb::math::Transform& xf = grid.transform();
+  try {
+    xf.baseMap()->getAffineMap();  // inverts the matrix: throws where it is nearly singular
+  } catch (const openvdb::Exception& e) {
+    throw InputError(where + ": its transform is singular (voxel size " +
+                     exactNumber(xf.voxelSize()[0]) + "; " + e.what() + ")");
+  }
+  const openvdb::Vec3d v = xf.voxelSize();
+  for (int a = 0; a < 3; ++a) {
+    if (!std::isfinite(v[a]) || !(v[a] > 0)) {
+      throw InputError(where + ": its transform's voxel size must be finite and > 0");
+    }
+  }
+  const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
+  for (int c = 0; c < 8; ++c) {
+    const openvdb::Vec3d ijk((c & 1 ? box.max() : box.min()).x(),
+                             (c & 2 ? box.max() : box.min()).y(),
+                             (c & 4 ? box.max() : box.min()).z());
+    const openvdb::Vec3d w = xf.indexToWorld(ijk);
+    for (int a = 0; a < 3; ++a) {
+      if (!(std::abs(w[a]) <= kMaxWorldCoordinate)) {
+        throw InputError(where + ": its active voxels reach world coordinate " + exactNumber(w[a]) +
+                         " (voxel size " + exactNumber(v[0]) + "), beyond +-1e15");
+      }
+    }
   }
 }
 
@@ -104,6 +141,7 @@ DensityFieldPtr loadVdbVolume(const VdbSourceOptions& options) {
       throw InputError(where + ": level set has no interior");
     }
   }
+  checkTransform(*grid, where);
   checkValues(*grid, where);
   return makeGridVolume(grid, path);
 }

@@ -52,7 +52,14 @@ void addMieCommand(CLI::App& app, int* exit_code) {
       ->required();
   cmd->callback([opt, exit_code] {
     const double x = parseFinite("--x", opt->x);
-    const MieEfficiencies e = mieEfficiencies(x, parseRefractiveIndex(opt->m));
+    MieEfficiencies e;
+    try {
+      e = mieEfficiencies(x, parseRefractiveIndex(opt->m));
+    } catch (const InputError& err) {  // the core names its arguments mie.x and mie.m
+      const std::string what = err.what();
+      if (what.rfind("mie.", 0) == 0) throw InputError("--" + what.substr(4));
+      throw;
+    }
     const nlohmann::json out = {{"qext", e.qext}, {"qsca", e.qsca}, {"qback", e.qback}, {"g", e.g}};
     std::cout << out.dump() << std::endl;
     *exit_code = kOk;

@@ -55,6 +55,11 @@ void addPreviewCommand(CLI::App& app, int* exit_code) {
                   "so previews of different files compare")
       ->check(CLI::PositiveNumber);
   cmd->callback([opt, exit_code] {
+    // CLI11's PositiveNumber lets NaN through (every comparison with it is false).
+    if (!(opt->exposure >= 0 && opt->exposure <= 1e12)) {
+      throw InputError("--exposure: must be a number in (0, 1e12], got " +
+                       std::to_string(opt->exposure));
+    }
     const ExrContents exr = readExr(opt->exr);
     const std::string name = pickLayer(exr, opt->layer, opt->exr);
     const double exposure = writePreviewPng(opt->out, exr.layers.at(name), opt->exposure);

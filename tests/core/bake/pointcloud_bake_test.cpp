@@ -595,6 +595,29 @@ TEST(Pointcloud, ACloudFarFromTheOriginGivesTheSameLight) {
   }
 }
 
+// An outside probe: at extinction 1e-320 a point's discretised collision fraction is a
+// denormal, its ratio to the target overflowed, and inf times a zero sphere gave NaN light.
+TEST(NormalisedRule, ANearlyTransparentCloudScattersNothingAndStaysFinite) {
+  const Lattice l = sphereLattice(1, 1, 12);
+  for (const double g : {0.0, 0.6}) {
+    for (const double extinction : {1e-320, 1e-300, 1e-40}) {
+      const Medium m =
+          sphereMedium(1, extinction, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(g));
+      PointcloudOptions o;
+      o.points = 500;
+      o.passes = 3;
+      const PointCloudResult r = runPointcloud(l.grid, l.density, {}, m, Vec3(0, 0, 1), o);
+      ASSERT_GT(r.cloud.size(), 0u);
+      for (size_t j = 0; j < r.cloud.size(); ++j) {
+        ASSERT_TRUE(std::isfinite(r.transfer_scale[j])) << extinction << " g " << g << " " << j;
+        ASSERT_TRUE(isFinite(r.co[j]) && isFinite(r.light_dir[j])) << extinction << " " << j;
+        ASSERT_LE(maxComponent(r.co[j]), 1e-20) << extinction << " g " << g << " " << j;
+        ASSERT_GE(r.co[j].x, 0.0);
+      }
+    }
+  }
+}
+
 TEST(NormalisedRule, MieRatioIsHigherOnTheShadowSide) {
   // Seed 000's Figure 8: on the lit side light arrives forward and back scattered (more
   // isotropic), in the shadow it flows on, away from the sun (more beam-like).

@@ -441,6 +441,61 @@ TEST(RunShot, OutputsExrLayersWriteTheChosenLayersOnly) {
   fs::remove_all(dir);
 }
 
+// An outside probe: an empty box with bake.vdb failed as the file was written, naming no field,
+// though an empty cloud is a valid shot; a box thinner than a voxel named none either.
+TEST(RunShot, AnEmptyCloudsDensityVdbIsEmptyAndAThinBoxNamesTheVoxelSize) {
+  const fs::path dir = freshDir("emptyvdb");
+  RunOptions opt;
+  opt.out_dir = (dir / "empty").string();
+  ShotSpec shot = parse(tinyShot());
+  shot.volume = BoxVolumeSpec{{-1, -1, -1}, {1, 1, 1}, 0.0};
+  const RunResult r = runShot(shot, opt);
+  ASSERT_EQ(r.files.size(), 2u);
+  VdbFileReader vdb(r.files[1].path);
+  EXPECT_EQ(vdb.grids().at(0).name, "density");
+  EXPECT_EQ(vdb.grids().at(0).active_voxels, 0u);
+  EXPECT_DOUBLE_EQ(vdb.grids().at(0).voxel_size, 0.25);
+
+  shot.volume = BoxVolumeSpec{{-1, -1, 0.01}, {1, 1, 0.2}, 1.0};  // no voxel centre inside
+  opt.out_dir = (dir / "thin").string();
+  try {
+    runShot(shot, opt);
+    ADD_FAILURE() << "a box no voxel samples was written";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/outputs/vdb_voxel_size: "), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "thin" / "bake.vdb"));
+  fs::remove_all(dir);
+}
+
+// The command line's --samples is held to the method's own limit: 1024 rays per pixel for a
+// view from a bake (it failed after the bake, as "samples_per_pixel").
+TEST(RunShot, ASamplesOverrideBeyondTheMethodsLimitIsRefusedBeforeTheBake) {
+  const fs::path dir = freshDir("samples");
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  opt.samples = 1025;
+  std::string text = tinyShot();
+  const std::string pt = R"("method": "pathtrace", "samples": 2)";
+  text.replace(text.find(pt), pt.size(), R"("method": "single", "light_resolution": 8)");
+  const std::string vdb = R"("vdb": true, "vdb_voxel_size": 0.25)";
+  text.replace(text.find(vdb), vdb.size(), R"("vdb": false)");
+  const ShotSpec shot = parse(text);
+  try {
+    runShot(shot, opt);
+    ADD_FAILURE() << "1025 rays per pixel were accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("samples: method 'single' takes at most 1024"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "front.exr"));
+  opt.samples = 1024;
+  EXPECT_NO_THROW(runShot(shot, opt));
+  fs::remove_all(dir);
+}
+
 TEST(RunShot, CachedSunColourChangeIsScaledNotRecomputed) {
   const fs::path dir = freshDir("scaled");
   BakeCache cache((dir / "cache").string(), 0);

@@ -725,6 +725,41 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["outputs"]["exr_layers"] = {"sun"};
        },
        "/outputs/exr_layers: applies only when /outputs/exr is true"},
+      // An outside probe's findings: each was refused late, or blamed on the wrong field.
+      {"a denormal extinction", [](json& j) { j["medium"]["extinction"] = 1e-320; },
+       "/medium/extinction: must be 0 or at least 1e-30 (the grids hold densities as floats), "
+       "got "},
+      {"a denormal box density", [](json& j) { j["volume"]["box"]["density"] = 1e-35; },
+       "/volume/box/density: must be 0 or at least 1e-30"},
+      {"a denormal procedural density",
+       [](json& j) {
+         j["volume"] = {{"procedural", {{"type", "perlin_cloud"}, {"density", 1e-320}}}};
+       },
+       "/volume/procedural/density: must be at least 1e-30"},
+      {"a procedural size beyond 1e9",
+       [](json& j) {
+         j["volume"] = {{"procedural", {{"type", "perlin_cloud"}, {"size", {1e12, 2, 1}}}}};
+       },
+       "/volume/procedural/size/0: must be in (0, 1e+09], got 1e+12"},
+      {"a procedural cloud too thin for its resolution",
+       [](json& j) {
+         j["volume"] = {
+             {"procedural", {{"type", "perlin_cloud"}, {"size", {2, 2, 0.1}}, {"resolution", 8}}}};
+       },
+       "/volume/procedural/size: must be at least 6 voxels along every axis at resolution 8"},
+      {"a sequence whose last frame's time is beyond 1e6",
+       [](json& j) {
+         j["volume"] = {
+             {"sequence",
+              {{"procedural", {{"type", "perlin_cloud"}, {"time", 1e6}}}, {"frames", 3}}}};
+         j["bake"] = {{"method", "precomputed"}};
+       },
+       "/volume/sequence/time_step: puts the last frame's time at 1000000.2"},
+      {"more rays per pixel than a view from a bake takes",
+       [](json& j) {
+         j["bake"] = {{"method", "single"}, {"samples", 1025}};
+       },
+       "/bake/samples: must be an integer in [1, 1024], got 1025"},
       {"shot name with a space", [](json& j) { j["name"] = "my shot"; }, "/name: must be 1 to 128"},
       {"box of the wrong shape",
        [](json& j) {

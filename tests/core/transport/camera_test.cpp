@@ -115,6 +115,33 @@ void expectInvalid(const Camera& c, const std::string& field) {
   }
 }
 
+// An outside probe: an up of [0, 1e-200, 0] was refused as "a non-zero vector" (its length
+// underflows), and a huge one as well. Any finite non-zero vector is a direction.
+TEST(Camera, TinyAndHugeDirectionsAreDirections) {
+  const Camera base = baseCamera();
+  const CameraRays reference(base);
+  for (const Vec3& up : {Vec3(0, 0, 1e-200), Vec3(0, 0, 1e-320), Vec3(0, 1e-300, 1e-200),
+                         Vec3(0, 0, 1e300), Vec3(1e-5, 1e200, 1e200)}) {
+    Camera c = base;
+    c.up = up;
+    ASSERT_NO_THROW(validateCamera(c)) << up.z;
+    const CameraRays rays(c);
+    for (const auto& [x, y] : {std::pair{0, 0}, std::pair{200, 100}, std::pair{37, 80}}) {
+      const Vec3 d = rays.generate(x, y).d, r = reference.generate(x, y).d;
+      if (up.y == 0) {
+        EXPECT_NEAR(length(d - r), 0.0, 1e-12) << up.z << " " << x;
+      }
+      EXPECT_TRUE(isFinite(d)) << up.y << " " << up.z;
+    }
+  }
+  Camera near = base;  // a look_at 1e-200 from the position looks along the difference
+  near.position = Vec3(0.0);
+  near.look_at = Vec3(0, 1e-200, 0);
+  ASSERT_NO_THROW(validateCamera(near));
+  EXPECT_NEAR(length(CameraRays(near).generate(37, 80).d - reference.generate(37, 80).d), 0.0,
+              1e-12);
+}
+
 TEST(Camera, ValidationNamesTheField) {
   Camera c = baseCamera();
   EXPECT_NO_THROW(validateCamera(c));

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -171,6 +172,38 @@ TEST_F(VdbSourceTest, RejectsNanAndNegativeVoxelsNamingTheVoxel) {
   inf_tile->tree().addTile(1, openvdb::Coord(64, 0, 0), INFINITY, true);
   writeGrids(dir_ + "/inf.vdb", {inf_tile});
   expectInputError({dir_ + "/inf.vdb", "density"});
+}
+
+// The scale and voxel size (six doubles after the map's name) of a file's UniformScaleMap set to
+// `value`, as a corrupt or hand-made file may hold them: OpenVDB refuses to build such a map in
+// memory, but reads it from a file and only fails when it first inverts it.
+void setFileScale(const std::string& path, double value) {
+  std::ifstream in(path, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  in.close();
+  const std::string name = "UniformScaleMap";
+  const size_t at = bytes.find(name);
+  ASSERT_NE(at, std::string::npos);
+  for (int k = 0; k < 6; ++k) {
+    std::memcpy(&bytes[at + name.size() + 8 * size_t(k)], &value, sizeof value);
+  }
+  testing::writeText(path, bytes);
+}
+
+// An outside probe: a file's transform may be singular (a zero or tiny scale) or so large that
+// the cloud's box is infinite. Both are the file's fault: an error naming it, not an internal one.
+TEST_F(VdbSourceTest, RefusesADegenerateOrHugeTransformNamingTheFile) {
+  for (const double scale : {0.0, 1e-7, 1e300, 1e15, std::nan("")}) {
+    const std::string path = dir_ + "/scale.vdb";
+    writeGrids(path, {ballGrid("density", 1.f)});
+    setFileScale(path, scale);
+    const std::string msg = expectInputError({path, "density"});
+    EXPECT_NE(msg.find("scale.vdb: grid 'density': its "), std::string::npos) << scale << msg;
+  }
+  // A scale at which the cloud stays within +-1e15 loads.
+  writeGrids(dir_ + "/big.vdb", {ballGrid("density", 1.f)});
+  setFileScale(dir_ + "/big.vdb", 1e12);
+  EXPECT_GT(loadVdbVolume({dir_ + "/big.vdb", "density"})->bounds().max.x, 6e12);
 }
 
 TEST_F(VdbSourceTest, LevelSetBecomesFogVolume) {

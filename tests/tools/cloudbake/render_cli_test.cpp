@@ -555,6 +555,40 @@ TEST_F(RenderCli, PreviewWritesAPngOfAnyLayer) {
   EXPECT_EQ(r.rc, 3);
 }
 
+// An outside probe: a huge refractive index made `mie` ask for a vector of 1e11 terms (an
+// internal error), and `preview --exposure nan` fell back to auto exposure with exit 0.
+TEST_F(RenderCli, OutOfRangeArgumentsExitWith2NamingTheOption) {
+  for (const char* m : {"1e10,0", "1.33,1e300", "1e300,0"}) {
+    const CliResult r = run(std::string("mie --x 10 --m ") + m);
+    EXPECT_EQ(r.rc, 2) << m << r.err;
+    EXPECT_NE(r.err.find("--m: refractive index must have |m| <= 1000"), std::string::npos)
+        << r.err;
+  }
+  CliResult r = run("mie --x 1e5 --m 100,0");  // |m| x beyond what the recurrence holds
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("--m: |m| x must be at most"), std::string::npos) << r.err;
+  r = run("mie --x 1e-9 --m 1.33");
+  EXPECT_EQ(r.rc, 2) << r.err;
+  EXPECT_NE(r.err.find("--x: size parameter must be in"), std::string::npos) << r.err;
+  ASSERT_EQ(run("mie --x 10 --m 1.33,0").rc, 0);
+
+  json j = slab();
+  j["views"][0]["resolution"] = {4, 4};
+  j["bake"]["samples"] = 1;
+  ASSERT_EQ(
+      run("render '" + writeShot("p.json", j).string() + "' --out '" + dir_.string() + "' --quiet")
+          .rc,
+      0);
+  const std::string exr = (dir_ / (j["views"][0]["name"].get<std::string>() + ".exr")).string();
+  for (const char* exposure : {"nan", "inf", "1e300"}) {
+    r = run("preview '" + exr + "' --exposure " + exposure + " --out '" +
+            (dir_ / "e.png").string() + "'");
+    EXPECT_EQ(r.rc, 2) << exposure << r.out;
+    EXPECT_NE(r.err.find("--exposure"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "e.png")) << exposure;
+  }
+}
+
 // A mistyped subcommand is named, with the nearest command (CLI11 said "A subcommand is
 // required").
 // What an outside probe found: a result printed into a full disk exited 0 with an empty file;
