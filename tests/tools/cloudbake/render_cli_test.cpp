@@ -69,6 +69,16 @@ class RenderCli : public ::testing::Test {
     return p;
   }
   static json slab() { return json::parse(slurp(kExamples / "slab.json")); }
+  // Renders the slab's view at `side` x `side` pixels, 1 sample, into dir_: its EXR's path.
+  std::string renderSmallSlab(int side) {
+    json j = slab();
+    j["views"][0]["resolution"] = {side, side};
+    j["bake"]["samples"] = 1;
+    const CliResult r = run("render '" + writeShot("small.json", j).string() + "' --out '" +
+                            dir_.string() + "' --quiet");
+    EXPECT_EQ(r.rc, 0) << r.err;
+    return (dir_ / (j["views"][0]["name"].get<std::string>() + ".exr")).string();
+  }
   fs::path dir_;
 };
 
@@ -531,14 +541,7 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
 // Previews of any EXR: the beauty by default, any layer by name, a clear error for a layer the
 // file lacks (listing what it has) and exit 3 for a missing file.
 TEST_F(RenderCli, PreviewWritesAPngOfAnyLayer) {
-  json j = slab();
-  j["views"][0]["resolution"] = {8, 8};
-  j["bake"]["samples"] = 1;
-  ASSERT_EQ(
-      run("render '" + writeShot("p.json", j).string() + "' --out '" + dir_.string() + "' --quiet")
-          .rc,
-      0);
-  const std::string exr = (dir_ / (j["views"][0]["name"].get<std::string>() + ".exr")).string();
+  const std::string exr = renderSmallSlab(8);
   CliResult r = run("preview '" + exr + "' --out '" + (dir_ / "b.png").string() + "'");
   ASSERT_EQ(r.rc, 0) << r.err;
   EXPECT_EQ(json::parse(r.out).at("layer"), "beauty");
@@ -572,14 +575,7 @@ TEST_F(RenderCli, OutOfRangeArgumentsExitWith2NamingTheOption) {
   EXPECT_NE(r.err.find("--x: size parameter must be in"), std::string::npos) << r.err;
   ASSERT_EQ(run("mie --x 10 --m 1.33,0").rc, 0);
 
-  json j = slab();
-  j["views"][0]["resolution"] = {4, 4};
-  j["bake"]["samples"] = 1;
-  ASSERT_EQ(
-      run("render '" + writeShot("p.json", j).string() + "' --out '" + dir_.string() + "' --quiet")
-          .rc,
-      0);
-  const std::string exr = (dir_ / (j["views"][0]["name"].get<std::string>() + ".exr")).string();
+  const std::string exr = renderSmallSlab(4);
   for (const char* exposure : {"nan", "inf", "1e300"}) {
     r = run("preview '" + exr + "' --exposure " + exposure + " --out '" +
             (dir_ / "e.png").string() + "'");
