@@ -94,6 +94,14 @@ void checkShot(const grpc::Status& s, const std::string& shot_file) {
   check(grpc::Status(s.error_code(), message), shot_file);
 }
 
+/// A job's error with the server's name of the shot ("shot.json: ...") replaced by the user's
+/// file, when the client knows it (submit): an asset found bad while the job ran is named so.
+std::string userNamedError(const std::string& error, const std::string& shot_file) {
+  const std::string server_name = "shot.json: ";
+  if (shot_file.empty() || error.rfind(server_name, 0) != 0) return error;
+  return shot_file + ": " + error.substr(server_name.size());
+}
+
 // Protobuf's own names of the enum values ("QUEUED", "RUNNING", ...); they live for the program.
 const char* stateName(v1::JobState s) { return v1::JobState_Name(s).c_str(); }
 
@@ -573,7 +581,10 @@ v1::Job watch(Client& c, const std::string& id, bool quiet) {
   }
 }
 
-int finishJob(Client& c, const v1::Job& job, const std::string& out_dir) {
+int finishJob(Client& c, const v1::Job& job_in, const std::string& out_dir,
+              const std::string& shot_file = "") {
+  v1::Job job = job_in;
+  job.set_error(userNamedError(job.error(), shot_file));
   if (job.state() == v1::SUCCEEDED && !out_dir.empty()) return fetchAll(c, job, out_dir, "");
   if (c.json)
     std::cout << jobJson(job).dump() << "\n";
@@ -780,7 +791,7 @@ int cmdSubmit(Client& c, const SubmitArgs& a) {
     return ExitCode::kOk;
   }
   if (!c.json && !a.quiet) std::fprintf(stderr, "job %s submitted\n", job.id().c_str());
-  return finishJob(c, watch(c, job.id(), a.quiet), a.out);
+  return finishJob(c, watch(c, job.id(), a.quiet), a.out, a.shot);
 }
 
 // ---- health and info ---------------------------------------------------------------------

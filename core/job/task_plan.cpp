@@ -341,6 +341,34 @@ void checkGraph(const shotjson::Reader& r, const std::vector<FarmTask>& tasks) {
   }
 }
 
+// A plan is what `cloudbake plan` makes of its shot: the graph is made again from the shot, at
+// the width its stages show, and compared task by task. A plan whose id was computed again
+// after an edit could otherwise drop gather's dependencies (gather then ran, and marked itself
+// done, before anything it gathers) or misname a task's files (found only after it ran).
+void checkAgainstReplanned(const shotjson::Reader& r, const TaskPlan& plan) {
+  std::map<Part, int> per_part;
+  for (const FarmTask& t : plan.tasks) ++per_part[t.scope.part];
+  int width = 1;
+  for (const auto& [part, n] : per_part) width = std::max(width, n);
+  const TaskPlan again = planTasks(plan.shot, std::min(width, 10000), plan.auto_preset);
+  const std::string redo = ": plan again (`cloudbake plan` makes another graph of this shot)";
+  if (again.tasks.size() != plan.tasks.size()) {
+    r.fail("/tasks", "has " + std::to_string(plan.tasks.size()) +
+                         " tasks where the shot's plan has " + std::to_string(again.tasks.size()) +
+                         redo);
+  }
+  for (size_t i = 0; i < plan.tasks.size(); ++i) {
+    const FarmTask &a = plan.tasks[i], &b = again.tasks[i];
+    const std::string ptr = "/tasks/" + std::to_string(i);
+    if (a.id != b.id || a.scope.part != b.scope.part || a.scope.begin != b.scope.begin ||
+        a.scope.end != b.scope.end) {
+      r.fail(ptr, "task '" + a.id + "' is not the shot's task '" + b.id + "' there" + redo);
+    }
+    if (a.after != b.after) r.fail(ptr + "/after", "differs from the shot's plan" + redo);
+    if (a.writes != b.writes) r.fail(ptr + "/writes", "differs from the shot's plan" + redo);
+  }
+}
+
 ShotSpec readShot(const Json& v, const std::string& source, const std::string& ptr) {
   ParseOptions po;
   po.source_name = source + " " + ptr;
@@ -377,6 +405,7 @@ TaskPlan planFromJson(const std::string& text, const std::string& source) {
   if (contentId(plan) != plan.id) {
     r.fail("/id", "does not match the plan's content (edited, or its files changed): plan again");
   }
+  checkAgainstReplanned(r, plan);
   return plan;
 }
 

@@ -616,6 +616,11 @@ void expectBadCases(const ServerProc& server, const Workspace& ws,
     EXPECT_EQ(r.code, c.code) << c.label << ": " << r.err;
     EXPECT_NE(r.err.find(c.message), std::string::npos) << c.label << ": " << r.err;
     EXPECT_EQ(r.err.find("internal"), std::string::npos) << c.label << ": " << r.err;
+    // The user's file is named, whether the server refused the shot at submit or its job
+    // failed on an asset (an outside probe: the latter said the server's "shot.json").
+    if (c.code == 2) {
+      EXPECT_NE(r.err.find(shot + ": "), std::string::npos) << c.label << ": " << r.err;
+    }
     EXPECT_EQ(r.err.find(server.stateDir()), std::string::npos)
         << c.label << " leaks a server path: " << r.err;
     EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << c.label << ": one line: " << r.err;

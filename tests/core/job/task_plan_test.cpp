@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -258,6 +259,45 @@ TEST(TaskPlan, APlanFileRoundTripsAndAnEditedOrMalformedOneIsRefused) {
     }
   }
   EXPECT_THROW(planFromJson("{\"format\": ", "plan.json"), InputError);
+}
+
+// An outside probe forged plans whose id it computed again after the edit: gather without its
+// dependencies ran before anything it gathers and marked itself done, and a render task with
+// another `writes` ran whole before failing as an internal error. A plan must be the graph
+// `cloudbake plan` makes of its shot; every such edit is refused as the plan is read.
+TEST(TaskPlan, AForgedGraphWithARecomputedIdIsRefused) {
+  const TaskPlan p = planTasks(parseShot(sequenceShot(), ""), 2);
+  const nlohmann::json j = planToJson(p);
+  auto forged = [](nlohmann::json f) {
+    f.erase("id");
+    f["id"] = sha256Hex(f.dump());
+    return f.dump();
+  };
+  EXPECT_EQ(planFromJson(forged(j), "plan.json").id, p.id);  // the forger's id is the real one
+  auto refused = [&](const nlohmann::json& f, const std::string& pointer) {
+    try {
+      planFromJson(forged(f), "plan.json");
+      ADD_FAILURE() << "accepted: " << pointer;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(pointer + ": "), std::string::npos) << e.what();
+    }
+  };
+  const size_t gather = j["tasks"].size() - 1;
+  nlohmann::json no_deps = j;
+  no_deps["tasks"][gather]["after"] = nlohmann::json::array();
+  refused(no_deps, "/tasks/" + std::to_string(gather) + "/after");
+  nlohmann::json render_first = j;
+  render_first["tasks"][4]["after"] = nlohmann::json::array();  // render.000 before the bake
+  refused(render_first, "/tasks/4/after");
+  nlohmann::json other_file = j;
+  other_file["tasks"][4]["writes"] = {"other.exr"};
+  refused(other_file, "/tasks/4/writes");
+  nlohmann::json fewer = j;
+  fewer["tasks"].erase(size_t(2));  // precompute.001 gone, and the bake's `after` with it
+  fewer["tasks"][2]["after"] = {"precompute.000"};
+  nlohmann::json& last_after = fewer["tasks"][fewer["tasks"].size() - 1]["after"];
+  last_after.erase(std::find(last_after.begin(), last_after.end(), "precompute.001"));
+  refused(fewer, "/tasks");
 }
 
 }  // namespace
