@@ -1492,6 +1492,11 @@ template <typename TracePixel, typename SkyBehind>
 bool renderFilm(int w, int h, int spacing, const FilmTolerance& tolerance, int threads,
                 const ProgressFn& progress, RenderLayers& out, TracePixel&& trace_pixel,
                 SkyBehind&& sky_behind, const std::function<void()>& setup) {
+  std::atomic<int64_t> traced{0};  // out.traced_pixels
+  auto counted = [&](int x, int y, Rng& rng, BakeMarcher::Scratch* scratch) {
+    traced.fetch_add(1, std::memory_order_relaxed);
+    return trace_pixel(x, y, rng, scratch);
+  };
   auto trace_tile = [&](const TileRect& t, const TilePoll& poll) {
     Rng rng;
     BakeMarcher::Scratch scratch;
@@ -1500,28 +1505,34 @@ bool renderFilm(int w, int h, int spacing, const FilmTolerance& tolerance, int t
       for (int x = t.x0; x < t.x1; ++x) {
         if (!onFilmLine(x, w, spacing)) continue;
         if (poll.stop()) return;
-        storeFilm(out, x, y, trace_pixel(x, y, rng, &scratch));
+        storeFilm(out, x, y, counted(x, y, rng, &scratch));
       }
     }
   };
-  if (spacing == 1) return renderTiles(w, h, kTileSize, threads, progress, trace_tile, setup);
-  const std::vector<int> film_xs = filmLine(w, spacing), film_ys = filmLine(h, spacing);
-  auto fill_tile = [&](const TileRect& t, const TilePoll& poll) {
-    Rng rng;
-    BakeMarcher::Scratch scratch;
-    fillSparseTile(
-        t, film_xs, film_ys, spacing, tolerance, poll, out,
-        [&](int x, int y) { return trace_pixel(x, y, rng, &scratch); },
-        [&](int x, int y) { return sky_behind(x, y, rng); });
-  };
-  // The traced pixels are about a third of the work, the cells that bend the rest.
-  ProgressFn first, second;
-  if (progress) {
-    first = [&](double f) { return progress(kFilmFirstPass * f); };
-    second = [&](double f) { return progress(kFilmFirstPass + (1 - kFilmFirstPass) * f); };
+  bool finished = false;
+  if (spacing == 1) {
+    finished = renderTiles(w, h, kTileSize, threads, progress, trace_tile, setup);
+  } else {
+    const std::vector<int> film_xs = filmLine(w, spacing), film_ys = filmLine(h, spacing);
+    auto fill_tile = [&](const TileRect& t, const TilePoll& poll) {
+      Rng rng;
+      BakeMarcher::Scratch scratch;
+      fillSparseTile(
+          t, film_xs, film_ys, spacing, tolerance, poll, out,
+          [&](int x, int y) { return counted(x, y, rng, &scratch); },
+          [&](int x, int y) { return sky_behind(x, y, rng); });
+    };
+    // The traced pixels are about a third of the work, the cells that bend the rest.
+    ProgressFn first, second;
+    if (progress) {
+      first = [&](double f) { return progress(kFilmFirstPass * f); };
+      second = [&](double f) { return progress(kFilmFirstPass + (1 - kFilmFirstPass) * f); };
+    }
+    finished = renderTiles(w, h, kTileSize, threads, first, trace_tile, setup) &&
+               renderTiles(w, h, kTileSize, threads, second, fill_tile);
   }
-  return renderTiles(w, h, kTileSize, threads, first, trace_tile, setup) &&
-         renderTiles(w, h, kTileSize, threads, second, fill_tile);
+  out.traced_pixels = traced.load();
+  return finished;
 }
 
 void validateBake(const BakedLight& bake) {

@@ -355,10 +355,12 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
         {"cloudbake:seed", std::to_string(ro.seed)},
         {"cloudbake:film_spacing", std::to_string(filmSpacingOf(light, camera, ro))}};
     if (shot.lighting.has_sun) addLitFrom(shot, light.sun_direction, &attributes);
+    const double traced = tracedShare(layers);
     const double write_s =
         run.writeView(camera.name, camera, renderLayersToExr(std::move(layers)), attributes);
     ++run.result().views_from_bake;
-    run.result().steps.push_back({"view", camera.name, -1, secondsSince(t0), {{"write", write_s}}});
+    run.result().steps.push_back(
+        {"view", camera.name, -1, secondsSince(t0), {{"write", write_s}, {"traced", traced}}});
     run.poll(v1, 1);
     run.report("render", v1, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s",
                camera.name);

@@ -38,6 +38,13 @@ Knob stepKnob(const char* derived_default = "half a lattice voxel");
 Knob filmSpacingKnob();
 Knob lightResolutionKnob(int64_t default_resolution, bool aligned_to_grid);
 
+/// The share of a view's pixels whose rays were traced (the sparse film interpolates the rest):
+/// a view step's "traced" in --stats-json.
+inline double tracedShare(const RenderLayers& layers) {
+  const double pixels = double(layers.beauty.width) * layers.beauty.height;
+  return pixels > 0 ? double(layers.traced_pixels) / pixels : 0.0;
+}
+
 /// How views of a lattice method are rendered: `step`, bake.samples rays per pixel, bake.seed.
 BakeRenderOptions bakeRenderOptions(const ShotSpec& shot, int threads);
 

@@ -288,6 +288,7 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
     RenderLayers layers =
         renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
                        [&](double fr) { return run.poll(progress.at(f, 1 + i + fr), fr); });
+    const double traced = tracedShare(layers);
     const double write_s = run.writeView(
         frameStem(camera.name, f), camera, renderLayersToExr(std::move(layers)),
         {{"cloudbake:frame", std::to_string(f)},
@@ -298,7 +299,7 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
          {"cloudbake:film_spacing", std::to_string(filmSpacingOf(light, camera, ro))}});
     ++run.result().views_from_bake;
     run.result().steps.push_back(
-        {"view", camera.name, f, secondsSince(t_view), {{"write", write_s}}});
+        {"view", camera.name, f, secondsSince(t_view), {{"write", write_s}, {"traced", traced}}});
     run.report("render", progress.at(f, 2 + i),
                "frame " + std::to_string(f) + ", view '" + camera.name + "' " +
                    std::to_string(camera.width_px) + "x" + std::to_string(camera.height_px) +

@@ -59,6 +59,9 @@ struct RenderLayers {
   Image sky;         ///< 3 channels
   Image single;      ///< 3 channels
   Image multiple;    ///< 3 channels
+  /// Pixels whose rays were traced: every pixel, but for a view from a bake's sparse film
+  /// (core/bake/sparse_film.h), which interpolates the others.
+  int64_t traced_pixels = 0;
 };
 
 /// Renders one view by path tracing. Throws InputError for invalid medium/camera/options.

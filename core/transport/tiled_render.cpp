@@ -83,6 +83,7 @@ RenderLayers makeRenderLayers(int width, int height) {
   out.sky = Image(width, height, 3);
   out.single = Image(width, height, 3);
   out.multiple = Image(width, height, 3);
+  out.traced_pixels = int64_t(width) * height;
   return out;
 }
 

@@ -575,6 +575,11 @@ TEST(BakeRender, SparseFilmAgreesWithEveryPixelTraced) {
     }
     ASSERT_GT(n, 5000) << "the cloud should fill much of the view";
     EXPECT_GT(differ, 0) << "spacing " << spacing << ": some pixels should be interpolated";
+    // The film counts what it traced: the grid of every s-th pixel at least, not every pixel.
+    const int64_t pixels = int64_t(cam.width_px) * cam.height_px;
+    EXPECT_EQ(full.traced_pixels, pixels);
+    EXPECT_GE(sparse.traced_pixels, pixels / (spacing * spacing));
+    EXPECT_LT(sparse.traced_pixels, pixels - differ / 2) << "spacing " << spacing;
     const double mean_full = sum_full / n;
     EXPECT_LT(std::sqrt(se / n) / mean_full, 0.005) << "spacing " << spacing;
     EXPECT_NEAR(sum / sum_full, 1.0, 3e-3) << "spacing " << spacing;

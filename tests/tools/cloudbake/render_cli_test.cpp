@@ -209,6 +209,8 @@ TEST_F(RenderCli, StatsJsonHasCountersStepsAndPeakMemory) {
     if (step.at("step") == "view") {  // writing the EXR is a part of the view's seconds
       EXPECT_GT(step.at("write").get<double>(), 0.0);
       EXPECT_LE(step.at("write").get<double>(), step.at("seconds").get<double>());
+      EXPECT_GT(step.at("traced").get<double>(), 0.0);  // a view from the bake: its film
+      EXPECT_LE(step.at("traced").get<double>(), 1.0);
     }
   }
   EXPECT_EQ(kinds, (std::set<std::string>{"volume", "bake", "view"}));
