@@ -95,7 +95,12 @@ class BakeClient:
             self.channel = grpc.secure_channel(address, creds)
         else:
             self.channel = grpc.insecure_channel(address)
-        grpc.channel_ready_future(self.channel).result(timeout=timeout)
+        try:
+            grpc.channel_ready_future(self.channel).result(timeout=timeout)
+        except grpc.FutureTimeoutError:
+            self.channel.close()
+            raise ConnectionError("cannot reach cloudbake-server at %s within %g s (is it running, "
+                                  "and is the address right?)" % (address, timeout)) from None
         token = read_token(token, token_file)
         channel = self.channel
         if token:
@@ -123,8 +128,10 @@ class BakeClient:
         self.stub.UploadAsset(parts())
         return digest
 
-    def submit(self, shot_json, base_dir=".", dry_run=False, samples=None):
-        """Submits shot text; files it names (relative to base_dir) are uploaded first."""
+    def submit(self, shot_json, base_dir=".", dry_run=False, samples=None, allow_outside=False):
+        """Submits shot text; files it names (relative to base_dir) are uploaded first. A file
+        whose real path (symbolic links resolved) leaves base_dir is refused with ValueError
+        unless allow_outside, as cloudctl refuses it (docs/api.md)."""
         request = pb.SubmitJobRequest(shot_json=shot_json, dry_run=dry_run)
         if samples is not None:
             request.samples = samples
@@ -133,10 +140,19 @@ class BakeClient:
         except ValueError:
             shot = None  # the server reports where the JSON breaks
         for rel in referenced_paths(shot) if shot is not None else []:
+            if not isinstance(rel, str):
+                continue  # the server names the field
             norm = os.path.normpath(rel)
-            if os.path.isabs(norm) or norm.startswith(".."):
+            # "..a.vdb" is a file in the folder; ".." and "../x" leave it.
+            if os.path.isabs(norm) or norm == ".." or norm.startswith(".." + os.sep):
                 continue  # the server rejects it, naming the field
-            request.assets.add(path=norm, sha256=self.upload(os.path.join(base_dir, norm)))
+            local = os.path.join(base_dir, norm)
+            root = os.path.realpath(base_dir)
+            real = os.path.realpath(local)
+            if not allow_outside and os.path.commonpath([root, real]) != root:
+                raise ValueError("%s: leads outside the shot's folder (to %s); pass "
+                                 "allow_outside=True to upload it" % (rel, real))
+            request.assets.add(path=norm, sha256=self.upload(local))
         reply = self.stub.SubmitJob(request, timeout=self.timeout)
         return reply.plan if dry_run else reply.job
 
@@ -212,7 +228,11 @@ def main():
     parser.add_argument("--token-file", help="bearer token file (env CLOUDBAKE_TOKEN_FILE, or "
                         "the token itself in CLOUDBAKE_TOKEN)")
     args = parser.parse_args()
-    client = BakeClient(args.server, tls_ca=args.tls_ca, token_file=args.token_file)
+    try:
+        client = BakeClient(args.server, tls_ca=args.tls_ca, token_file=args.token_file)
+    except (ConnectionError, OSError) as e:
+        print("error: %s" % e, file=sys.stderr)
+        return 4  # unavailable, as cloudctl's exit code
     try:
         job = client.submit_file(args.shot)
         job = client.wait(job.id, on_event=lambda e: print(
@@ -225,6 +245,9 @@ def main():
     except JobFailed as e:
         print("error: %s" % e, file=sys.stderr)
         return 5
+    except (ValueError, OSError) as e:  # a file the shot names, or the shot itself
+        print("error: %s" % e, file=sys.stderr)
+        return 2
     return 0
 
 

@@ -21,6 +21,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <set>
@@ -204,6 +205,12 @@ Imf::Compression toImf(ExrCompression c) {
 void checkExrHeader(const std::string& path) {
   // isOpenExrFile only checks the magic number; it gives a clearer message than the library's
   // for the common "not an EXR at all / does not exist" cases.
+  // A FIFO would block the open, a device never end: regular files only.
+  std::error_code ec;
+  const std::filesystem::file_status st = std::filesystem::status(path, ec);
+  if (std::filesystem::exists(st) && !std::filesystem::is_regular_file(st)) {
+    throw InputError(path + ": not a regular file");
+  }
   if (FILE* f = std::fopen(path.c_str(), "rb")) {
     std::fclose(f);
   } else if (errno == ENOENT) {

@@ -71,6 +71,20 @@ std::string readWholeFile(const std::string& path) {
   return s.str();
 }
 
+std::string readRegularFile(const std::string& path, uint64_t max_bytes) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (!fs::exists(st)) throw MissingFileError(path + ": no such file");
+  if (!fs::is_regular_file(st)) throw InputError(path + ": not a regular file");
+  const uintmax_t size = fs::file_size(path, ec);
+  if (ec) throw InputError(path + ": cannot read its size (" + ec.message() + ")");
+  if (size > max_bytes) {
+    throw InputError(path + ": " + std::to_string(size) + " bytes, more than the " +
+                     std::to_string(max_bytes) + " allowed");
+  }
+  return readWholeFile(path);
+}
+
 void linkOrCopy(const std::string& from, const std::string& to) {
   std::error_code ec;
   fs::create_directories(fs::path(to).parent_path(), ec);

@@ -11,6 +11,10 @@ namespace cloudbake {
 void writeFileAtomic(const std::string& path, const std::string& data);
 
 /// Whole file as bytes. Throws InputError naming `path` when it cannot be read.
+/// A regular file's bytes, at most `max_bytes` of them: MissingFileError where it does not exist,
+/// InputError naming it where it is not a regular file (a FIFO would block, /dev/zero never
+/// end) or is larger, checked before anything is read.
+std::string readRegularFile(const std::string& path, uint64_t max_bytes);
 std::string readWholeFile(const std::string& path);
 
 /// A name unique within this process and very likely across processes (pid, time, counter):

@@ -131,6 +131,33 @@ def main():
             except grpc.RpcError as e:
                 check(e.code() == grpc.StatusCode.INVALID_ARGUMENT,
                       "%s -> INVALID_ARGUMENT (%s)" % (label, e.details()))
+        # Outside probe: "..a.vdb" is a file of the folder (it was never uploaded), and a link
+        # leading outside the folder is refused unless asked for (it was uploaded silently).
+        shutil.copy(os.path.join(work, "shot", "assets", "cloud.vdb"),
+                    os.path.join(work, "shot", "..a.vdb"))
+        dots = dict(vdb_shot, name="py_dots", volume={"vdb": {"path": "..a.vdb"}})
+        job_dots = client.wait(client.submit(json.dumps(dots), base_dir=os.path.join(work, "shot")).id)
+        check(job_dots.state == pb.SUCCEEDED, "a file named ..a.vdb is uploaded (%s)" % job_dots.error)
+        os.makedirs(os.path.join(work, "outside"))
+        shutil.copy(os.path.join(work, "shot", "assets", "cloud.vdb"),
+                    os.path.join(work, "outside", "secret.vdb"))
+        os.symlink(os.path.join(work, "outside", "secret.vdb"),
+                   os.path.join(work, "shot", "link.vdb"))
+        linked = dict(vdb_shot, name="py_link", volume={"vdb": {"path": "link.vdb"}})
+        try:
+            client.submit(json.dumps(linked), base_dir=os.path.join(work, "shot"))
+            check(False, "a link leading outside the shot's folder is refused")
+        except ValueError as e:
+            check("leads outside the shot's folder" in str(e),
+                  "a link leading outside the shot's folder is refused (%s)" % e)
+        job_link = client.wait(client.submit(json.dumps(linked), base_dir=os.path.join(work, "shot"),
+                                             allow_outside=True).id)
+        check(job_link.state == pb.SUCCEEDED, "allow_outside=True uploads it")
+        try:
+            cloudbake_client.BakeClient("127.0.0.1:%d" % free_port(), timeout=0.5)
+            check(False, "a server that is down is a clear error")
+        except ConnectionError as e:
+            check("cannot reach cloudbake-server" in str(e), "a server that is down: %s" % e)
         try:
             client.submit('{"version": 1, "name": ')
             check(False, "malformed shot rejected")

@@ -39,6 +39,7 @@ struct RunTaskOptions {
   std::string out;
   int threads = 0;
   bool quiet = false;
+  bool check = false;
 };
 
 std::unique_ptr<tbb::global_control> limitThreads(int threads) {
@@ -99,7 +100,16 @@ std::pair<uint64_t, uint64_t> ioBytes() {
 
 void runTaskCommand(const RunTaskOptions& opt) {
   const auto limit = limitThreads(opt.threads);
-  const TaskPlan p = planFromJson(readWholeFile(opt.plan), opt.plan);
+  // A FIFO or /dev/zero as the plan would block or fill the memory: a regular file of at most
+  // the JSON reader's 64 MiB.
+  const TaskPlan p = planFromJson(readRegularFile(opt.plan, 64u << 20), opt.plan);
+  if (opt.check) {  // the plan and the task are valid: what a scheduler asks before submitting
+    if (!p.find(opt.task)) {
+      throw InputError("task: no task '" + opt.task + "' in the plan " + opt.plan);
+    }
+    std::cout << p.id << "\n";
+    return;
+  }
   std::error_code ec;
   fs::create_directories(opt.cache_dir, ec);
   if (ec || !fs::is_directory(opt.cache_dir)) {
@@ -167,6 +177,9 @@ void addFarmCommands(CLI::App& app, int* exit_code) {
   run_cmd->add_option("--out", ropt->out, "output folder (created if missing)")->required();
   run_cmd->add_option("--threads", ropt->threads, "worker threads (default 0 = all cores)");
   run_cmd->add_flag("--quiet", ropt->quiet, "no progress on stderr");
+  run_cmd->add_flag("--check", ropt->check,
+                    "only check the plan (as `cloudbake plan` would make it of its shot) and the "
+                    "task; print the plan's id and run nothing");
   run_cmd->callback([ropt, exit_code] {
     runTaskCommand(*ropt);
     std::cout.flush();

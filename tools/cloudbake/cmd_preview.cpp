@@ -1,5 +1,6 @@
 // `cloudbake preview`: an sRGB PNG of any layer of any EXR (a view of this tool, of the server,
 // or of another renderer), to look at a result without re-rendering it.
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -24,10 +25,28 @@ std::string pickLayer(const ExrContents& exr, const std::string& layer, const st
     for (const auto& [n, image] : exr.layers) {
       if (image.channels >= 3) have += (have.empty() ? "" : ", ") + (n.empty() ? "cloud" : n);
     }
-    throw InputError("--layer: " + path + " has no RGB layer '" + (layer.empty() ? name : layer) +
-                     "' (it has: " + have + ")");
+    if (layer.empty()) {  // no --layer given: the file has no beauty to show
+      throw InputError(path + ": no RGB beauty layer to preview (RGB layers: " +
+                       (have.empty() ? std::string("none") : have) + "; choose one with --layer)");
+    }
+    throw InputError("--layer: " + path + " has no RGB layer '" + layer +
+                     "' (it has: " + (have.empty() ? std::string("none") : have) + ")");
   }
   return name;
+}
+
+// A non-finite pixel is the input's fault: named by the EXR and its layer, before the PNG.
+void checkFinite(const Image& image, const std::string& path, const std::string& layer) {
+  for (int y = 0; y < image.height; ++y) {
+    for (int x = 0; x < image.width; ++x) {
+      for (int c = 0; c < image.channels; ++c) {
+        if (!std::isfinite(image.at(x, y)[c])) {
+          throw InputError(path + ": layer '" + layer + "' has a non-finite pixel at (" +
+                           std::to_string(x) + ", " + std::to_string(y) + "): nothing to preview");
+        }
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -62,6 +81,7 @@ void addPreviewCommand(CLI::App& app, int* exit_code) {
     }
     const ExrContents exr = readExr(opt->exr);
     const std::string name = pickLayer(exr, opt->layer, opt->exr);
+    checkFinite(exr.layers.at(name), opt->exr, name.empty() ? "cloud" : name);
     const double exposure = writePreviewPng(opt->out, exr.layers.at(name), opt->exposure);
     const std::string layer = opt->layer.empty() ? "beauty" : opt->layer;
     std::printf(

@@ -1,6 +1,7 @@
 // Runs `cloudbake render` on real shot files and checks exit codes, messages and outputs.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -51,10 +52,11 @@ class RenderCli : public ::testing::Test {
     std::error_code ec;
     fs::remove_all(dir_, ec);
   }
-  // Runs cloudbake with `args` (already shell-quoted where needed).
-  CliResult run(const std::string& args) {
+  // Runs cloudbake with `args` (already shell-quoted where needed), after `prefix` (such as
+  // "timeout 20 ").
+  CliResult run(const std::string& args, const std::string& prefix = "") {
     const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    const std::string cmd = std::string("'") + CLOUDBAKE_EXE + "' " + args + " > '" + out.string() +
+    const std::string cmd = prefix + "'" + CLOUDBAKE_EXE + "' " + args + " > '" + out.string() +
                             "' 2> '" + err.string() + "'";
     const int status = std::system(cmd.c_str());
     CliResult r;
@@ -584,6 +586,25 @@ TEST_F(RenderCli, OutOfRangeArgumentsExitWith2NamingTheOption) {
     EXPECT_EQ(r.rc, 2) << exposure << r.out;
     EXPECT_NE(r.err.find("--exposure"), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "e.png")) << exposure;
+  }
+}
+
+// An outside probe: a FIFO given as an input blocked compare and preview, and run-task read
+// /dev/zero until the kernel killed it. Inputs are regular files, checked before they are read.
+TEST_F(RenderCli, InputsThatAreNotRegularFilesAreRefusedBeforeTheyAreRead) {
+  const std::string fifo = (dir_ / "fifo").string();
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const std::string exr = renderSmallSlab(4);
+  for (const std::string& args :
+       {"compare '" + exr + "' '" + fifo + "'", "compare '" + fifo + "' '" + exr + "'",
+        "preview '" + fifo + "' --out '" + (dir_ / "p.png").string() + "'",
+        "run-task '" + fifo + "' gather --check --cache-dir '" + (dir_ / "c").string() +
+            "' --out '" + (dir_ / "o").string() + "'",
+        std::string("run-task /dev/zero gather --check --cache-dir '") + (dir_ / "c").string() +
+            "' --out '" + (dir_ / "o").string() + "'"}) {
+    const CliResult r = run(args, "timeout 20 ");  // a regression blocks: 124, not a hang
+    EXPECT_EQ(r.rc, 2) << args << ": " << r.err;
+    EXPECT_NE(r.err.find("not a regular file"), std::string::npos) << args << ": " << r.err;
   }
 }
 
