@@ -5,11 +5,14 @@ For each scene (bench/scenes/*.json, both of its views: the sun beside the cloud
 behind it, at --res x --res) and each configuration of `pathtrace`'s knobs, it renders the
 shot twice with different seeds and prints
 
-  scene | view | config | spp | s/view | rel. noise | efficiency | x off
+  scene | view | config | spp | s/view | rel. noise | single | multiple | efficiency | x off
 
 - rel. noise: the relative RMSE between the two renders of the cloud's own light (`scattered`
   = sun + sky layers) over the cloud's pixels (reference alpha >= --cloud-alpha), divided by
   sqrt(2): the noise of one render relative to its mean;
+- single, multiple: the same for the light scattered once and more than once, each relative to
+  its own mean: which part of the transport a technique must reduce (in views towards the sun
+  the multiple layer's, docs/methods.md);
 - s/view: the view's seconds from `cloudbake render --stats-json` (the path trace alone; the
   scene and phase table are built once per run and not counted), mean of the two seeds;
 - efficiency = 1 / (rel. noise^2 x s/view), the quantity variance reduction buys: a render with
@@ -111,14 +114,18 @@ def view_seconds(stats, view):
                s.get("view") == view)
 
 
-def relative_noise(cloudbake, a, b, cloud_alpha):
+def relative_noise(cloudbake, a, b, cloud_alpha, layers=("scattered",)):
+    """One render's relative noise per layer (of `layers`), from two renders a and b."""
     out = subprocess.run([cloudbake, "compare", a, b, "--json", "--cloud-alpha", str(cloud_alpha)],
                          check=True, capture_output=True, text=True).stdout
-    return json.loads(out)["scattered"]["rel_rmse"] / math.sqrt(2)
+    rows = json.loads(out)
+    noise = [rows[layer]["rel_rmse"] / math.sqrt(2) for layer in layers]
+    return noise[0] if len(noise) == 1 else noise
 
 
 def measure(args, cloudbake, scene, shot, config):
-    """Per view: (seconds, relative noise) of one configuration."""
+    """Per view: (seconds, [relative noise of scattered, single, multiple]) of one
+    configuration."""
     runs = []
     for seed in (1, 2):
         s = json.loads(json.dumps(shot))
@@ -130,7 +137,8 @@ def measure(args, cloudbake, scene, shot, config):
     for view in [v["name"] for v in shot["views"]]:
         secs = sum(view_seconds(st, view) for _, st in runs) / 2
         noise = relative_noise(cloudbake, os.path.join(runs[0][0], view + ".exr"),
-                               os.path.join(runs[1][0], view + ".exr"), args.cloud_alpha)
+                               os.path.join(runs[1][0], view + ".exr"), args.cloud_alpha,
+                               ("scattered", "single", "multiple"))
         rows[view] = (secs, noise)
     return rows
 
@@ -192,8 +200,9 @@ def main():
     if args.trade_floor:
         trade_floor(args, cloudbake, configs)
         return
-    print("| scene | view | config | spp | s/view | rel. noise | efficiency | x off |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| scene | view | config | spp | s/view | rel. noise | single | multiple | efficiency | "
+          "x off |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for scene in args.scenes.split(","):
         if scene not in SCENES:
             sys.exit("--scenes: unknown '%s' (known: %s)" % (scene, ", ".join(SCENES)))
@@ -202,13 +211,15 @@ def main():
             continue
         base = {}
         for config in configs:
-            for view, (secs, noise) in measure(args, cloudbake, scene, shot, config).items():
+            for view, (secs, layers) in measure(args, cloudbake, scene, shot, config).items():
+                noise = layers[0]
                 eff = 1 / (noise * noise * secs) if noise > 0 and secs > 0 else float("nan")
                 if config == "off":
                     base[view] = eff
                 ratio = eff / base[view] if view in base else float("nan")
-                print("| %s | %s | %s | %d | %.2f | %.4f | %.4g | %.2f |" %
-                      (scene, view, config, args.spp, secs, noise, eff, ratio), flush=True)
+                print("| %s | %s | %s | %d | %.2f | %.4f | %.4f | %.4f | %.4g | %.2f |" %
+                      (scene, view, config, args.spp, secs, noise, layers[1], layers[2], eff,
+                       ratio), flush=True)
     print("work folder: %s" % args.work, file=sys.stderr)
 
 
