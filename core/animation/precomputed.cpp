@@ -140,6 +140,9 @@ void checkFrameInput(const PrecomputedDatabase& db, const BlendFrame& frame,
   if (options.max_orders < 1 || options.max_orders > 1000) {
     throw InputError("iterations: must be in [1, 1000], got " + std::to_string(options.max_orders));
   }
+  if (options.sky_spacing != 1 && options.sky_spacing != 2) {
+    throw InputError("sky_spacing: must be 1 or 2, got " + std::to_string(options.sky_spacing));
+  }
   if (!(options.tolerance > 0 && options.tolerance <= 1)) {
     throw InputError("tolerance: must be in (0, 1], got " + std::to_string(options.tolerance));
   }
@@ -191,10 +194,68 @@ void addSunTransmittance(const PrecomputedDatabase& db, BakedLight& bake) {
   bake.metadata[kSunTransmittanceMarginKey] = "2";
 }
 
+// The nodes of the coarse lattice on one axis of n voxels: the even indices and the last.
+struct CoarseAxis {
+  explicit CoarseAxis(int n) : n(n), nodes(n / 2 + 1) {}
+  int n, nodes;
+  int voxelOf(int node) const { return std::min(2 * node, n - 1); }
+  // The two nodes around voxel i and the second's weight.
+  void around(int i, int* lo, int* hi, float* t) const {
+    *lo = i / 2;
+    *hi = std::min(*lo + (i % 2), nodes - 1);
+    const int v0 = voxelOf(*lo), v1 = voxelOf(*hi);
+    *t = v1 > v0 ? float(i - v0) / float(v1 - v0) : 0.f;
+  }
+};
+
+// Every second voxel along each axis (and the last) of a lattice, with the 8 nodes around each
+// voxel and their trilinear weights.
+struct CoarseLattice {
+  explicit CoarseLattice(const BakeGrid& g) : g(g), x(g.nx), y(g.ny), z(g.nz) {}
+  const BakeGrid& g;
+  CoarseAxis x, y, z;
+  size_t count() const { return size_t(x.nodes) * y.nodes * z.nodes; }
+  size_t index(int i, int j, int k) const { return (size_t(k) * y.nodes + j) * x.nodes + i; }
+  size_t voxelOf(size_t n) const {
+    const int i = int(n % size_t(x.nodes)), j = int((n / size_t(x.nodes)) % size_t(y.nodes));
+    const int k = int(n / (size_t(x.nodes) * y.nodes));
+    return g.index(x.voxelOf(i), y.voxelOf(j), z.voxelOf(k));
+  }
+  // fn(node, weight) for the nodes around voxel (i, j, k) with a weight > 0.
+  template <typename Fn>
+  void forCorners(int i, int j, int k, Fn&& fn) const {
+    int i0, i1, j0, j1, k0, k1;
+    float tx, ty, tz;
+    x.around(i, &i0, &i1, &tx);
+    y.around(j, &j0, &j1, &ty);
+    z.around(k, &k0, &k1, &tz);
+    for (int c = 0; c < 8; ++c) {
+      const float w = (c & 1 ? tx : 1 - tx) * (c & 2 ? ty : 1 - ty) * (c & 4 ? tz : 1 - tz);
+      if (w > 0) fn(index(c & 1 ? i1 : i0, c & 2 ? j1 : j0, c & 4 ? k1 : k0), w);
+    }
+  }
+};
+
+// The nodes some voxel of the support reads.
+std::vector<uint8_t> nodesRead(const CoarseLattice& c, const std::vector<uint8_t>& support) {
+  std::vector<uint8_t> needed(c.count(), 0);
+  const BakeGrid& g = c.g;
+  for (int k = 0; k < g.nz; ++k) {
+    for (int j = 0; j < g.ny; ++j) {
+      for (int i = 0; i < g.nx; ++i) {
+        if (!support[g.index(i, j, k)]) continue;
+        c.forCorners(i, j, k, [&](size_t n, float) { needed[n] = 1; });
+      }
+    }
+  }
+  return needed;
+}
+
 // Eq. 6 and 7: the blended optical depth's SH, exponentiated, and its DC term as the sky
-// visibility.
-void addSkyTransmittance(const PrecomputedDatabase& db, const BlendFrame& frame,
-                         const std::vector<uint8_t>& support, BakedLight& bake) {
+// visibility. With spacing 2, SHEXP runs on the coarse lattice's nodes the support reads, and
+// the voxels between interpolate its coefficients trilinearly. Returns the SHEXP evaluations.
+size_t addSkyTransmittance(const PrecomputedDatabase& db, const BlendFrame& frame,
+                           const std::vector<uint8_t>& support, int spacing, BakedLight& bake) {
   const double w = frame.w;
   const BasicVolumePrecompute& va = db.basic[size_t(frame.a)];
   const BasicVolumePrecompute& vb = db.basic[size_t(frame.b)];
@@ -202,22 +263,52 @@ void addSkyTransmittance(const PrecomputedDatabase& db, const BlendFrame& frame,
   for (int i = 0; i < kShCoefficients; ++i) {
     out[size_t(i)] = bake.add(bake_grids::skyTransmittanceSh(i), 1).data.data();
   }
-  BakeChannel& vis = bake.add(bake_grids::kSkyVisibility, 1);
-  parallelFor(0, int64_t(bake.grid.voxelCount()),
-              [&](size_t v) {
-                if (!support[v]) return;
-                ShCoefficients f;
-                for (int i = 0; i < kShCoefficients; ++i) {
-                  f[size_t(i)] = float(-(w * va.optical_depth_sh[v][size_t(i)] +
-                                         (1 - w) * vb.optical_depth_sh[v][size_t(i)]));
-                }
-                const ShCoefficients t = db.shexp(f);
-                for (int i = 0; i < kShCoefficients; ++i) {
-                  out[size_t(i)][v] = std::isfinite(t[size_t(i)]) ? t[size_t(i)] : 0.f;
-                }
-                vis.data[v] = float(std::clamp(double(out[0][v]) / kSqrt4Pi, 0.0, 1.0));
+  float* vis = bake.add(bake_grids::kSkyVisibility, 1).data.data();
+  auto shexpAt = [&](size_t v) {
+    ShCoefficients f;
+    for (int i = 0; i < kShCoefficients; ++i) {
+      f[size_t(i)] = float(
+          -(w * va.optical_depth_sh[v][size_t(i)] + (1 - w) * vb.optical_depth_sh[v][size_t(i)]));
+    }
+    ShCoefficients t = db.shexp(f);
+    for (float& x : t) x = std::isfinite(x) ? x : 0.f;
+    return t;
+  };
+  auto store = [&](size_t v, const float* t) {
+    for (int i = 0; i < kShCoefficients; ++i) out[size_t(i)][v] = t[i];
+    vis[v] = float(std::clamp(double(t[0]) / kSqrt4Pi, 0.0, 1.0));
+  };
+  const BakeGrid& g = bake.grid;
+  if (spacing == 1) {
+    parallelFor(0, int64_t(g.voxelCount()),
+                [&](size_t v) {
+                  if (support[v]) store(v, shexpAt(v).data());
+                },
+                {kCheapIterationGrain});
+    return size_t(std::count_if(support.begin(), support.end(), [](uint8_t s) { return s; }));
+  }
+  const CoarseLattice coarse(g);
+  const std::vector<uint8_t> needed = nodesRead(coarse, support);
+  std::vector<ShCoefficients> node_t(coarse.count());
+  parallelFor(0, int64_t(coarse.count()),
+              [&](size_t n) {
+                if (needed[n]) node_t[n] = shexpAt(coarse.voxelOf(n));
               },
               {kCheapIterationGrain});
+  parallelFor(0, int64_t(g.nz), [&](int k) {
+    for (int j = 0; j < g.ny; ++j) {
+      for (int i = 0; i < g.nx; ++i) {
+        const size_t v = g.index(i, j, k);
+        if (!support[v]) continue;
+        float t[kShCoefficients] = {};
+        coarse.forCorners(i, j, k, [&](size_t n, float wc) {
+          for (int q = 0; q < kShCoefficients; ++q) t[q] += wc * node_t[n][size_t(q)];
+        });
+        store(v, t);
+      }
+    }
+  });
+  return size_t(std::count_if(needed.begin(), needed.end(), [](uint8_t s) { return s; }));
 }
 
 // integral L_sky (1 - T) dw for one channel's sky SH and a transmittance SH: the sky light the
@@ -654,7 +745,7 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   bool sky = false;
   for (const auto& c : sky_sh)
     for (float x : c) sky = sky || x != 0;
-  if (sky) addSkyTransmittance(db, frame, support, bake);
+  if (sky) st.sky_evaluations = addSkyTransmittance(db, frame, support, options.sky_spacing, bake);
   st.seconds_sky = lap();
 
   const float* tsun = bake.find(bake_grids::kSunTransmittance)->data.data();

@@ -78,13 +78,20 @@ struct FrameLightOptions {
   /// sun as a beam; without it (or for g = 0) it is seed 002's plain isotropic scattering.
   Rgb mean_cosine{0, 0, 0};
   bool similarity = true;
+  /// Voxels between the sky transmittance's SHEXP evaluations along each axis, 1 or 2. With 2,
+  /// SHEXP runs on every second voxel (and the last) of each axis, the nodes the density's
+  /// support reads, and the voxels between interpolate the 16 coefficients trilinearly: an
+  /// eighth of the evaluations, the frame's largest stage (version 8); 1 evaluates every voxel
+  /// of the support (version 7).
+  int sky_spacing = 2;
 };
 
 /// What computing one frame measured.
 struct FrameLightStats {
   int orders = 0;  ///< scattering orders iterated (Eq. 8)
   double seconds = 0;
-  size_t merged_entries = 0;  ///< entries of the merged cuts, summed over receivers
+  size_t merged_entries = 0;   ///< entries of the merged cuts, summed over receivers
+  size_t sky_evaluations = 0;  ///< voxels whose sky transmittance SHEXP evaluated
   /// Seconds of each stage, which add up to `seconds`: the blended density and its sun
   /// transmittance; the sky transmittance (Eq. 6-7, SHEXP); the receivers' cuts and first-order
   /// sources; the scattering orders (Eq. 8) and the sky's fractions; the multiple-scattering
