@@ -246,10 +246,10 @@ void framePart(const Args& a) {
   // The stages of the last frame lit (at the last thread count).
   std::printf(
       "  at %d threads: light %.3f s = sun %.3f + sky (SHEXP) %.3f + receivers %.3f + orders %.3f"
-      " + multiple %.3f + trim and checks %.3f; %d orders\n",
+      " + multiple %.3f + trim and checks %.3f; %d orders; SHEXP at %zu of %zu voxels\n",
       a.threads.back(), stats.seconds, stats.seconds_sun, stats.seconds_sky,
       stats.seconds_receivers, stats.seconds_orders, stats.seconds_multiple, stats.seconds_finish,
-      stats.orders);
+      stats.orders, stats.sky_evaluations, stats.support_voxels);
   timeAtThreads(a, "frame precomputed: view '" + camera.name + "'", render);
   {
     BakeRenderOptions every = frameRenderOptions(shot, light, 0), sparse = every;

@@ -1,6 +1,7 @@
 #include "core/animation/precomputed.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <mutex>
@@ -236,14 +237,41 @@ struct CoarseLattice {
   }
 };
 
-// The nodes some voxel of the support reads.
-std::vector<uint8_t> nodesRead(const CoarseLattice& c, const std::vector<uint8_t>& support) {
+// Interpolating the transmittance is safe only among voxels of the cloud: a node in the empty
+// margin beside a surface (or on both sides of a sheet one voxel thick) sees the open sky, and
+// voxels between it and the cloud would take its light. And where the evaluated mean
+// transmittance of the corners differs by more than this, the voxels between are evaluated too.
+constexpr float kSkyInterpolationSpread = 0.1f;
+
+// Per voxel of the support: 1 where its corner nodes may be interpolated (the voxel and every
+// node it reads hold density), else 0 (evaluated directly).
+std::vector<uint8_t> interpolableVoxels(const CoarseLattice& c, const std::vector<uint8_t>& support,
+                                        const std::vector<float>& density) {
+  const BakeGrid& g = c.g;
+  std::vector<uint8_t> ok(g.voxelCount(), 0);
+  parallelFor(0, int64_t(g.nz), [&](int k) {
+    for (int j = 0; j < g.ny; ++j) {
+      for (int i = 0; i < g.nx; ++i) {
+        const size_t v = g.index(i, j, k);
+        if (!support[v] || !(density[v] > 0)) continue;
+        bool inside = true;
+        c.forCorners(i, j, k,
+                     [&](size_t n, float) { inside = inside && density[c.voxelOf(n)] > 0; });
+        ok[v] = inside;
+      }
+    }
+  });
+  return ok;
+}
+
+// The nodes the interpolable voxels read.
+std::vector<uint8_t> nodesRead(const CoarseLattice& c, const std::vector<uint8_t>& interpolable) {
   std::vector<uint8_t> needed(c.count(), 0);
   const BakeGrid& g = c.g;
   for (int k = 0; k < g.nz; ++k) {
     for (int j = 0; j < g.ny; ++j) {
       for (int i = 0; i < g.nx; ++i) {
-        if (!support[g.index(i, j, k)]) continue;
+        if (!interpolable[g.index(i, j, k)]) continue;
         c.forCorners(i, j, k, [&](size_t n, float) { needed[n] = 1; });
       }
     }
@@ -252,8 +280,10 @@ std::vector<uint8_t> nodesRead(const CoarseLattice& c, const std::vector<uint8_t
 }
 
 // Eq. 6 and 7: the blended optical depth's SH, exponentiated, and its DC term as the sky
-// visibility. With spacing 2, SHEXP runs on the coarse lattice's nodes the support reads, and
-// the voxels between interpolate its coefficients trilinearly. Returns the SHEXP evaluations.
+// visibility. With spacing 2, SHEXP runs on the coarse lattice's nodes inside the cloud, and
+// the voxels between interpolate its coefficients trilinearly where their corners agree; the
+// others (the support's margin, thin sheets, steep edges) are evaluated. Returns the SHEXP
+// evaluations.
 size_t addSkyTransmittance(const PrecomputedDatabase& db, const BlendFrame& frame,
                            const std::vector<uint8_t>& support, int spacing, BakedLight& bake) {
   const double w = frame.w;
@@ -288,27 +318,41 @@ size_t addSkyTransmittance(const PrecomputedDatabase& db, const BlendFrame& fram
     return size_t(std::count_if(support.begin(), support.end(), [](uint8_t s) { return s; }));
   }
   const CoarseLattice coarse(g);
-  const std::vector<uint8_t> needed = nodesRead(coarse, support);
+  const std::vector<uint8_t> interpolable = interpolableVoxels(coarse, support, bake.density);
+  const std::vector<uint8_t> needed = nodesRead(coarse, interpolable);
   std::vector<ShCoefficients> node_t(coarse.count());
   parallelFor(0, int64_t(coarse.count()),
               [&](size_t n) {
                 if (needed[n]) node_t[n] = shexpAt(coarse.voxelOf(n));
               },
               {kCheapIterationGrain});
+  std::atomic<size_t> direct{0};
   parallelFor(0, int64_t(g.nz), [&](int k) {
+    size_t evaluated = 0;
     for (int j = 0; j < g.ny; ++j) {
       for (int i = 0; i < g.nx; ++i) {
         const size_t v = g.index(i, j, k);
         if (!support[v]) continue;
         float t[kShCoefficients] = {};
-        coarse.forCorners(i, j, k, [&](size_t n, float wc) {
-          for (int q = 0; q < kShCoefficients; ++q) t[q] += wc * node_t[n][size_t(q)];
-        });
+        float lo = 1e30f, hi = -1e30f;
+        if (interpolable[v]) {
+          coarse.forCorners(i, j, k, [&](size_t n, float wc) {
+            for (int q = 0; q < kShCoefficients; ++q) t[q] += wc * node_t[n][size_t(q)];
+            lo = std::min(lo, node_t[n][0]);
+            hi = std::max(hi, node_t[n][0]);
+          });
+        }
+        if (!interpolable[v] || hi - lo > kSkyInterpolationSpread * float(kSqrt4Pi)) {
+          const ShCoefficients e = shexpAt(v);
+          std::copy(e.begin(), e.end(), t);
+          ++evaluated;
+        }
         store(v, t);
       }
     }
+    direct += evaluated;
   });
-  return size_t(std::count_if(needed.begin(), needed.end(), [](uint8_t s) { return s; }));
+  return direct + size_t(std::count_if(needed.begin(), needed.end(), [](uint8_t s) { return s; }));
 }
 
 // integral L_sky (1 - T) dw for one channel's sky SH and a transmittance SH: the sky light the
@@ -740,6 +784,8 @@ BakedLight lightAnimationFrame(const PrecomputedDatabase& db, const BlendFrame& 
   };
   bake.density = blendFrame(db.volumes.frames, frame);
   const std::vector<uint8_t> support = densitySupport(g, bake.density);
+  st.support_voxels =
+      size_t(std::count_if(support.begin(), support.end(), [](uint8_t s) { return s; }));
   addSunTransmittance(db, bake);
   st.seconds_sun = lap();
   bool sky = false;

@@ -79,10 +79,11 @@ struct FrameLightOptions {
   Rgb mean_cosine{0, 0, 0};
   bool similarity = true;
   /// Voxels between the sky transmittance's SHEXP evaluations along each axis, 1 or 2. With 2,
-  /// SHEXP runs on every second voxel (and the last) of each axis, the nodes the density's
-  /// support reads, and the voxels between interpolate the 16 coefficients trilinearly: an
-  /// eighth of the evaluations, the frame's largest stage (version 8); 1 evaluates every voxel
-  /// of the support (version 7).
+  /// SHEXP runs on every second voxel (and the last) of each axis, and a voxel of the cloud
+  /// whose corner nodes all hold density and agree on the mean transmittance within 0.1
+  /// interpolates the 16 coefficients trilinearly; the others (the support's margin, sheets a
+  /// voxel thick, steep edges) are evaluated (version 8). 1 evaluates every voxel of the
+  /// support (version 7).
   int sky_spacing = 2;
 };
 
@@ -92,6 +93,7 @@ struct FrameLightStats {
   double seconds = 0;
   size_t merged_entries = 0;   ///< entries of the merged cuts, summed over receivers
   size_t sky_evaluations = 0;  ///< voxels whose sky transmittance SHEXP evaluated
+  size_t support_voxels = 0;   ///< voxels of the blended density's support
   /// Seconds of each stage, which add up to `seconds`: the blended density and its sun
   /// transmittance; the sky transmittance (Eq. 6-7, SHEXP); the receivers' cuts and first-order
   /// sources; the scattering orders (Eq. 8) and the sky's fractions; the multiple-scattering

@@ -60,9 +60,11 @@ std::vector<Knob> precomputedKnobs() {
                     "scattering as Iwasaki et al. wrote it"),
       Knob::integer("sky_spacing", 1, 2, d.frame.sky_spacing,
                     "voxels between a frame's evaluations of the sky transmittance (SHEXP, Ren "
-                    "et al. 2006) along each axis: 2 evaluates every second voxel and "
-                    "interpolates the coefficients between (an eighth of the frame's largest "
-                    "stage); 1 evaluates every voxel (version 7)"),
+                    "et al. 2006) along each axis: 2 evaluates every second voxel inside the "
+                    "cloud and interpolates the coefficients between where the evaluated mean "
+                    "transmittance of the corners agrees within 0.1, evaluating the others (the "
+                    "cloud's margin, thin sheets, steep edges); 1 evaluates every voxel "
+                    "(version 7)"),
   };
 }
 
@@ -407,11 +409,15 @@ MethodPlan PrecomputedMethod::plan(const ShotSpec& shot, const ShotCacheKeys& ke
         std::to_string(o.precompute.transfer_resolution) + "-voxel receiver lattice (cut error " +
         shortNumber(o.precompute.cuts.cut_error) + ")");
   }
-  plan.components.push_back("frames: " + std::to_string(o.frames) +
-                            " of endless animation (sigma " + shortNumber(o.walk.sigma) +
-                            ", cross-dissolve over " + std::to_string(o.walk.dissolve_frames) +
-                            " frames), each lit by a sun sweep, SHEXP sky and up to " +
-                            std::to_string(o.frame.max_orders) + " multiple-scattering orders");
+  plan.components.push_back(
+      "frames: " + std::to_string(o.frames) + " of endless animation (sigma " +
+      shortNumber(o.walk.sigma) + ", cross-dissolve over " +
+      std::to_string(o.walk.dissolve_frames) +
+      " frames), each lit by a sun sweep, the sky's SHEXP " +
+      (o.frame.sky_spacing == 1 ? std::string("at every voxel")
+                                : std::string("at every second voxel where the transmittance "
+                                              "varies smoothly inside the cloud, else at each")) +
+      " and up to " + std::to_string(o.frame.max_orders) + " multiple-scattering orders");
   if (shot.outputs.exr) {
     for (const Camera& c : shot.views) {
       plan.view_cached.push_back(plan.bake_cached);

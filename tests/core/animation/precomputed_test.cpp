@@ -343,8 +343,9 @@ TEST(Precomputed, SkySpacingTwoInterpolatesWhatEveryVoxelWouldEvaluate) {
   FrameLightStats sa, sb;
   const BakedLight a = lightAnimationFrame(db, {0, 0, 1}, sun_dir, Rgb(0.95), sky_sh, every, &sa);
   const BakedLight b = lightAnimationFrame(db, {0, 0, 1}, sun_dir, Rgb(0.95), sky_sh, spaced, &sb);
-  // An eighth of the evaluations, and the nodes around the support's edge.
-  EXPECT_LT(sb.sky_evaluations * 4, sa.sky_evaluations);
+  // Fewer evaluations; on a lattice this coarse most voxels are near the surface or where the
+  // transmittance falls steeply, and those are evaluated.
+  EXPECT_LT(sb.sky_evaluations, sa.sky_evaluations);
   const std::vector<float>& ta = a.find(bake_grids::skyTransmittanceSh(0))->data;
   const std::vector<float>& tb = b.find(bake_grids::skyTransmittanceSh(0))->data;
   double worst = 0;
@@ -369,8 +370,8 @@ TEST(Precomputed, SkySpacingTwoInterpolatesWhatEveryVoxelWouldEvaluate) {
   }
   EXPECT_GT(nodes, 100);
   EXPECT_GT(worst, 0);  // voxels between the nodes were interpolated, not evaluated
-  // The mean transmittance over the sphere of directions, per voxel: within 0.1 everywhere.
-  EXPECT_LT(worst, 0.1);
+  // The mean transmittance over the sphere of directions, per voxel: within 0.05 everywhere.
+  EXPECT_LT(worst, 0.05);
   auto sum = [](const BakedLight& l, const std::string& name) {
     double s = 0;
     for (float x : l.find(name)->data) s += x;
@@ -383,6 +384,39 @@ TEST(Precomputed, SkySpacingTwoInterpolatesWhatEveryVoxelWouldEvaluate) {
               vis, co_sky);
   EXPECT_NEAR(vis, 1.0, 0.01);
   EXPECT_NEAR(co_sky, 1.0, 0.01);
+}
+
+TEST(Precomputed, SkySpacingTwoEvaluatesASheetOneVoxelThick) {
+  // A sheet one voxel thick between two planes of nodes: every node on either side of it is
+  // empty and sees the open sky, so none may be interpolated into the sheet. (Interpolated, a
+  // column's sky visibility came out 0.83-0.89 against 0.33-0.37 evaluated.)
+  BakeGrid g;
+  std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 16, &g);
+  for (int k = 0; k < g.nz; ++k) {
+    for (int j = 0; j < g.ny; ++j) {
+      for (int i = 0; i < g.nx; ++i) {
+        const bool sheet = k == (g.nz / 2 | 1) && i > 2 && i < g.nx - 3 && j > 2 && j < g.ny - 3;
+        d[g.index(i, j, k)] = sheet ? 1.f : 0.f;
+      }
+    }
+  }
+  PrecomputeOptions po;
+  po.sample_points = 256;
+  po.transfer_resolution = 8;
+  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, 20.0, po);
+  Sky sky;
+  sky.radiance = Rgb(0.3);
+  const auto sky_sh = projectSkyRadiance(SkyLight(sky));
+  FrameLightOptions every, spaced;
+  every.sky_spacing = 1;
+  const BakedLight a = lightAnimationFrame(db, {0, 0, 1}, Vec3(0, 0, 1), Rgb(0.9), sky_sh, every);
+  const BakedLight b = lightAnimationFrame(db, {0, 0, 1}, Vec3(0, 0, 1), Rgb(0.9), sky_sh, spaced);
+  for (int q = 0; q < kShCoefficients; ++q) {
+    EXPECT_EQ(a.find(bake_grids::skyTransmittanceSh(q))->data,
+              b.find(bake_grids::skyTransmittanceSh(q))->data)
+        << "coefficient " << q;
+  }
+  EXPECT_EQ(a.find(bake_grids::kSkyVisibility)->data, b.find(bake_grids::kSkyVisibility)->data);
 }
 
 TEST(Precomputed, DatabaseRoundTripsThroughFiles) {
