@@ -322,6 +322,21 @@ TEST(Precomputed, BlendedFrameFollowsTheBlendedDensity) {
   EXPECT_NEAR(vis, 1.0, 0.05);
 }
 
+// A database of one basic volume `d` on `g` and the RGB SH of a uniform sky of radiance 0.3.
+struct OneVolumeUnderSky {
+  PrecomputedDatabase db;
+  std::array<ShCoefficients, 3> sky_sh;
+};
+OneVolumeUnderSky oneVolumeUnderSky(const BakeGrid& g, const std::vector<float>& d,
+                                    double extinction, int sample_points, int transfer) {
+  PrecomputeOptions po;
+  po.sample_points = sample_points;
+  po.transfer_resolution = transfer;
+  Sky sky;
+  sky.radiance = Rgb(0.3);
+  return {precomputeBasicVolumes({g, {d}}, extinction, po), projectSkyRadiance(SkyLight(sky))};
+}
+
 TEST(Precomputed, SkySpacingTwoInterpolatesWhatEveryVoxelWouldEvaluate) {
   // A sphere of optical radius 3 under a sky: SHEXP on every second voxel, interpolated between,
   // against SHEXP on every voxel. The nodes hold the same coefficients bit for bit; between them
@@ -329,13 +344,7 @@ TEST(Precomputed, SkySpacingTwoInterpolatesWhatEveryVoxelWouldEvaluate) {
   // frame scatters moves by under 1 %.
   BakeGrid g;
   const std::vector<float> d = sphereOnLattice(Vec3(0.0), 1.0, 24, &g);
-  PrecomputeOptions po;
-  po.sample_points = 512;
-  po.transfer_resolution = 12;
-  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, 3.0, po);
-  Sky sky;
-  sky.radiance = Rgb(0.3);
-  const auto sky_sh = projectSkyRadiance(SkyLight(sky));
+  const auto [db, sky_sh] = oneVolumeUnderSky(g, d, 3.0, 512, 12);
   const Vec3 sun_dir = normalize(Vec3(0.2, 0.5, 1));
   FrameLightOptions every, spaced;
   every.sky_spacing = 1;
@@ -400,13 +409,7 @@ TEST(Precomputed, SkySpacingTwoEvaluatesASheetOneVoxelThick) {
       }
     }
   }
-  PrecomputeOptions po;
-  po.sample_points = 256;
-  po.transfer_resolution = 8;
-  const PrecomputedDatabase db = precomputeBasicVolumes({g, {d}}, 20.0, po);
-  Sky sky;
-  sky.radiance = Rgb(0.3);
-  const auto sky_sh = projectSkyRadiance(SkyLight(sky));
+  const auto [db, sky_sh] = oneVolumeUnderSky(g, d, 20.0, 256, 8);
   FrameLightOptions every, spaced;
   every.sky_spacing = 1;
   const BakedLight a = lightAnimationFrame(db, {0, 0, 1}, Vec3(0, 0, 1), Rgb(0.9), sky_sh, every);
