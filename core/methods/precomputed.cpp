@@ -1,9 +1,11 @@
 #include "core/methods/precomputed.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 
 #include "core/animation/basic_volumes.h"
 #include "core/animation/precomputed_io.h"
@@ -179,8 +181,10 @@ PrecomputedDatabase assembleDatabase(MethodRun& run, const PrecomputedShotOption
   return db;
 }
 
-// The database's precompute: from the cache when it holds it, else built and committed.
-PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions& o) {
+// The database's precompute: from the cache when it holds it, else built and committed, from
+// `static_lattice` where staticLattice built it.
+PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions& o,
+                                   std::optional<BakedLight> static_lattice) {
   const ShotSpec& shot = run.shot();
   auto build = [&]() {
     const auto t0 = std::chrono::steady_clock::now();
@@ -193,7 +197,9 @@ PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions&
         return run.pollMessage(0.1 * f, "building basic volumes");
       });
     } else {
-      BakedLight lattice = makeBakeLattice(*run.scene().medium.density, o.light_resolution);
+      BakedLight lattice = static_lattice
+                               ? std::move(*static_lattice)
+                               : makeBakeLattice(*run.scene().medium.density, o.light_resolution);
       vols.grid = lattice.grid;
       vols.frames.push_back(std::move(lattice.density));
     }
@@ -450,15 +456,32 @@ void PrecomputedMethod::checkLimits(const ShotSpec& shot, const MethodLimits& li
   }
 }
 
-// An empty cloud (a static volume whose density is 0 everywhere) is a valid shot, as for every
-// method: each frame renders the background from a zero bake. No database can be built for
-// it (its sample points would have nowhere to go).
-bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o) {
+// A static volume's lattice where its database is to be built here (not for a sequence, nor a
+// database the cache holds): built once, for the database and for the check of
+// renderEmptyCloud.
+std::optional<BakedLight> staticLattice(MethodRun& run, const PrecomputedShotOptions& o) {
+  if (std::holds_alternative<SequenceVolumeSpec>(run.shot().volume)) return std::nullopt;
+  if (run.hasCache() && run.lookup(run.keys().precompute)) return std::nullopt;
+  return makeBakeLattice(*run.scene().medium.density, o.light_resolution);
+}
+
+// An empty cloud (a static volume whose density is 0 everywhere, or on every voxel of its
+// lattice: a box thinner than the spacing of the lattice's samples) is a valid shot, as for
+// every method: each frame renders the background from a zero bake. No database can be built
+// for it (its sample points would have nowhere to go).
+bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o,
+                      std::optional<BakedLight>& lattice) {
   const ShotSpec& shot = run.shot();
   if (std::holds_alternative<SequenceVolumeSpec>(shot.volume)) return false;
   const Scene& scene = run.scene();
-  if (scene.medium.density->maxDensity() > 0) return false;
-  BakedLight light = makeBakeLattice(*scene.medium.density, o.light_resolution);
+  const bool field_empty = !(scene.medium.density->maxDensity() > 0);
+  if (!field_empty && (!lattice || std::any_of(lattice->density.begin(), lattice->density.end(),
+                                               [](float v) { return v > 0; }))) {
+    return false;
+  }
+  BakedLight light =
+      lattice ? std::move(*lattice) : makeBakeLattice(*scene.medium.density, o.light_resolution);
+  lattice.reset();
   light.method = "precomputed";
   light.sun_direction = sunDirection(shot);
   computeSunTransmittance(light, light.sun_direction, scene.medium.extinction, {});
@@ -477,13 +500,14 @@ bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o) {
 void PrecomputedMethod::run(MethodRun& run) const {
   const ShotSpec& shot = run.shot();
   const PrecomputedShotOptions o = precomputedOptions(shot);
-  if (renderEmptyCloud(run, o)) return;
+  std::optional<BakedLight> lattice = staticLattice(run, o);
+  if (renderEmptyCloud(run, o, lattice)) return;
   const RunScope& scope = run.scope();
   if (scope.part == RunScope::Part::kLayout || scope.part == RunScope::Part::kPrecompute) {
     runDatabasePart(run, o);
     return;
   }
-  const PrecomputedDatabase db = obtainDatabase(run, o);
+  const PrecomputedDatabase db = obtainDatabase(run, o, std::move(lattice));
   if (scope.part == RunScope::Part::kBake) return;
   const std::vector<BlendFrame> walk = walkDatabase(db, o);
   const int basic_volumes = int(db.basic.size());

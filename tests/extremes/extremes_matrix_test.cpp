@@ -208,6 +208,12 @@ std::vector<Variant> variants() {
        [](json& s) {
          s["volume"] = {{"box", {{"min", {-1, -1, -1}}, {"max", {1, 1, 1}}, {"density", 0}}}};
        }},
+      // Thinner than the spacing of a lattice's samples: a lattice method bakes no density
+      // (precomputed refused it, with no sample point to place; an outside probe).
+      {"box_thinner_than_a_voxel",
+       [](json& s) {
+         s["volume"] = {{"box", {{"min", {-1, -1, 0}}, {"max", {1, 1, 0.001}}, {"density", 1}}}};
+       }},
       {"camera_inside",
        [](json& s) {
          s["views"][0]["camera"] = {{"type", "perspective"},
