@@ -198,6 +198,7 @@ void viewPart(const Args& a) {
           layers = renderFromBake(bake, scene.medium, scene.sun, scene.sky, camera, o);
         });
         printFilmError(layers, full);
+        std::printf("  traced %.1f %% of the pixels\n", 100 * tracedShare(layers));
       }
     }
   }

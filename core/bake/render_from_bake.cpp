@@ -474,7 +474,12 @@ class BakeMarcher {
     }
     if (angularModel(bake) == "sh") {
       loadPhotonTallies(bake, medium, sky);
-      buildViewField(tally_ ? bake.tally_grid : bake.grid, view);
+      const BakeGrid& tally_grid = tally_ ? bake.tally_grid : bake.grid;
+      buildViewField(tally_grid, view);
+      // Samples the field does not serve weight the coefficients per ray, read from a pack of
+      // them per voxel: a view whose field serves every sample needs none (at the default knobs
+      // with a droplet phase, 207 floats a voxel, 54 MB, a sixth of a view's time).
+      if (!fieldServesEverySample(view)) buildTallyPack(tally_grid.voxelCount());
     }
     co_ = channel(bake, bake_grids::kMultipleFluence, 3, false, "");
     if (co_) {
@@ -640,7 +645,6 @@ class BakeMarcher {
     const double cut_deg = peakCutDegrees(bake);
     if (cut_deg > 0) peak_.emplace(lut_, cut_deg, medium.albedo);
     phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order, zonal_order_));
-    buildTallyPack(tally_ ? bake.tally_grid.voxelCount() : grid_.voxelCount());
   }
 
   // The photon tallies' coefficients packed per voxel of their lattice: the radiance first, then
@@ -738,7 +742,6 @@ class BakeMarcher {
     const double skip = field_near_ - 2 * g.voxel_size;
     if (view.pinhole && farthestCentre(g, view.eye) < field_near_) return;
     field_ = LargeArray<float>(voxels * kFieldFloats);
-    const size_t nx = size_t(g.nx), ny = size_t(g.ny);
     // A slice's voxels take about 0.3 us each: a tally lattice near the memory's limit takes
     // seconds, so the loop stops when the view is cancelled.
     ParallelOptions slices;
@@ -747,32 +750,88 @@ class BakeMarcher {
     parallelFor(
         0, g.nz,
         [&](int64_t k) {
-          Rgb w[shCount(kMaxShDegree) + kMaxZonalDegree];
-          for (size_t j = 0; j < ny; ++j) {
-            for (size_t i = 0; i < nx; ++i) {
-              const size_t v = (size_t(k) * ny + j) * nx + i;
-              const float* rec = tally_pack_.data() + v * tally_stride_;
-              float* out = field_.data() + v * kFieldFloats;
-              std::fill(out, out + kFieldFloats, 0.f);
-              if (std::all_of(rec, rec + tally_floats_, [](float x) { return x == 0; })) continue;
-              Vec3 d = view.forward;
-              if (view.pinhole) {
-                const Vec3 r = g.center(int(i), int(j), int(k)) - view.eye;
-                const double dist = length(r);
-                if (dist < skip) continue;
-                if (dist > 0) d = r / dist;
-              }
-              phaseWeights(d, w);
-              const Rgb src[3] = {weightedSum(rec, msh_.size(), w),
-                                  weightedSum(rec + ssky_slot_, ssky_sh_.size(), w),
-                                  weightedSum(rec + msky_slot_, msky_sh_.size(), w)};
-              for (int q = 0; q < 3; ++q) {
-                for (int c = 0; c < 3; ++c) out[3 * q + c] = float(src[q][c]);
-              }
-            }
-          }
+          FieldRow row(size_t(g.nx), msh_.size());
+          for (int j = 0; j < g.ny; ++j) buildFieldRow(g, view, skip, j, int(k), &row);
         },
         slices);
+  }
+
+  // One row of the field's voxels at once, channel by channel: each coefficient's grid is read
+  // along the row (the tallies are stored one grid per coefficient), and every voxel's sums run
+  // over the coefficients in the order weightedSum takes them.
+  struct FieldRow {
+    FieldRow(size_t nx, size_t coefficients)
+        : n(coefficients), active(nx), w(nx * coefficients), sum(3 * nx) {}
+    size_t n;                     // weights per voxel
+    std::vector<uint8_t> active;  // holds a tally and is read from the field
+    std::vector<Rgb> w;           // [i * nx + x]: coefficient i's weight at voxel x
+    std::vector<Rgb> sum;         // [q * nx + x]: ms, ssky, csky
+  };
+
+  void buildFieldRow(const BakeGrid& g, const ViewGeometry& view, double skip, int j, int k,
+                     FieldRow* r) {
+    const size_t nx = size_t(g.nx);
+    const size_t v0 = size_t(g.index(0, j, k));
+    const std::vector<const float*>* lists[3] = {&msh_, &ssky_sh_, &msky_sh_};
+    std::fill(r->active.begin(), r->active.end(), uint8_t(0));
+    for (const auto* list : lists) {
+      for (const float* grid : *list) {
+        const float* p = grid + 3 * v0;
+        for (size_t x = 0; x < 3 * nx; ++x) r->active[x / 3] |= uint8_t(p[x] != 0);
+      }
+    }
+    Rgb w[shCount(kMaxShDegree) + kMaxZonalDegree];
+    for (size_t x = 0; x < nx; ++x) {
+      if (!r->active[x]) continue;
+      Vec3 d = view.forward;
+      if (view.pinhole) {
+        const Vec3 to = g.center(int(x), j, k) - view.eye;
+        const double dist = length(to);
+        if (dist < skip) {
+          r->active[x] = 0;
+          continue;
+        }
+        if (dist > 0) d = to / dist;
+      }
+      phaseWeights(d, w);
+      for (size_t i = 0; i < r->n; ++i) r->w[i * nx + x] = w[i];
+    }
+    std::fill(r->sum.begin(), r->sum.end(), Rgb(0.0));
+    for (int q = 0; q < 3; ++q) {
+      Rgb* sum = r->sum.data() + size_t(q) * nx;
+      for (size_t i = 0; i < lists[q]->size(); ++i) {
+        const float* p = (*lists[q])[i] + 3 * v0;
+        const Rgb* wi = r->w.data() + i * nx;
+        for (size_t x = 0; x < nx; ++x) {
+          if (r->active[x]) sum[x] += wi[x] * Rgb(p[3 * x], p[3 * x + 1], p[3 * x + 2]);
+        }
+      }
+    }
+    float* out = field_.data() + v0 * kFieldFloats;
+    for (size_t x = 0; x < nx; ++x) {
+      for (int q = 0; q < 3; ++q) {
+        const Rgb& v = r->sum[size_t(q) * nx + x];
+        for (int c = 0; c < 3; ++c) out[x * kFieldFloats + size_t(3 * q + c)] = float(v[c]);
+      }
+    }
+  }
+
+  // Whether every sample of the view reads the field: it was built and, for a pinhole, the
+  // whole support of the lattice (index (-1, n), with the anchor before a sample and a voxel to
+  // spare) lies beyond field_near_.
+  bool fieldServesEverySample(const ViewGeometry& view) const {
+    if (field_.size() == 0) return false;
+    if (!view.pinhole) return true;
+    const double h = grid_.voxel_size;
+    Bounds3 support;
+    support.min = grid_.origin - Vec3(2 * h);
+    support.max = grid_.origin + Vec3(grid_.nx + 1, grid_.ny + 1, grid_.nz + 1) * h;
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double e = std::max({support.min[a] - view.eye[a], 0.0, view.eye[a] - support.max[a]});
+      d2 += e * e;
+    }
+    return std::sqrt(d2) > field_near_ + (tally_ ? tally_dt_ : 0.0) + h;
   }
 
   // The largest distance from `eye` to a voxel centre of `g` (at one of the lattice's corners).
@@ -976,7 +1035,8 @@ class BakeMarcher {
       return;
     }
     c.record[kTsun] = lattice_.read(tsun_, c);
-    if (vsky_) c.record[kVsky] = lattice_.read(vsky_, c);
+    // Photon's sky light comes from its tallies: its views do not read the visibility.
+    if (vsky_ && ssky_sh_.empty()) c.record[kVsky] = lattice_.read(vsky_, c);
     if (mie_) c.record[kMie] = lattice_.read(mie_, c);
   }
 
