@@ -5,7 +5,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <memory>
 #include <optional>
+#include <tuple>
 
 #include "core/animation/basic_volumes.h"
 #include "core/animation/precomputed_io.h"
@@ -287,8 +290,94 @@ struct FrameProgress {
   double at(int frame, double unit) const { return 0.5 + 0.5 * (frame * per_frame + unit) / units; }
 };
 
+// Frames the walk shows again. An endless walk repeats its blends (a natural successor is a
+// whole basic volume, and a jump back replays the same dissolve: examples/endless_cloud.json's
+// 24 frames hold 13 blends), and the walk is known before any frame is lit, so a frame's light
+// and its rendered views are kept from its first frame to the last later frame of the same
+// blend, while what is kept fits in kRepeatedFrameBytes. A frame's light depends on nothing but
+// its blend and the shot's cameras do not move, so a repeat is the same light and the same
+// pixels; only the files, which name their frame, are written again.
+struct KeptFrame {
+  std::shared_ptr<const BakedLight> light;
+  std::vector<RenderLayers> views;  // the shot's first views.size() views, as rendered
+};
+
+class RepeatedFrames {
+ public:
+  RepeatedFrames(const std::vector<BlendFrame>& walk, const RunScope& scope)
+      : first_(walk.size()), last_(walk.size()) {
+    std::map<std::tuple<int, int, double>, size_t> seen;  // a blend's first rendered frame
+    for (size_t f = 0; f < walk.size(); ++f) {
+      first_[f] = last_[f] = f;
+      if (!scope.renders(int(f))) continue;
+      const BlendFrame& b = walk[f];
+      first_[f] = seen.emplace(std::make_tuple(b.a, b.b, b.w), f).first->second;
+      last_[first_[f]] = f;
+    }
+  }
+
+  /// What an earlier frame of frame f's blend kept, else null.
+  const KeptFrame* find(size_t f) const {
+    const auto it = kept_.find(first_[f]);
+    return it == kept_.end() || first_[f] == f ? nullptr : &it->second;
+  }
+
+  /// Where frame f, the first of its blend, keeps its light and views for a later frame of its
+  /// blend; null where none follows or its light does not fit.
+  KeptFrame* keep(size_t f, const std::shared_ptr<const BakedLight>& light) {
+    if (first_[f] != f || last_[f] == f || !admit(lightBytes(*light))) return nullptr;
+    KeptFrame& k = kept_[f];
+    k.light = light;
+    return &k;
+  }
+
+  /// Counts `bytes` more kept where they fit.
+  bool admit(size_t bytes) {
+    if (bytes_ + bytes > kRepeatedFrameBytes) return false;
+    bytes_ += bytes;
+    return true;
+  }
+
+  /// Drops what frame f's blend kept where f is its last frame.
+  void done(size_t f) {
+    const auto it = kept_.find(first_[f]);
+    if (it == kept_.end() || last_[first_[f]] != f) return;
+    bytes_ -= lightBytes(*it->second.light);
+    for (const RenderLayers& v : it->second.views) bytes_ -= layersBytes(v);
+    kept_.erase(it);
+  }
+
+  static size_t layersBytes(const RenderLayers& l) {
+    size_t floats = 0;
+    for (const Image* i : {&l.beauty, &l.background, &l.sun, &l.sky, &l.single, &l.multiple}) {
+      floats += i->data.size();
+    }
+    return floats * sizeof(float);
+  }
+
+ private:
+  static constexpr size_t kRepeatedFrameBytes = size_t(1) << 30;
+  static size_t lightBytes(const BakedLight& l) {
+    size_t floats = l.density.size();
+    for (const auto& [name, c] : l.channels) floats += c.data.size();
+    return floats * sizeof(float);
+  }
+  std::vector<size_t> first_;  // per frame: the first rendered frame of its blend
+  std::vector<size_t> last_;   // per first frame: the last rendered frame of its blend
+  std::map<size_t, KeptFrame> kept_;
+  size_t bytes_ = 0;
+};
+
+// A frame's part in RepeatedFrames: the views an earlier frame of its blend rendered
+// (`replay`), or where it keeps its own (`keep`); both null where neither.
+struct FrameReuse {
+  const KeptFrame* replay = nullptr;
+  KeptFrame* keep = nullptr;
+  RepeatedFrames* frames = nullptr;
+};
+
 void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, int f,
-                 const FrameProgress& progress) {
+                 const FrameProgress& progress, const FrameReuse& reuse = {}) {
   const ShotSpec& shot = run.shot();
   const Scene& lights = run.lights();
   const BakeRenderOptions ro = frameRenderOptions(shot, light, run.threads());
@@ -298,9 +387,16 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
     const auto t_view = std::chrono::steady_clock::now();
     run.report("render", progress.at(f, 1 + i),
                "frame " + std::to_string(f) + ", view '" + camera.name + "'", camera.name);
+    const bool replayed = reuse.replay && size_t(i) < reuse.replay->views.size();
     RenderLayers layers =
-        renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
-                       [&](double fr) { return run.poll(progress.at(f, 1 + i + fr), fr); });
+        replayed
+            ? reuse.replay->views[size_t(i)]
+            : renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro,
+                             [&](double fr) { return run.poll(progress.at(f, 1 + i + fr), fr); });
+    if (!replayed && reuse.keep && reuse.keep->views.size() == size_t(i) &&
+        reuse.frames->admit(RepeatedFrames::layersBytes(layers))) {
+      reuse.keep->views.push_back(layers);
+    }
     const double traced = tracedShare(layers);
     const double write_s = run.writeView(
         frameStem(camera.name, f), camera, renderLayersToExr(std::move(layers)),
@@ -312,7 +408,11 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
          {"cloudbake:film_spacing", std::to_string(filmSpacingOf(light, camera, ro))}});
     ++run.result().views_from_bake;
     run.result().steps.push_back(
-        {"view", camera.name, f, secondsSince(t_view), {{"write", write_s}, {"traced", traced}}});
+        {"view",
+         camera.name,
+         f,
+         secondsSince(t_view),
+         {{"write", write_s}, {"traced", traced}, {"repeated", replayed ? 1.0 : 0.0}}});
     run.report("render", progress.at(f, 2 + i),
                "frame " + std::to_string(f) + ", view '" + camera.name + "' " +
                    std::to_string(camera.width_px) + "x" + std::to_string(camera.height_px) +
@@ -524,20 +624,36 @@ void PrecomputedMethod::run(MethodRun& run) const {
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
   const FrameProgress progress{double(o.frames) * per_frame, per_frame};
+  RepeatedFrames repeated(walk, scope);
   for (int f = 0; f < o.frames; ++f) {
     if (!scope.renders(f)) continue;
     const BlendFrame& bf = walk[size_t(f)];
     const auto t0 = std::chrono::steady_clock::now();
-    FrameLightStats stats;
-    const BakedLight light = lightAnimationFrame(db, bf, sunDirection(shot), lights.medium.albedo,
-                                                 sky_sh, frame_options, &stats);
-    run.result().steps.push_back(
-        {"light", "", f, stats.seconds, {{"orders", double(stats.orders)}}});
-    run.report("render", progress.at(f, 0),
-               "frame " + std::to_string(f) + " (basic volumes " + std::to_string(bf.a) + ", " +
-                   std::to_string(bf.b) + ", w " + fixed(bf.w, 3) + "): lit in " +
-                   fixed(stats.seconds, 2) + " s, " + std::to_string(stats.orders) + " orders");
-    renderFrame(run, light, bf, f, progress);
+    FrameReuse reuse;
+    reuse.frames = &repeated;
+    reuse.replay = repeated.find(size_t(f));
+    std::shared_ptr<const BakedLight> light = reuse.replay ? reuse.replay->light : nullptr;
+    const std::string blend = "frame " + std::to_string(f) + " (basic volumes " +
+                              std::to_string(bf.a) + ", " + std::to_string(bf.b) + ", w " +
+                              fixed(bf.w, 3) + "): ";
+    if (light) {
+      run.result().steps.push_back({"light", "", f, 0.0, {{"repeated", 1.0}}});
+      run.report("render", progress.at(f, 0),
+                 blend + "lit and its first " + std::to_string(reuse.replay->views.size()) +
+                     " view(s) rendered as an earlier frame of its blend");
+    } else {
+      FrameLightStats stats;
+      light = std::make_shared<const BakedLight>(lightAnimationFrame(
+          db, bf, sunDirection(shot), lights.medium.albedo, sky_sh, frame_options, &stats));
+      reuse.keep = repeated.keep(size_t(f), light);
+      run.result().steps.push_back(
+          {"light", "", f, stats.seconds, {{"orders", double(stats.orders)}}});
+      run.report("render", progress.at(f, 0),
+                 blend + "lit in " + fixed(stats.seconds, 2) + " s, " +
+                     std::to_string(stats.orders) + " orders");
+    }
+    renderFrame(run, *light, bf, f, progress, reuse);
+    repeated.done(size_t(f));
     run.report("render", progress.at(f + 1, 0),
                "frame " + std::to_string(f) + " done in " + fixed(secondsSince(t0), 2) + " s");
   }

@@ -5,8 +5,10 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <tuple>
 
 #include "core/bake/baked_light_vdb.h"
 #include "core/bake/sky_sh_scatter.h"
@@ -83,6 +85,53 @@ TEST(RunShotPrecomputed, WritesAFrameSequenceAndReusesThePrecompute) {
   const double sun_a = sumOf(readExr((dir / "a" / "v.0002.exr").string()).layers.at("sun"), 0);
   const double sun_b = sumOf(readExr((dir / "b" / "v.0002.exr").string()).layers.at("sun"), 0);
   EXPECT_NEAR(sun_b / sun_a, 2.0, 1e-4);
+  fs::remove_all(dir);
+}
+
+// An endless walk shows its blends again: each is lit and rendered once, and a repeat's views
+// hold the pixels of that frame rendered alone (a farm task of one frame, which finds no
+// earlier frame of its blend).
+TEST(RunShotPrecomputed, ARepeatedBlendIsLitAndRenderedOnce) {
+  const fs::path dir = freshDir("precomputed_repeat");
+  BakeCache cache((dir / "cache").string(), 0);
+  RunOptions opt;
+  opt.cache = &cache;
+  opt.out_dir = (dir / "all").string();
+  const ShotSpec shot = parse(animated(R"(, "frames": 24, "dissolve": 2)"));
+  const RunResult r = runShot(shot, opt);
+  std::ifstream walk_file(dir / "all" / "animation.json");
+  const nlohmann::json walk = nlohmann::json::parse(walk_file);
+  ASSERT_EQ(walk["frames"].size(), 24u);
+  std::map<std::tuple<int, int, double>, int> first;
+  int repeat = -1;
+  for (int f = 0; f < 24; ++f) {
+    const auto& fr = walk["frames"][size_t(f)];
+    const auto key = std::make_tuple(fr["a"].get<int>(), fr["b"].get<int>(), fr["w"].get<double>());
+    if (!first.emplace(key, f).second && repeat < 0) repeat = f;
+  }
+  ASSERT_GE(repeat, 0) << "24 frames of 6 volumes repeat some blend";
+  int lit = 0, replayed = 0;
+  for (const StepTime& s : r.steps) {
+    if (s.step == "light" && !s.values.count("repeated")) ++lit;
+    if (s.step == "view" && s.values.at("repeated") == 1) ++replayed;
+  }
+  EXPECT_EQ(lit, int(first.size()));
+  EXPECT_EQ(replayed, 24 - int(first.size()));
+  EXPECT_EQ(r.views_from_bake, 24);
+
+  opt.out_dir = (dir / "one").string();
+  opt.scope.part = RunScope::Part::kRender;
+  opt.scope.begin = repeat;
+  opt.scope.end = repeat + 1;
+  runShot(shot, opt);
+  const std::string name = frameStem("v", repeat) + ".exr";
+  const ExrContents all = readExr((dir / "all" / name).string());
+  const ExrContents one = readExr((dir / "one" / name).string());
+  EXPECT_EQ(all.attributes.at("cloudbake:frame"), std::to_string(repeat));
+  ASSERT_EQ(all.layers.size(), one.layers.size());
+  for (const auto& [layer, image] : one.layers) {
+    EXPECT_EQ(all.layers.at(layer).data, image.data) << layer;
+  }
   fs::remove_all(dir);
 }
 
