@@ -57,7 +57,7 @@ class PhotonMethod final : public BakeMethod {
         "1977, "
         "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
         "approximation (JQSRT), for a droplet's forward peak split off";
-    info_.version = 10;
+    info_.version = 11;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

@@ -437,7 +437,7 @@ class PrecomputedMethod final : public BakeMethod {
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
     // 8: the sky transmittance's SHEXP on every second voxel, interpolated between (knob
     //    sky_spacing; 1 is version 7's output).
-    info_.version = 8;
+    info_.version = 9;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

@@ -15,7 +15,7 @@ class SingleMethod final : public BakeMethod {
     info_.citation =
         "slsdo 2010, \"Volumetric Clouds: a volume renderer that utilizes ray casting and ray "
         "marching through a 3D voxel grid\"";
-    info_.version = 5;
+    info_.version = 6;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

@@ -1,5 +1,6 @@
 #include "core/volume/analytic.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <vector>
@@ -59,6 +60,17 @@ BoxDensity::BoxDensity(const Vec3& min, const Vec3& max, double density) : densi
 
 std::unique_ptr<DensityField::Lookup> BoxDensity::lookup() const {
   return std::make_unique<BoxLookup>(box_, density_);
+}
+
+std::optional<double> BoxDensity::cellMean(const Bounds3& cell) const {
+  double share = 1;
+  for (int a = 0; a < 3; ++a) {
+    const double width = cell.max[a] - cell.min[a];
+    if (!(width > 0)) return std::nullopt;  // a degenerate cell: sampled as a point
+    const double inside = std::min(cell.max[a], box_.max[a]) - std::max(cell.min[a], box_.min[a]);
+    share *= std::clamp(inside / width, 0.0, 1.0);
+  }
+  return density_ * share;
 }
 
 double BoxDensity::featureSize() const {

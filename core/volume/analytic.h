@@ -22,6 +22,8 @@ class BoxDensity final : public DensityField {
   }
   double featureSize() const override;
   std::string describe() const override;
+  /// The density times the share of `cell` inside the box.
+  std::optional<double> cellMean(const Bounds3& cell) const override;
 
  private:
   Bounds3 box_;

@@ -75,6 +75,10 @@ class DensityField {
   /// The lattice of samples the field interpolates, when it has one (SampleLattice); none by
   /// default.
   virtual std::optional<SampleLattice> sampleLattice() const { return std::nullopt; }
+  /// The field's mean over the box `cell` where it knows it in closed form (a homogeneous box:
+  /// its share of the cell), so a lattice keeps features thinner than its samples' spacing;
+  /// none by default (a lattice samples the field).
+  virtual std::optional<double> cellMean(const Bounds3& /*cell*/) const { return std::nullopt; }
   /// Characteristic feature size in world units (voxel size for grids; for analytic shapes a
   /// small fraction of their extent). Ray marchers use it to choose step lengths.
   virtual double featureSize() const = 0;

@@ -208,8 +208,9 @@ std::vector<Variant> variants() {
        [](json& s) {
          s["volume"] = {{"box", {{"min", {-1, -1, -1}}, {"max", {1, 1, 1}}, {"density", 0}}}};
        }},
-      // Thinner than the spacing of a lattice's samples: a lattice method bakes no density
-      // (precomputed refused it, with no sample point to place; an outside probe).
+      // Thinner than a quarter of a lattice voxel: sampled, it fell between the samples, so the
+      // lattice methods drew no cloud and precomputed refused it (no sample point to place);
+      // its exact means keep it (outside probes).
       {"box_thinner_than_a_voxel",
        [](json& s) {
          s["volume"] = {{"box", {{"min", {-1, -1, 0}}, {"max", {1, 1, 0.001}}, {"density", 1}}}};

@@ -94,6 +94,30 @@ TEST(BakeLattice, AlignedLatticeIsAboutTheRequestAndFallsBackToBoxMeans) {
 
 // A lattice whose corners lie more than kMaxLatticeOffsetVoxels of its voxels from the origin is
 // refused (world coordinates there keep no digits of a voxel); one just within is built.
+// A box's voxels hold its exact share of each voxel, so a box thinner than the samples of a box
+// mean keeps its optical depth: sampled, one under a quarter voxel thick vanished (every lattice
+// method rendered no cloud) and thicker ones aliased (an outside probe's sweep).
+TEST(BakeLattice, ABoxKeepsItsOpticalDepthAtAnyThickness) {
+  for (double thickness : {1e-6, 0.002, 0.0049, 0.008, 0.013, 0.02, 0.05, 0.3}) {
+    SCOPED_TRACE(thickness);
+    const double z0 = 0.0123;  // the faces cut the voxels anywhere
+    const BoxDensity box(Vec3(-1, -1, z0), Vec3(1, 1, z0 + thickness), 1 / thickness);
+    const BakedLight bake = makeBakeLattice(box, 64);
+    const BakeGrid& g = bake.grid;
+    // Each column through the box's interior sums to its optical depth per unit extinction, 1.
+    for (const auto& [i, j] : {std::pair{g.nx / 2, g.ny / 2}, std::pair{5, g.ny - 6}}) {
+      double column = 0;
+      for (int k = 0; k < g.nz; ++k) column += bake.density[g.index(i, j, k)] * g.voxel_size;
+      EXPECT_NEAR(column, 1.0, 1e-5);
+    }
+    // The whole lattice holds the box's mass (its edge voxels by their shares too).
+    double mass = 0;
+    for (float d : bake.density) mass += d;
+    mass *= std::pow(g.voxel_size, 3);
+    EXPECT_NEAR(mass, 4.0, 4e-5);
+  }
+}
+
 TEST(BakeLattice, AVolumeTooFarFromTheOriginForItsVoxelsIsRefused) {
   Bounds3 close;
   close.expand(Vec3(1e3, 0, 0));
