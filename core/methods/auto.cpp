@@ -200,6 +200,8 @@ std::vector<std::string> AutoChoice::planLines() const {
                     fixed(traits.phase_spikiness, 1) +
                     (traits.peak_split ? " (photon splits its forward peak off)" : "") +
                     ", optical thickness of a 1/128 voxel " + fixed(traits.tau_voxel_128, 3) +
+                    ", " + fixed(traits.thinnest_voxels_128, 1) +
+                    " such voxels across the cloud's thinnest side" +
                     ", the views' aureole brightness " + aureoleList(pilot.aureole));
   }
   for (const std::string& note : notes) lines.push_back("auto: " + note);
@@ -236,6 +238,7 @@ nlohmann::json AutoChoice::toJson() const {
             {"sun", traits.sun},
             {"sky", traits.sky},
             {"tau_voxel_128", traits.tau_voxel_128},
+            {"thinnest_voxels_128", traits.thinnest_voxels_128},
             {"views", traits.views},
             {"pixels", traits.pixels},
             {"write_seconds_per_pixel", traits.write_seconds_per_pixel},

@@ -68,6 +68,8 @@ SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene) {
   const Bounds3 b = m.density->bounds();
   const double extent = std::max({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
   t.tau_voxel_128 = denseSigmaT(m) * extent / 128.0;
+  const double thinnest = std::min({b.max.x - b.min.x, b.max.y - b.min.y, b.max.z - b.min.z});
+  t.thinnest_voxels_128 = extent > 0 ? 128.0 * thinnest / extent : 128.0;
   if (shot.outputs.exr) {  // views are rendered only then
     t.views = int(shot.views.size());
     for (const Camera& c : shot.views) t.pixels += double(c.width_px) * c.height_px;

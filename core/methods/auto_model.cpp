@@ -237,6 +237,10 @@ double latticeSingleBias(const SceneTraits& traits, int resolution) {
   return std::min(1.0, tau * tau / 2.0);
 }
 
+bool latticeResolves(const SceneTraits& traits, int resolution) {
+  return traits.thinnest_voxels_128 * resolution / 128.0 >= kThinLatticeVoxels;
+}
+
 double pathtraceMargin(const SceneTraits& traits) {
   return traits.phase_spikiness > kHeavyTailSpikiness ? kHeavyTailMargin : kPathtraceMargin;
 }
@@ -251,12 +255,20 @@ int64_t pathtraceSamplesFor(const SceneTraits& traits, const PilotMeasure& pilot
 std::vector<AutoCandidate> autoCandidates(const SceneTraits& traits, const PilotMeasure& pilot,
                                           double tolerance, int max_samples) {
   std::vector<AutoCandidate> all;
-  for (int resolution : {128, 256}) all.push_back(singleCandidate(traits, pilot, resolution));
+  // Lattices too coarse across the cloud are left out: what they predict was measured on
+  // clouds they resolve.
+  for (int resolution : {128, 256}) {
+    if (latticeResolves(traits, resolution)) {
+      all.push_back(singleCandidate(traits, pilot, resolution));
+    }
+  }
   const double factor = photonSceneFactor(traits, pilot);
   if (!traits.photon_refuses &&
       (traits.phase_spikiness <= kPhotonMaxSpikiness || traits.peak_split)) {
     for (const PhotonRung& rung : photonRungs()) {
-      all.push_back(photonCandidate(traits, pilot, rung, factor));
+      if (latticeResolves(traits, rung.light_resolution)) {
+        all.push_back(photonCandidate(traits, pilot, rung, factor));
+      }
     }
   }
   // Without views the path tracer makes nothing to be accurate about (a shot of bake.vdb

@@ -26,6 +26,8 @@ struct SceneTraits {
   /// cloud is dense (the 90th percentile of sigma_t inside it): how much a lattice's linear
   /// interpolation of the transmittance errs.
   double tau_voxel_128 = 0;
+  /// Voxels of a 128-voxel lattice across the cloud's bounds along their thinnest side.
+  double thinnest_voxels_128 = 128;
   int views = 0;
   double pixels = 0;  ///< over every view
   /// Seconds per pixel of writing a view's EXR at the shot's outputs.exr_compression
@@ -113,6 +115,15 @@ double photonAureoleError(const SceneTraits& traits, const PilotMeasure& pilot);
 /// photon's predicted error before its margin: per view hypot(`bound`, aureoleTerm), averaged
 /// over the views; `bound` itself for a phase that is not split.
 double photonViewsError(const SceneTraits& traits, const PilotMeasure& pilot, double bound);
+
+/// A lattice this many voxels across the cloud or more resolves it; one of fewer blurs its light
+/// across them (docs/methods.md, "The lattice").
+constexpr double kThinLatticeVoxels = 4;
+/// Whether a lattice of `resolution` voxels along the cloud's longest side spans its thinnest
+/// side with kThinLatticeVoxels or more: the lattice candidates' errors were measured on such
+/// clouds only, and an outside probe's bar of 100:1:1 (2 voxels across) left `photon`'s multiple
+/// scattering at 0.39 of the path tracer's.
+bool latticeResolves(const SceneTraits& traits, int resolution);
 
 /// Bias of single scattering read from a lattice of `resolution` voxels, relative: tau^2 / 2 per
 /// voxel of optical thickness tau (measured on Disney's cloud; auto_model.cpp).
