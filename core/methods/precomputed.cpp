@@ -594,6 +594,9 @@ bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o,
   for (int f = 0; f < o.frames; ++f) {
     if (run.scope().renders(f)) renderFrame(run, light, BlendFrame{0, 0, 1}, f, progress);
   }
+  // A static volume is one basic volume, shown by every frame (an outside probe: the walk was
+  // not written for an empty cloud, by a run or a farm's gather).
+  writeAnimation(run, std::vector<BlendFrame>(size_t(o.frames), BlendFrame{0, 0, 1}), 1);
   return true;
 }
 

@@ -183,6 +183,30 @@ TEST(RunShotPrecomputed, AStaticVolumeIsOneBasicVolume) {
   fs::remove_all(dir);
 }
 
+// An empty static cloud renders the background each frame and writes its walk like any other
+// (an outside probe: it wrote none, nor did a farm's gather).
+TEST(RunShotPrecomputed, AnEmptyCloudWritesItsWalk) {
+  const fs::path dir = freshDir("precomputed_empty");
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  const RunResult r =
+      runShot(parse(animated(R"(, "frames": 3)", "[1, 1, 1]",
+                             R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 0}})")),
+              opt);
+  EXPECT_EQ(r.views_from_bake, 3);
+  std::ifstream walk_file(dir / "animation.json");
+  ASSERT_TRUE(walk_file.good());
+  const nlohmann::json walk = nlohmann::json::parse(walk_file);
+  EXPECT_EQ(walk["basic_volumes"], 1);
+  ASSERT_EQ(walk["frames"].size(), 3u);
+  for (const auto& f : walk["frames"]) {
+    EXPECT_EQ(f["a"], 0);
+    EXPECT_EQ(f["b"], 0);
+    EXPECT_EQ(f["w"], 1.0);
+  }
+  fs::remove_all(dir);
+}
+
 TEST(RunShotPrecomputed, CancelsAndRefusesBadInput) {
   const fs::path dir = freshDir("precomputed_bad");
   RunOptions opt;
