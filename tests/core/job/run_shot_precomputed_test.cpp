@@ -167,44 +167,35 @@ TEST(RunShotPrecomputed, ThirtyBasicVolumesWalkEndlessly) {
   fs::remove_all(dir);
 }
 
+// A static volume is one basic volume, every frame the same image and the walk all of it; an
+// empty one too, rendering the background (an outside probe: it wrote no walk, in a run nor in a
+// farm's gather).
 TEST(RunShotPrecomputed, AStaticVolumeIsOneBasicVolume) {
-  const fs::path dir = freshDir("precomputed_static");
-  RunOptions opt;
-  opt.out_dir = dir.string();
-  const RunResult r =
-      runShot(parse(animated(R"(, "frames": 2)", "[1, 1, 1]",
-                             R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})")),
-              opt);
-  EXPECT_EQ(r.views_from_bake, 2);
-  // Every frame is the same volume: the same image.
-  const Image a = readExr((dir / "v.0000.exr").string()).layers.at("");
-  const Image b = readExr((dir / "v.0001.exr").string()).layers.at("");
-  EXPECT_EQ(a.data, b.data);
-  fs::remove_all(dir);
-}
-
-// An empty static cloud renders the background each frame and writes its walk like any other
-// (an outside probe: it wrote none, nor did a farm's gather).
-TEST(RunShotPrecomputed, AnEmptyCloudWritesItsWalk) {
-  const fs::path dir = freshDir("precomputed_empty");
-  RunOptions opt;
-  opt.out_dir = dir.string();
-  const RunResult r =
-      runShot(parse(animated(R"(, "frames": 3)", "[1, 1, 1]",
-                             R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 0}})")),
-              opt);
-  EXPECT_EQ(r.views_from_bake, 3);
-  std::ifstream walk_file(dir / "animation.json");
-  ASSERT_TRUE(walk_file.good());
-  const nlohmann::json walk = nlohmann::json::parse(walk_file);
-  EXPECT_EQ(walk["basic_volumes"], 1);
-  ASSERT_EQ(walk["frames"].size(), 3u);
-  for (const auto& f : walk["frames"]) {
-    EXPECT_EQ(f["a"], 0);
-    EXPECT_EQ(f["b"], 0);
-    EXPECT_EQ(f["w"], 1.0);
+  for (const char* density : {"1", "0"}) {
+    SCOPED_TRACE(density);
+    const fs::path dir = freshDir("precomputed_static");
+    RunOptions opt;
+    opt.out_dir = dir.string();
+    const std::string sphere =
+        std::string(R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": )") + density +
+        "}}";
+    const RunResult r = runShot(parse(animated(R"(, "frames": 3)", "[1, 1, 1]", sphere)), opt);
+    EXPECT_EQ(r.views_from_bake, 3);
+    const Image a = readExr((dir / "v.0000.exr").string()).layers.at("");
+    const Image b = readExr((dir / "v.0002.exr").string()).layers.at("");
+    EXPECT_EQ(a.data, b.data);
+    std::ifstream walk_file(dir / "animation.json");
+    ASSERT_TRUE(walk_file.good());
+    const nlohmann::json walk = nlohmann::json::parse(walk_file);
+    EXPECT_EQ(walk["basic_volumes"], 1);
+    ASSERT_EQ(walk["frames"].size(), 3u);
+    for (const auto& f : walk["frames"]) {
+      EXPECT_EQ(f["a"], 0);
+      EXPECT_EQ(f["b"], 0);
+      EXPECT_EQ(f["w"], 1.0);
+    }
+    fs::remove_all(dir);
   }
-  fs::remove_all(dir);
 }
 
 TEST(RunShotPrecomputed, CancelsAndRefusesBadInput) {
