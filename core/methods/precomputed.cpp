@@ -436,7 +436,7 @@ class PrecomputedMethod final : public BakeMethod {
         "Iwasaki, Nishino and Dobashi 2011, \"Real-time rendering of endless cloud animation\" "
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
     // 8: the sky transmittance's SHEXP on every second voxel, interpolated between (knob
-    //    sky_spacing; 1 is version 7's output).
+    //    sky_spacing; 1 is version 7's output). 9: a box volume's exact means on the lattice.
     info_.version = 9;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
@@ -566,9 +566,9 @@ std::optional<BakedLight> staticLattice(MethodRun& run, const PrecomputedShotOpt
 }
 
 // An empty cloud (a static volume whose density is 0 everywhere, or on every voxel of its
-// lattice: a box thinner than the spacing of the lattice's samples) is a valid shot, as for
-// every method: each frame renders the background from a zero bake. No database can be built
-// for it (its sample points would have nowhere to go).
+// lattice: a field sampled onto it whose features all fall between the samples) is a valid
+// shot, as for every method: each frame renders the background from a zero bake. No database
+// can be built for it (its sample points would have nowhere to go).
 bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o,
                       std::optional<BakedLight>& lattice) {
   const ShotSpec& shot = run.shot();
