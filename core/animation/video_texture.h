@@ -17,20 +17,31 @@ using BasicVolumes = std::vector<std::vector<float>>;
 /// non-finite densities (naming the frame). Parallel over rows; deterministic.
 std::vector<double> frameDistances(const BasicVolumes& frames);
 
+/// The largest future-cost weight: the walk looks about 1 / (1 - alpha) frames ahead.
+constexpr double kMaxFutureCost = 0.999;
+
 /// Options of the walk. `sigma` is the seed's temperature relative to the mean D_kl over k != l
-/// (so one value suits any lattice size): P_kl proportional to exp(-D_{k+1,l} / (sigma mean D)).
+/// (so one value suits any lattice size): P_kl proportional to exp(-D''_kl / (sigma mean D)).
 /// `dissolve_frames` H: frames over which a jump is cross-dissolved (0: a hard cut).
+/// `future_cost` alpha: Schoedl et al.'s weight of what a transition leads to (0: the jump's own
+/// cost only, which loops at the end of the input).
 struct VideoTextureOptions {
   double sigma = 0.05;      ///< (0, 1e6]; small: only near-identical continuations; large: uniform
   int dissolve_frames = 8;  ///< H in [0, n - 2]
+  double future_cost = 0.99;  ///< alpha in [0, kMaxFutureCost]
   uint64_t seed = 1;
 };
 
 /// P as an n x n row-major matrix: row k gives the probabilities of the frames that may follow
-/// frame k. The natural successor k+1 has D_{k+1,k+1} = 0 and so the largest weight; a jump
-/// target l must leave room for the dissolve (l + H <= n - 1). The last frame has no successor:
-/// its row uses D_{n-1,l-1} (jump to a frame whose predecessor looks like it). Rows sum to 1.
-/// InputError naming sigma or H when out of range.
+/// frame k. A transition's own cost is D'_kl = D_{k+1,l}: the natural successor k+1 costs 0; a
+/// jump target l must leave room for the dissolve (l + H <= n - 1). The last frame has no
+/// successor: its row uses D_{n-1,l-1} (jump to a frame whose predecessor looks like it). Schoedl
+/// et al. 2000 (Section 3.3) add what the transition leads to: D''_kl = D'_kl + alpha min_m
+/// D''_{j,m}, where j is the frame the walk goes on from (l, or l + H - 1 after a dissolve). The
+/// last frame's jump then goes back far enough to spread its cost over the stretch before the
+/// end comes round again, instead of the shortest jump that loops the last H + 1 frames (the
+/// dead end). Rows sum to 1.
+/// InputError naming sigma, H or future_cost when out of range.
 std::vector<double> transitionProbabilities(const std::vector<double>& distances, int n,
                                             const VideoTextureOptions& options);
 

@@ -26,7 +26,8 @@ class AutoMethod final : public BakeMethod {
     info_.citation =
         "cloudbake's own measured trade curves (2026; docs/methods.md, \"Method auto\"): the "
         "model and its fit; the methods it chooses cite their papers";
-    info_.version = 11;
+    // 12: a sequence's choice, `precomputed`, walks with future costs (its version 10).
+    info_.version = 12;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {

@@ -55,6 +55,11 @@ std::vector<Knob> precomputedKnobs() {
       Knob::number("sigma", 0, 1e6, d.walk.sigma, "",
                    "`sequence` volumes only: the walk's temperature, relative to the mean "
                    "distance between basic volumes (small: natural successors; large: any jump)"),
+      Knob::number("future_cost", 0, kMaxFutureCost, d.walk.future_cost, "",
+                   "`sequence` volumes only: alpha, the weight of what a jump leads to (Schoedl "
+                   "et al. 2000's future costs), so the walk does not loop at the input's end; "
+                   "0: each jump's own cost only (version 9's walk)",
+                   /*exclusive_min=*/false),
       Knob::integer("dissolve", 0, 10000, std::nullopt,
                     "`sequence` volumes only: H, frames of cross-dissolve per jump; at most the "
                     "sequence's frames - 2")
@@ -437,7 +442,8 @@ class PrecomputedMethod final : public BakeMethod {
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
     // 8: the sky transmittance's SHEXP on every second voxel, interpolated between (knob
     //    sky_spacing; 1 is version 7's output). 9: a box volume's exact means on the lattice.
-    info_.version = 9;
+    // 10: the walk's future costs (knob future_cost; 0 is version 9's walk).
+    info_.version = 10;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
@@ -464,7 +470,7 @@ void PrecomputedMethod::validate(const ShotSpec& shot, const std::string& source
   const KnobValues& k = shot.bake.knobs;
   const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
   if (!seq) {
-    for (const char* key : {"sigma", "dissolve"}) {
+    for (const char* key : {"sigma", "dissolve", "future_cost"}) {
       if (!k.has(key)) continue;
       throw InputError(source + ": /bake/" + key + ": applies to animated volumes only (a " +
                        volumeTypeName(shot.volume) +
@@ -696,6 +702,7 @@ PrecomputedShotOptions precomputedOptions(const ShotSpec& shot) {
   const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
   o.basic_volumes = seq ? seq->frames : 1;
   o.walk.sigma = k.number("sigma");
+  o.walk.future_cost = k.number("future_cost");
   o.walk.dissolve_frames =
       int(k.optionalInteger("dissolve")
               .value_or(std::max(0, std::min(o.walk.dissolve_frames, o.basic_volumes - 2))));

@@ -33,6 +33,33 @@ BasicVolumes circlingBlob(int n, int size = 16) {
   return frames;
 }
 
+// A blob drifting along x and never coming back: the input ends in a volume that nothing follows.
+BasicVolumes driftingBlob(int n, int size = 16) {
+  BasicVolumes frames(size_t(n), std::vector<float>(size_t(size) * size * size));
+  for (int f = 0; f < n; ++f) {
+    const double cx = size * (0.2 + 0.6 * f / (n - 1));
+    for (int k = 0; k < size; ++k)
+      for (int j = 0; j < size; ++j)
+        for (int i = 0; i < size; ++i) {
+          const double r2 = (i - cx) * (i - cx) + (j - size / 2.0) * (j - size / 2.0) +
+                            (k - size / 2.0) * (k - size / 2.0);
+          frames[size_t(f)][(size_t(k) * size + size_t(j)) * size + size_t(i)] =
+              float(std::exp(-r2 / 8));
+        }
+  }
+  return frames;
+}
+
+// The share of a walk's later half whose heavier volume is among the last `tail` of n.
+double laterShareInTail(const std::vector<BlendFrame>& walk, int n, int tail) {
+  int in = 0;
+  const size_t half = walk.size() / 2;
+  for (size_t i = half; i < walk.size(); ++i) {
+    in += (walk[i].w >= 0.5 ? walk[i].a : walk[i].b) >= n - tail;
+  }
+  return double(in) / double(walk.size() - half);
+}
+
 void expectErrorNaming(const std::function<void()>& fn, const std::string& what) {
   try {
     fn();
@@ -142,6 +169,52 @@ TEST(VideoTexture, TheEndlessWalkIsSeededAndNeverJumps) {
   o.sigma = 1e6;
   const std::vector<double> uniform = transitionProbabilities(d, n, o);
   EXPECT_GT(maxFrameChange(frames, endlessWalk(uniform, n, 1000, o)), 3 * input);
+}
+
+// Schoedl et al.'s future costs: without them the last volume's best jump is the shortest one
+// back that leaves room to dissolve, so the walk ends up looping over the last H + 1 volumes.
+TEST(VideoTexture, FutureCostsKeepTheWalkOutOfTheDeadEnd) {
+  const int n = 40, h = 4;
+  const BasicVolumes frames = driftingBlob(n);
+  const std::vector<double> d = frameDistances(frames);
+  VideoTextureOptions o;
+  o.dissolve_frames = h;
+  o.future_cost = 0;
+  double trapped = 0, free = 0;
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    o.seed = seed;
+    o.future_cost = 0;
+    trapped = std::max(
+        trapped,
+        laterShareInTail(endlessWalk(transitionProbabilities(d, n, o), n, 2000, o), n, h + 1));
+    o.future_cost = VideoTextureOptions{}.future_cost;
+    free = std::max(free, laterShareInTail(
+                              endlessWalk(transitionProbabilities(d, n, o), n, 2000, o), n, h + 1));
+  }
+  std::printf(
+      "[ animation ] later half of a 2000-frame walk in the last %d of %d volumes: %.2f without "
+      "future costs, %.2f with (alpha %.3g)\n",
+      h + 1, n, trapped, free, VideoTextureOptions{}.future_cost);
+  // The control: the dead end does trap the walk without them.
+  EXPECT_GT(trapped, 0.9);
+  // Uniform play would give (h + 1) / n = 0.125 of the frames there.
+  EXPECT_LT(free, 0.4);
+
+  // Why: the last volume's likeliest jump. Its own cost is least for the shortest jump back
+  // that leaves room to dissolve (target n - 1 - h); with future costs it goes further back, so
+  // that the jump's cost is spread over a longer stretch before the end comes round again.
+  auto likeliestFromLast = [&](double alpha) {
+    o.future_cost = alpha;
+    o.sigma = 1e-3;
+    const std::vector<double> p = transitionProbabilities(d, n, o);
+    return int(std::max_element(p.begin() + (n - 1) * n, p.end()) - (p.begin() + (n - 1) * n));
+  };
+  EXPECT_EQ(likeliestFromLast(0), n - 1 - h);
+  EXPECT_LT(likeliestFromLast(0.99), n - 1 - 2 * h);
+  o.future_cost = 1.0;
+  expectErrorNaming([&] { transitionProbabilities(d, n, o); }, "future_cost");
+  o.future_cost = -0.1;
+  expectErrorNaming([&] { transitionProbabilities(d, n, o); }, "future_cost");
 }
 
 TEST(VideoTexture, ThreeHundredVolumesWork) {

@@ -656,6 +656,17 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["bake"] = {{"method", "precomputed"}, {"sigma", 0}};
        },
        "/bake/sigma: must be"},
+      {"future cost on a static volume",
+       [](json& j) {
+         j["bake"] = {{"method", "precomputed"}, {"future_cost", 0.5}};
+       },
+       "/bake/future_cost: applies to animated volumes only"},
+      {"future cost of 1 (the costs would not converge)",
+       [](json& j) {
+         j["volume"] = {{"sequence", {{"procedural", {{"type", "perlin_cloud"}}}, {"frames", 5}}}};
+         j["bake"] = {{"method", "precomputed"}, {"future_cost", 1}};
+       },
+       "/bake/future_cost: must be in [0, 0.999]"},
       {"0 output frames",
        [](json& j) {
          j["bake"] = {{"method", "precomputed"}, {"frames", 0}};
