@@ -17,6 +17,7 @@
 #include "core/job/direction_index.h"
 #include "core/job/file_util.h"
 #include "core/job/phase_cache.h"
+#include "core/job/replaced_outputs.h"
 #include "core/job/run_outputs.h"
 #include "core/job/volume_cache.h"
 #include "core/job/volume_limits.h"
@@ -97,6 +98,15 @@ class ShotRun final : public MethodRun {
   void setDensity(DensityFieldPtr density) { density_ = std::move(density); }
   /// Header attributes every view gets (auto's choice).
   void setHeader(std::map<std::string, std::string> header) { header_ = std::move(header); }
+  /// The run failed and removed its files: the earlier files they replaced come back. One that
+  /// cannot stays under its hidden name, which the log names.
+  void restoreReplaced() {
+    for (const std::string& hidden : replaced_.restore()) {
+      pollMessage(progress_.fraction, "could not put back the earlier file kept as " + hidden);
+    }
+  }
+  /// The run succeeded: the earlier files it replaced are deleted.
+  void commitReplaced() { replaced_.commit(); }
   ~ShotRun() override {
     std::error_code ec;
     if (!scratch_.empty()) fs::remove_all(scratch_, ec);
@@ -206,7 +216,9 @@ class ShotRun final : public MethodRun {
                    const std::map<std::string, std::string>& attributes) override;
   void writeOutput(const std::string& name,
                    const std::function<void(const std::string& path)>& write) override {
-    write((fs::path(opt_.out_dir) / name).string());
+    const std::string path = (fs::path(opt_.out_dir) / name).string();
+    replaced_.keep(path);
+    write(path);
     result_.files.push_back(describeOutput(opt_.out_dir, name));
   }
   void copyOutput(const std::string& name, const std::string& from) override {
@@ -215,6 +227,7 @@ class ShotRun final : public MethodRun {
     const std::string tmp = path.string() + ".tmp." + uniqueSuffix();
     try {
       fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
+      replaced_.keep(path.string());
       fs::rename(tmp, path);
     } catch (const fs::filesystem_error& e) {
       std::error_code ec;
@@ -237,6 +250,7 @@ class ShotRun final : public MethodRun {
   const RunOptions& opt_;
   const ShotCacheKeys keys_;
   RunResult result_;
+  ReplacedOutputs replaced_;
   RunProgress progress_;
   std::optional<Scene> scene_;
   bool density_built_ = false;
@@ -393,6 +407,8 @@ double ShotRun::writeView(const std::string& stem, const Camera& camera,
   const std::string name = stem + ".exr";
   const std::string path = (fs::path(opt_.out_dir) / name).string();
   const ExrCompression compression = exrCompressionOf(shot_, opt_.source);
+  replaced_.keep(path);
+  if (opt_.png) replaced_.keep((fs::path(opt_.out_dir) / (stem + ".png")).string());
   if (shot_.outputs.exr_layers == kExrLayerNames) {  // every layer, as the methods give them
     writeExr(path, layers, header, matrices, compression);
   } else {
@@ -529,11 +545,13 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
     if (isAutoShot(shot_in) && opt.scope.writesShotFiles()) writeAutoRecord(run, chosen->record);
   } catch (...) {
     // A run that fails leaves none of its outputs: a view written before the bake's file failed
-    // (a full disk) looked finished.
+    // (a full disk) looked finished. What they replaced comes back (replaced_outputs.h).
     std::error_code ec;
     for (const OutputFile& f : run.result().files) fs::remove(f.path, ec);
+    run.restoreReplaced();
     throw;
   }
+  run.commitReplaced();
   RunResult result = run.result();
   result.method = shot.bake.method;
   result.seconds = secondsSince(t_start);

@@ -232,6 +232,59 @@ TEST(RunShotPrecomputed, CancelsAndRefusesBadInput) {
   fs::remove_all(dir);
 }
 
+// Every file of a folder, by name, with its bytes.
+std::map<std::string, std::string> folderBytes(const fs::path& dir) {
+  std::map<std::string, std::string> out;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    std::ifstream in(e.path(), std::ios::binary);
+    out[e.path().filename().string()] =
+        std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  return out;
+}
+
+// A re-render into the folder of an earlier complete run (other lighting, so other pixels) that
+// is cancelled midway, or fails, leaves the earlier run as it was: its frames and the
+// animation.json that lists them. One that finishes replaces them and leaves nothing hidden.
+TEST(RunShotPrecomputed, AnInterruptedReRenderLeavesTheEarlierRunAsItWas) {
+  const fs::path dir = freshDir("precomputed_rerender");
+  RunOptions opt;
+  opt.out_dir = dir.string();
+  opt.png = true;
+  runShot(parse(animated(R"(, "frames": 6, "dissolve": 2)")), opt);
+  const std::map<std::string, std::string> before = folderBytes(dir);
+  ASSERT_EQ(before.count("animation.json"), 1u);
+  ASSERT_EQ(before.count("v.0005.exr"), 1u);
+  ASSERT_EQ(before.count("v.0005.png"), 1u);
+
+  const ShotSpec other = parse(animated(R"(, "frames": 6, "dissolve": 2)", "[2, 1, 0.5]"));
+  // Cancelled once it has written over a few earlier files (kept aside under hidden names).
+  size_t replaced = 0;
+  opt.progress = [&](const RunProgress&) {
+    replaced = 0;
+    for (const auto& e : fs::directory_iterator(dir)) {
+      replaced += e.path().filename().string().find(".replaced.") != std::string::npos;
+    }
+    return replaced < 3;
+  };
+  EXPECT_THROW(runShot(other, opt), Cancelled);
+  EXPECT_GE(replaced, 3u) << "the cancel must come after frames were written over";
+  EXPECT_EQ(folderBytes(dir), before);
+
+  // Finished: every frame replaced, and none of the earlier files is kept.
+  opt.progress = {};
+  runShot(other, opt);
+  const std::map<std::string, std::string> after = folderBytes(dir);
+  EXPECT_EQ(after.size(), before.size());
+  for (const auto& [name, bytes] : after) {
+    EXPECT_NE(name[0], '.') << name;
+    if (name.find(".exr") != std::string::npos) {
+      EXPECT_NE(bytes, before.at(name)) << name;
+    }
+  }
+  fs::remove_all(dir);
+}
+
 TEST(RunShotPrecomputed, TheDatabaseCountsAgainstTheServersVoxelLimit) {
   // 6 basic volumes of (20 + 2)^3 voxels, 17 floats each: 1086096 voxel-equivalents.
   const ShotSpec s = parse(animated(""));
