@@ -36,56 +36,49 @@ void checkOptions(int n, const VideoTextureOptions& o) {
   }
 }
 
-// One allowed transition out of frame k: to frame `to`, at the cost of how unlike what would
-// naturally come next it is, after which the walk goes on from frame `then` (past the dissolve).
-struct Transition {
-  int to = 0, then = 0;
-  double cost = 0;
-};
-
-std::vector<std::vector<Transition>> transitionCosts(const std::vector<double>& distances, int n,
-                                                     int h) {
-  auto dist = [&](int k, int l) { return distances[size_t(k) * size_t(n) + size_t(l)]; };
-  std::vector<std::vector<Transition>> rows(static_cast<size_t>(n));
-  for (int k = 0; k < n; ++k) {
-    for (int l = 0; l < n; ++l) {
-      const bool successor = k + 1 < n && l == k + 1;
-      const bool room = l + h <= n - 1;
-      const int then = successor || h == 0 ? l : l + h - 1;
-      if (k + 1 < n) {
-        if (successor || room) rows[size_t(k)].push_back({l, then, dist(k + 1, l)});
-      } else if (l >= 1 && room) {
-        // The last frame: its look-alike's successor.
-        rows[size_t(k)].push_back({l, then, dist(k, l - 1)});
-      }
+// fn(l, then, cost) for every transition allowed out of frame k: to frame l, at the cost of how
+// unlike what would naturally come next it is, after which the walk goes on from frame `then`
+// (past the dissolve). Computed from the distances on each call, so the walk holds no n x n
+// table beyond them and the probabilities.
+template <typename Fn>
+void forTransitions(const std::vector<double>& distances, int n, int h, int k, Fn&& fn) {
+  auto dist = [&](int a, int b) { return distances[size_t(a) * size_t(n) + size_t(b)]; };
+  for (int l = 0; l < n; ++l) {
+    const bool successor = k + 1 < n && l == k + 1;
+    const bool room = l + h <= n - 1;
+    const int then = successor || h == 0 ? l : l + h - 1;
+    if (k + 1 < n) {
+      if (successor || room) fn(l, then, dist(k + 1, l));
+    } else if (l >= 1 && room) {
+      fn(l, then, dist(k, l - 1));  // the last frame: its look-alike's successor
     }
   }
-  return rows;
 }
 
 // Schoedl et al.'s future costs: V(k) = min over transitions (cost + alpha V(then)), by value
 // iteration. Sweeping from the last frame down lets a chain of natural successors settle in
 // one sweep; only jumps back need more. It converges geometrically (alpha < 1); the cap keeps a
 // pathological database from running long, at a tolerance far below any temperature.
-std::vector<double> futureCosts(const std::vector<std::vector<Transition>>& rows, double alpha) {
-  std::vector<double> v(rows.size(), 0.0);
+std::vector<double> futureCosts(const std::vector<double>& distances, int n, int h, double alpha) {
+  std::vector<double> v(size_t(n), 0.0);
   if (alpha <= 0) return v;
-  double scale = 0;
-  for (const auto& row : rows)
-    for (const Transition& t : row) scale = std::max(scale, t.cost);
+  const double scale = *std::max_element(distances.begin(), distances.end());
   const double tolerance = 1e-12 * scale / (1 - alpha);
   for (int sweep = 0; sweep < 100000; ++sweep) {
     double change = 0;
-    for (size_t k = rows.size(); k-- > 0;) {
+    for (int k = n - 1; k >= 0; --k) {
       double best = 1e300;
-      for (const Transition& t : rows[k]) best = std::min(best, t.cost + alpha * v[size_t(t.then)]);
-      change = std::max(change, std::abs(best - v[k]));
-      v[k] = best;
+      forTransitions(distances, n, h, k, [&](int, int then, double cost) {
+        best = std::min(best, cost + alpha * v[size_t(then)]);
+      });
+      change = std::max(change, std::abs(best - v[size_t(k)]));
+      v[size_t(k)] = best;
     }
     if (change <= tolerance) break;
   }
   return v;
 }
+
 }  // namespace
 
 std::vector<double> frameDistances(const BasicVolumes& frames) {
@@ -127,9 +120,8 @@ std::vector<double> transitionProbabilities(const std::vector<double>& distances
                      "^2 entries needs at least 2 volumes");
   }
   checkOptions(n, options);
-  const std::vector<std::vector<Transition>> rows =
-      transitionCosts(distances, n, options.dissolve_frames);
-  const std::vector<double> v = futureCosts(rows, options.future_cost);
+  const int h = options.dissolve_frames;
+  const std::vector<double> v = futureCosts(distances, n, h, options.future_cost);
   double mean = 0;
   for (int k = 0; k < n; ++k)
     for (int l = 0; l < n; ++l) mean += k == l ? 0.0 : distances[size_t(k) * size_t(n) + size_t(l)];
@@ -138,18 +130,19 @@ std::vector<double> transitionProbabilities(const std::vector<double>& distances
   const double temperature = options.sigma * (mean > 0 ? mean : 1.0);
   std::vector<double> p(size_t(n) * size_t(n), 0.0);
   for (int k = 0; k < n; ++k) {
-    std::vector<double> q;
-    for (const Transition& t : rows[size_t(k)]) {
-      q.push_back(t.cost + options.future_cost * v[size_t(t.then)]);
-    }
-    // Weights relative to the best candidate, so they never all underflow.
-    const double best = *std::min_element(q.begin(), q.end());
+    double* row = &p[size_t(k) * size_t(n)];
+    // D'' per target (kept in the row), then weights relative to the best, so they never all
+    // underflow.
+    std::vector<int> targets;
+    double best = 1e300;
+    forTransitions(distances, n, h, k, [&](int l, int then, double cost) {
+      row[l] = cost + options.future_cost * v[size_t(then)];
+      targets.push_back(l);
+      best = std::min(best, row[l]);
+    });
     double z = 0;
-    for (double c : q) z += std::exp(-(c - best) / temperature);
-    for (size_t i = 0; i < q.size(); ++i) {
-      p[size_t(k) * size_t(n) + size_t(rows[size_t(k)][i].to)] =
-          std::exp(-(q[i] - best) / temperature) / z;
-    }
+    for (int l : targets) z += std::exp(-(row[l] - best) / temperature);
+    for (int l : targets) row[l] = std::exp(-(row[l] - best) / temperature) / z;
   }
   return p;
 }

@@ -554,6 +554,14 @@ void PrecomputedMethod::checkLimits(const ShotSpec& shot, const MethodLimits& li
       o.light_resolution, 17.0 * o.basic_volumes,
       "a database of " + std::to_string(o.basic_volumes) + " basic volume(s), 17 floats per voxel,",
       limits, source);
+  // The walk's distances and transition probabilities: two n x n tables of doubles.
+  const double walk_floats = 4.0 * double(o.basic_volumes) * double(o.basic_volumes);
+  if (limits.max_voxels > 0 && walk_floats > double(limits.max_voxels)) {
+    throw InputError(
+        source + ": /volume/sequence/frames: the walk over " + std::to_string(o.basic_volumes) +
+        " basic volumes holds two tables of frames^2 doubles, " + shortNumber(walk_floats) +
+        " floats, over the limit of " + std::to_string(limits.max_voxels) + " (--max-voxels)");
+  }
   checkPointCount(o.precompute.sample_points, "/bake/sample_points", limits, source);
   if (limits.max_frames > 0 && o.frames > limits.max_frames) {
     throw InputError(source + ": /bake/frames: " + std::to_string(o.frames) +

@@ -297,6 +297,19 @@ TEST(RunShotPrecomputed, TheDatabaseCountsAgainstTheServersVoxelLimit) {
               std::string::npos)
         << e.what();
   }
+  // The walk's two tables of frames^2 doubles count too: 100000 basic volumes hold 4e10 floats
+  // there, more than their database's 1.8e10.
+  const ShotSpec many = parse(animated("", "[1, 1, 1]", R"({"sequence": {"procedural":
+      {"type": "perlin_cloud", "size": [2, 2, 1], "resolution": 24}, "frames": 100000}})"));
+  try {
+    checkShotVoxels(many, 20000000000, "shot.json");
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/volume/sequence/frames: the walk over 100000 basic "
+                                         "volumes holds two tables"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(RunShotPrecomputed, PrecomputeKeyIgnoresLightingAndFrames) {
