@@ -22,7 +22,9 @@ void ReplacedOutputs::keep(const std::string& path) {
   // A second write of the same name replaces this run's own file, which must not come back.
   if (!seen_.insert(path).second) return;
   std::error_code ec;
-  if (!fs::exists(fs::symlink_status(path, ec))) return;
+  // A folder where a file goes is not the user's earlier output: the write fails as before.
+  const fs::file_status st = fs::symlink_status(path, ec);
+  if (!fs::exists(st) || fs::is_directory(st)) return;
   const std::string hidden = hiddenName(path);
   fs::rename(path, hidden, ec);
   if (ec) {

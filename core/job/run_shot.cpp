@@ -543,6 +543,10 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
     run.lights();
     runMethod(methodOf(shot), run, opt.source);
     if (isAutoShot(shot_in) && opt.scope.writesShotFiles()) writeAutoRecord(run, chosen->record);
+    // A cancel that comes after the last file still cancels, and puts the earlier files back:
+    // once they are deleted below, nothing cancels (a signal there gave exit 6 over a finished
+    // run whose earlier files were gone: an outside probe).
+    run.report("done", 1, "done in " + fixed(secondsSince(t_start), 2) + " s");
   } catch (...) {
     // A run that fails leaves none of its outputs: a view written before the bake's file failed
     // (a full disk) looked finished. What they replaced comes back (replaced_outputs.h).
@@ -555,7 +559,6 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   RunResult result = run.result();
   result.method = shot.bake.method;
   result.seconds = secondsSince(t_start);
-  run.report("done", 1, "done in " + fixed(result.seconds, 2) + " s");
   return result;
 }
 

@@ -51,6 +51,20 @@ TEST(ReplacedOutputs, AFailedRunPutsTheEarlierFilesBack) {
   fs::remove_all(dir);
 }
 
+// A folder where an output goes is not kept aside (the write fails on it, as it did before).
+TEST(ReplacedOutputs, AFolderIsNotKept) {
+  const fs::path dir = freshDir("replaced_folder");
+  fs::create_directories(dir / "a.exr");
+  put(dir / "a.exr" / "inside", "user's");
+  ReplacedOutputs r;
+  r.keep((dir / "a.exr").string());
+  EXPECT_EQ(r.kept(), 0u);
+  r.commit();
+  EXPECT_EQ(get(dir / "a.exr" / "inside"), "user's");
+  EXPECT_EQ(entries(dir), 1u);
+  fs::remove_all(dir);
+}
+
 TEST(ReplacedOutputs, ASuccessfulRunDeletesThem) {
   const fs::path dir = freshDir("replaced_commit");
   put(dir / "a.exr", "old a");

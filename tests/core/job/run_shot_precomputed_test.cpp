@@ -270,6 +270,11 @@ TEST(RunShotPrecomputed, AnInterruptedReRenderLeavesTheEarlierRunAsItWas) {
   EXPECT_THROW(runShot(other, opt), Cancelled);
   EXPECT_GE(replaced, 3u) << "the cancel must come after frames were written over";
   EXPECT_EQ(folderBytes(dir), before);
+  // Cancelled after its last file, as it reports that it is done: still cancelled, still put
+  // back (a late signal gave exit 6 over a finished run whose earlier files were deleted).
+  opt.progress = [&](const RunProgress& p) { return p.stage != "done"; };
+  EXPECT_THROW(runShot(other, opt), Cancelled);
+  EXPECT_EQ(folderBytes(dir), before);
 
   // Finished: every frame replaced, and none of the earlier files is kept.
   opt.progress = {};
