@@ -54,7 +54,10 @@ WalkStats measure(const BasicVolumes& db, const std::vector<BlendFrame>& walk, i
     if (f.w > 0) shown.insert(f.a);
     if (f.w < 1) shown.insert(f.b);
     all.insert({f.a, f.b, f.w});
-    if (f.w < 1 && (i == 0 || walk[i - 1].w == 1)) ++jumps;
+    // A jump: a dissolve's first frame, or (hard cuts) a whole frame not its predecessor's
+    // successor.
+    const bool cut = i > 0 && f.w == 1 && walk[i - 1].w == 1 && f.a != walk[i - 1].a + 1;
+    if ((f.w < 1 && (i == 0 || walk[i - 1].w == 1)) || cut) ++jumps;
     if (i >= half) {
       later.insert({f.a, f.b, f.w});
       tail += (f.w >= 0.5 ? f.a : f.b) >= n - 1 - h;
@@ -65,7 +68,9 @@ WalkStats measure(const BasicVolumes& db, const std::vector<BlendFrame>& walk, i
   s.blends = int(all.size());
   s.later_blends = int(later.size());
   s.jumps_per_100 = 100.0 * jumps / double(walk.size());
-  s.max_change = maxFrameChange(db, walk) / std::max(1e-30, maxInputFrameChange(db));
+  // Identical volumes change nothing; the ratio is then 0 (not a division by ~0).
+  const double input = maxInputFrameChange(db);
+  s.max_change = input > 1e-12 ? maxFrameChange(db, walk) / input : 0.0;
   return s;
 }
 

@@ -1,6 +1,7 @@
 #include "core/animation/video_texture.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <string>
 
@@ -40,17 +41,27 @@ void checkOptions(int n, const VideoTextureOptions& o) {
 // unlike what would naturally come next it is, after which the walk goes on from frame `then`
 // (past the dissolve). Computed from the distances on each call, so the walk holds no n x n
 // table beyond them and the probabilities.
+//
+// A cost is sqrt(D), Schoedl et al.'s exponent p = 1/2: for a cloud that evolves smoothly D
+// grows as the square of the frames between, so with D itself a loop of g frames costs g per
+// frame and future costs (which minimise the cost per frame played) settle in the shortest
+// loops there are; with sqrt(D) every loop length costs alike, and the walk keeps to long ones
+// (an outside probe: a dissolve of 2 frames trapped the walk in volumes 0-5 of 12).
 template <typename Fn>
 void forTransitions(const std::vector<double>& distances, int n, int h, int k, Fn&& fn) {
-  auto dist = [&](int a, int b) { return distances[size_t(a) * size_t(n) + size_t(b)]; };
+  auto cost = [&](int a, int b) { return std::sqrt(distances[size_t(a) * size_t(n) + size_t(b)]); };
   for (int l = 0; l < n; ++l) {
     const bool successor = k + 1 < n && l == k + 1;
     const bool room = l + h <= n - 1;
     const int then = successor || h == 0 ? l : l + h - 1;
     if (k + 1 < n) {
-      if (successor || room) fn(l, then, dist(k + 1, l));
+      if (successor || room) fn(l, then, cost(k + 1, l));
     } else if (l >= 1 && room) {
-      fn(l, then, dist(k, l - 1));  // the last frame: its look-alike's successor
+      fn(l, then, cost(k, l - 1));  // the last frame: its look-alike's successor
+    } else if (l == 0 && room) {
+      // Volume 0 has no predecessor to look like the last frame: the jump costs the two
+      // volumes' own distance (without it a database of 2 volumes froze on its last).
+      fn(l, then, cost(k, 0));
     }
   }
 }
@@ -59,12 +70,14 @@ void forTransitions(const std::vector<double>& distances, int n, int h, int k, F
 // iteration. Sweeping from the last frame down lets a chain of natural successors settle in
 // one sweep; only jumps back need more. It converges geometrically (alpha < 1); the cap keeps a
 // pathological database from running long, at a tolerance far below any temperature.
-std::vector<double> futureCosts(const std::vector<double>& distances, int n, int h, double alpha) {
+std::vector<double> futureCosts(const std::vector<double>& distances, int n, int h, double alpha,
+                                const std::function<bool()>& keep_going) {
   std::vector<double> v(size_t(n), 0.0);
   if (alpha <= 0) return v;
-  const double scale = *std::max_element(distances.begin(), distances.end());
+  const double scale = std::sqrt(*std::max_element(distances.begin(), distances.end()));
   const double tolerance = 1e-12 * scale / (1 - alpha);
   for (int sweep = 0; sweep < 100000; ++sweep) {
+    if (keep_going && !keep_going()) throw Cancelled("the walk's future costs");
     double change = 0;
     for (int k = n - 1; k >= 0; --k) {
       double best = 1e300;
@@ -81,7 +94,8 @@ std::vector<double> futureCosts(const std::vector<double>& distances, int n, int
 
 }  // namespace
 
-std::vector<double> frameDistances(const BasicVolumes& frames) {
+std::vector<double> frameDistances(const BasicVolumes& frames,
+                                   const std::function<bool()>& keep_going) {
   const int n = int(frames.size());
   if (n < 2) {
     throw InputError("basic volumes: an endless animation needs at least 2, got " +
@@ -101,12 +115,18 @@ std::vector<double> frameDistances(const BasicVolumes& frames) {
     }
   }
   std::vector<double> d(size_t(n) * size_t(n), 0.0);
+  std::atomic<bool> stop{false};
   parallelFor(0, n, [&](int k) {
+    if (stop || (keep_going && !keep_going())) {
+      stop = true;
+      return;
+    }
     for (int l = k + 1; l < n; ++l) {
       d[size_t(k) * size_t(n) + size_t(l)] =
           squaredDifference(frames[size_t(k)], frames[size_t(l)]);
     }
   });
+  if (stop) throw Cancelled("the distances between basic volumes");
   for (int k = 0; k < n; ++k)
     for (int l = 0; l < k; ++l)
       d[size_t(k) * size_t(n) + size_t(l)] = d[size_t(l) * size_t(n) + size_t(k)];
@@ -114,17 +134,21 @@ std::vector<double> frameDistances(const BasicVolumes& frames) {
 }
 
 std::vector<double> transitionProbabilities(const std::vector<double>& distances, int n,
-                                            const VideoTextureOptions& options) {
+                                            const VideoTextureOptions& options,
+                                            const std::function<bool()>& keep_going) {
   if (n < 2 || distances.size() != size_t(n) * size_t(n)) {
     throw InputError("basic volumes: a distance matrix of " + std::to_string(n) +
                      "^2 entries needs at least 2 volumes");
   }
   checkOptions(n, options);
   const int h = options.dissolve_frames;
-  const std::vector<double> v = futureCosts(distances, n, h, options.future_cost);
+  const std::vector<double> v = futureCosts(distances, n, h, options.future_cost, keep_going);
   double mean = 0;
-  for (int k = 0; k < n; ++k)
-    for (int l = 0; l < n; ++l) mean += k == l ? 0.0 : distances[size_t(k) * size_t(n) + size_t(l)];
+  for (int k = 0; k < n; ++k) {
+    for (int l = 0; l < n; ++l) {
+      mean += k == l ? 0.0 : std::sqrt(distances[size_t(k) * size_t(n) + size_t(l)]);
+    }
+  }
   mean /= double(n) * double(n - 1);
   // Identical frames everywhere: any scale will do, every candidate is equally good.
   const double temperature = options.sigma * (mean > 0 ? mean : 1.0);

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace cloudbake {
@@ -14,15 +15,17 @@ using BasicVolumes = std::vector<std::vector<float>>;
 
 /// D_kl = sum over voxels of (rho_k - rho_l)^2 for every pair, as an n x n row-major matrix
 /// (symmetric, zero diagonal). InputError for fewer than 2 frames, frames of different sizes, or
-/// non-finite densities (naming the frame). Parallel over rows; deterministic.
-std::vector<double> frameDistances(const BasicVolumes& frames);
+/// non-finite densities (naming the frame). Parallel over rows; deterministic. `keep_going`
+/// (called from worker threads, once a row) returning false cancels (Cancelled).
+std::vector<double> frameDistances(const BasicVolumes& frames,
+                                   const std::function<bool()>& keep_going = {});
 
 /// The largest future-cost weight: the walk looks about 1 / (1 - alpha) frames ahead.
 constexpr double kMaxFutureCost = 0.999;
 
-/// Options of the walk. `sigma` is the seed's temperature relative to the mean D_kl over k != l
-/// (so one value suits any lattice size): P_kl proportional to exp(-D''_kl / (sigma mean D)).
-/// `dissolve_frames` H: frames over which a jump is cross-dissolved (0: a hard cut).
+/// Options of the walk. `sigma` is the seed's temperature relative to the mean sqrt(D_kl) over
+/// k != l (so one value suits any lattice size): P_kl proportional to exp(-D''_kl / (sigma mean
+/// sqrt(D))). `dissolve_frames` H: frames over which a jump is cross-dissolved (0: a hard cut).
 /// `future_cost` alpha: Schoedl et al.'s weight of what a transition leads to (0: the jump's own
 /// cost only, which loops at the end of the input).
 struct VideoTextureOptions {
@@ -33,17 +36,19 @@ struct VideoTextureOptions {
 };
 
 /// P as an n x n row-major matrix: row k gives the probabilities of the frames that may follow
-/// frame k. A transition's own cost is D'_kl = D_{k+1,l}: the natural successor k+1 costs 0; a
-/// jump target l must leave room for the dissolve (l + H <= n - 1). The last frame has no
-/// successor: its row uses D_{n-1,l-1} (jump to a frame whose predecessor looks like it). Schoedl
-/// et al. 2000 (Section 3.3) add what the transition leads to: D''_kl = D'_kl + alpha min_m
-/// D''_{j,m}, where j is the frame the walk goes on from (l, or l + H - 1 after a dissolve). The
-/// last frame's jump then goes back far enough to spread its cost over the stretch before the
-/// end comes round again, instead of the shortest jump that loops the last H + 1 frames (the
-/// dead end). Rows sum to 1.
-/// InputError naming sigma, H or future_cost when out of range.
+/// frame k. A transition's own cost is D'_kl = sqrt(D_{k+1,l}) (Schoedl et al.'s exponent p =
+/// 1/2): the natural successor k+1 costs 0; a jump target l must leave room for the dissolve
+/// (l + H <= n - 1). The last frame has no successor: its row uses sqrt(D_{n-1,l-1}) (jump to a
+/// frame whose predecessor looks like it), and sqrt(D_{n-1,0}) for frame 0. Schoedl et al. 2000
+/// (Section 3.3) add what the transition leads to: D''_kl = D'_kl + alpha min_m D''_{j,m},
+/// where j is the frame the walk goes on from (l, or l + H - 1 after a dissolve). The last
+/// frame's jump then goes back far enough to spread its cost over the stretch before the end
+/// comes round again, instead of the shortest jump that loops the last H + 1 frames (the dead
+/// end). Rows sum to 1. InputError naming sigma, H or future_cost when out of range;
+/// `keep_going` (once per sweep of the future costs) returning false cancels (Cancelled).
 std::vector<double> transitionProbabilities(const std::vector<double>& distances, int n,
-                                            const VideoTextureOptions& options);
+                                            const VideoTextureOptions& options,
+                                            const std::function<bool()>& keep_going = {});
 
 /// One output frame: rho = w rho_a + (1 - w) rho_b (w = 1: frame a alone).
 struct BlendFrame {

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <tuple>
 
@@ -54,7 +55,8 @@ std::vector<Knob> precomputedKnobs() {
           .derivedDefault("the sequence's frame count (1 for a static volume)"),
       Knob::number("sigma", 0, 1e6, d.walk.sigma, "",
                    "`sequence` volumes only: the walk's temperature, relative to the mean "
-                   "distance between basic volumes (small: natural successors; large: any jump)"),
+                   "RMS-like distance sqrt(D) between basic volumes (small: natural successors; "
+                   "large: any jump)"),
       Knob::number("future_cost", 0, kMaxFutureCost, d.walk.future_cost, "",
                    "`sequence` volumes only: alpha, the weight of what a jump leads to (Schoedl "
                    "et al. 2000's future costs), so the walk does not loop at the input's end; "
@@ -265,12 +267,21 @@ PrecomputedDatabase obtainDatabase(MethodRun& run, const PrecomputedShotOptions&
 }
 
 // The walk over the database (a single basic volume repeats itself).
-std::vector<BlendFrame> walkDatabase(const PrecomputedDatabase& db,
+std::vector<BlendFrame> walkDatabase(MethodRun& run, const PrecomputedDatabase& db,
                                      const PrecomputedShotOptions& o) {
   const int n = int(db.basic.size());
   if (n == 1) return std::vector<BlendFrame>(size_t(o.frames), BlendFrame{0, 0, 1.0});
+  // Both are O(volumes^2): seconds for thousands of volumes, so they heed a cancel. The
+  // distances' rows run on worker threads, which take turns asking.
+  std::mutex mutex;
+  bool stop = false;
+  const std::function<bool()> keep_going = [&] {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (!stop) stop = !run.poll(0);
+    return !stop;
+  };
   const std::vector<double> p =
-      transitionProbabilities(frameDistances(db.volumes.frames), n, o.walk);
+      transitionProbabilities(frameDistances(db.volumes.frames, keep_going), n, o.walk, keep_going);
   return endlessWalk(p, n, o.frames, o.walk);
 }
 
@@ -626,7 +637,7 @@ void PrecomputedMethod::run(MethodRun& run) const {
   }
   const PrecomputedDatabase db = obtainDatabase(run, o, std::move(lattice));
   if (scope.part == RunScope::Part::kBake) return;
-  const std::vector<BlendFrame> walk = walkDatabase(db, o);
+  const std::vector<BlendFrame> walk = walkDatabase(run, db, o);
   const int basic_volumes = int(db.basic.size());
   if (!scope.rendersAny()) {
     writeAnimation(run, walk, basic_volumes);

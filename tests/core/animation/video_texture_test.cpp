@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <numeric>
+#include <set>
 #include <string>
 
 #include "core/error.h"
@@ -107,8 +108,9 @@ TEST(VideoTexture, TransitionsFavourTheNaturalSuccessorAndLeaveRoomToDissolve) {
     if (k + 1 < n) {
       EXPECT_EQ(argmax, k + 1) << k;
     } else {
-      // The last frame jumps to the frame whose predecessor looks like it: the loop's frame 1.
-      EXPECT_EQ(argmax, 1);
+      // The last frame jumps to where the loop goes on: frame 0 (one step from it), or frame 1,
+      // whose predecessor looks like it.
+      EXPECT_LE(argmax, 1);
     }
   }
   // A huge temperature makes every allowed target equally likely; a tiny one only the successor.
@@ -215,6 +217,53 @@ TEST(VideoTexture, FutureCostsKeepTheWalkOutOfTheDeadEnd) {
   expectErrorNaming([&] { transitionProbabilities(d, n, o); }, "future_cost");
   o.future_cost = -0.1;
   expectErrorNaming([&] { transitionProbabilities(d, n, o); }, "future_cost");
+}
+
+// The volumes the later half of a walk shows.
+int laterVolumes(const std::vector<BlendFrame>& walk) {
+  std::set<int> shown;
+  for (size_t i = walk.size() / 2; i < walk.size(); ++i) {
+    shown.insert(walk[i].a);
+    if (walk[i].w < 1) shown.insert(walk[i].b);
+  }
+  return int(shown.size());
+}
+
+// Future costs minimise the cost per frame played. On D itself, which grows as the square of the
+// frames between for a cloud that evolves smoothly, the shortest loops were the cheapest, and a
+// short dissolve trapped the walk in the first few volumes (an outside probe); on sqrt(D) it
+// keeps to long loops. And a database of 2 volumes, whose last could only jump to itself, froze.
+TEST(VideoTexture, TheWalkIsNotTrappedInAShortLoop) {
+  const int n = 40;
+  const BasicVolumes frames = driftingBlob(n);
+  const std::vector<double> d = frameDistances(frames);
+  VideoTextureOptions o;
+  for (int h : {0, 1, 2, 8}) {
+    o.dissolve_frames = h;
+    for (uint64_t seed = 1; seed <= 3; ++seed) {
+      o.seed = seed;
+      const int shown = laterVolumes(endlessWalk(transitionProbabilities(d, n, o), n, 2000, o));
+      std::printf("[ animation ] H = %d, seed %d: the later half of 2000 frames shows %d of %d\n",
+                  h, int(seed), shown, n);
+      EXPECT_GE(shown, 3 * n / 4) << "H = " << h << ", seed " << seed;
+    }
+  }
+  const BasicVolumes two = driftingBlob(2);
+  o.dissolve_frames = 0;
+  const std::vector<BlendFrame> walk =
+      endlessWalk(transitionProbabilities(frameDistances(two), 2, o), 2, 200, o);
+  EXPECT_EQ(laterVolumes(walk), 2);
+}
+
+// The O(n^2) parts heed a cancel.
+TEST(VideoTexture, DistancesAndFutureCostsCancel) {
+  const BasicVolumes frames = driftingBlob(20, 8);
+  int calls = 0;
+  EXPECT_THROW(frameDistances(frames, [&] { return ++calls < 3; }), Cancelled);
+  const std::vector<double> d = frameDistances(frames);
+  VideoTextureOptions o;
+  o.dissolve_frames = 2;
+  EXPECT_THROW(transitionProbabilities(d, 20, o, [] { return false; }), Cancelled);
 }
 
 TEST(VideoTexture, ThreeHundredVolumesWork) {
