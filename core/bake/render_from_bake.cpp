@@ -12,9 +12,12 @@
 //                       per ray, so p is looked up once per ray); Tsun(x) by a short
 //                       characteristic (BakeMarcher::sunTransmittanceAt): Tsun at the nearest
 //                       lattice plane towards the sun, interpolated within the plane, times the
-//                       segment's transmittance, its optical depth by Simpson's rule; trilinear
-//                       in optically thin blocks and in bakes without
-//                       cloudbake:sun_transmittance_margin (written before);
+//                       segment's transmittance, its optical depth by Simpson's rule, going on
+//                       plane by plane while the voxels around the plane's point differ by more
+//                       than kSunCornerRatio; trilinear in optically thin blocks and in bakes
+//                       without cloudbake:sun_transmittance_margin (written before); between
+//                       two samples whose Tsun differ by more than that ratio, Tsun is taken as
+//                       exponential in the view's optical depth (sunStep), not linear;
 //   multiple    J_ms  = E a(Ldir . -d) Co, only with a Co grid, with the angular model the
 //                       bake names in its metadata (cloudbake:angular_model):
 //                       "beam" (seed 000 Eq. 8 with A_iso = 1 / (4 pi); the default):
@@ -125,6 +128,14 @@ constexpr double kThinVoxelDepth = 0.25;
 // would change light of at most this fraction of the sun's): deep in a thick cloud's shadow,
 // where most of a backlit view's samples lie.
 constexpr float kDarkSun = 1e-3f;
+// The characteristic goes on to the next lattice plane towards the sun while the bake's
+// transmittance at the voxels around its end differs by more than this ratio: interpolating it
+// linearly there would be too bright (by at most (1 + r) / (2 sqrt(r)) - 1, 6 % at 2, where
+// it falls exponentially), as it is where a low sun grazes a cloud's top or skims a thick
+// cloud's rim. So these samples march towards the sun until the lattice is smooth around them.
+constexpr float kSunCornerRatio = 2.0f;
+// ... unless the light still to come through them is below this fraction of the sun's.
+constexpr double kSunNegligible = 1e-4;
 
 void validateOptions(const BakeRenderOptions& o, double voxel_size) {
   if (!std::isfinite(o.step) || o.step < 0) {
@@ -186,6 +197,22 @@ const float* channel(const BakedLight& bake, const char* name, int components, b
         (on_tally_grid ? "tally lattice (cloudbake:tally_lattice)" : "bake's lattice"));
   }
   return ch.data.data();
+}
+
+/// The sun's term of one step, integral over [0, delta] of exp(-tau) Tsun(tau) in the view's
+/// optical depth tau: Tsun linear between the step's ends (the weights w0, w1 of stepWeights),
+/// or, where it changes by more than kSunCornerRatio across the step, exponential,
+/// Tsun0 (Tsun1 / Tsun0)^(tau / delta): a sun that falls by e^7 across a step (a low sun grazing
+/// a dense layer's top, seen from above) gave the linear rule half the step's first light, where
+/// the light falls within a few per cent of the step.
+inline double sunStep(double delta, double w0, double w1, double tsun0, double tsun1) {
+  const double lo = std::min(tsun0, tsun1), hi = std::max(tsun0, tsun1);
+  if (!(hi > kSunCornerRatio * lo)) return w0 * tsun0 + w1 * tsun1;
+  const double floor = 1e-12 * hi;  // a zero end: a fall of 27.6 optical depths
+  const double j0 = std::max(tsun0, floor), j1 = std::max(tsun1, floor);
+  const double x = delta + std::log(j0 / j1);
+  const double f = std::abs(x) < 1e-6 ? 1 - 0.5 * x : -std::expm1(-x) / x;
+  return j0 * delta * f;
 }
 
 /// Weights of one step of the optical-depth trapezoid (see the file comment): transmittance
@@ -308,6 +335,31 @@ class LatticeReader {
     const float* __restrict p = pack + c.base * stride;
     const float fx = c.fx, fy = c.fy, fz = c.fz;
     for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
+  }
+
+  /// The smallest and largest of float `slot` (of `stride` per voxel) over the voxels a lookup
+  /// at c reads with a weight above 0.
+  void cornerRange(const float* data, size_t stride, int slot, const Cell& c, float* lo,
+                   float* hi) const {
+    *lo = std::numeric_limits<float>::max();
+    *hi = std::numeric_limits<float>::lowest();
+    auto take = [&](size_t voxel) {
+      const float v = data[voxel * stride + size_t(slot)];
+      *lo = std::min(*lo, v);
+      *hi = std::max(*hi, v);
+    };
+    if (!c.interior) {
+      for (int q = 0; q < 8; ++q) {
+        if (c.corners.weight[q] > 0) take(c.corners.offset[q]);
+      }
+      return;
+    }
+    for (int q = 0; q < 8; ++q) {
+      const bool x = q & 1, y = q & 2, z = q & 4;
+      if ((x ? c.fx : 1 - c.fx) > 0 && (y ? c.fy : 1 - c.fy) > 0 && (z ? c.fz : 1 - c.fz) > 0) {
+        take(c.base + (x ? 1 : 0) + (y ? stride_y_ : 0) + (z ? stride_z_ : 0));
+      }
+    }
   }
 
   float read(const float* data, const Cell& c) const {
@@ -1094,45 +1146,70 @@ class BakeMarcher {
     return block_max_[(size_t(b[2]) * nby_ + b[1]) * nbx_ + b[0]] > thick_density_;
   }
 
-  /// The sun's transmittance at the march's sample c by a short characteristic: from c towards
-  /// the sun to the nearest plane of lattice voxels across the sun's main axis, the bake's
+  /// The sun's transmittance at the march's sample c by a characteristic: from c towards the
+  /// sun to the nearest plane of lattice voxels across the sun's main axis, the bake's
   /// transmittance there, interpolated within the plane, times that of the segment, whose
   /// optical depth is Simpson's rule on the density the view reads. The transmittance
   /// interpolated in 3D is too bright where it falls exponentially within a voxel (thick
   /// media); along the sun that part is now exact, and across it the interpolation keeps the
   /// bound from above that convexity gives (the optical depth interpolated instead was too dark
-  /// where a low sun grazes a cloud's top). Measured in docs/methods.md ("The sun's
-  /// transmittance between voxels").
+  /// where a low sun grazes a cloud's top). Where the voxels around the plane's point still
+  /// differ by more than kSunCornerRatio, it goes on plane by plane. Measured in
+  /// docs/methods.md ("The sun's transmittance between voxels").
   /// `w`: c's block-space position (index + 1).
   double sunTransmittanceAt(const Cell& c, const Vec3& w) const {
-    const Vec3 u = w - Vec3(1.0);
+    Vec3 u = w - Vec3(1.0);
     const int a = sun_axis_;
     const double la = sun_dir_[a];
-    const double plane = la > 0 ? std::floor(u[a]) + 1 : std::ceil(u[a]) - 1;
-    const double s = (plane - u[a]) / la;  // voxels, in (0, sqrt(3)]
-    Vec3 y = u + sun_dir_ * s;
-    y[a] = plane;
-    Cell cy, cm;
-    lattice_.locate(y, &cy);
-    lattice_.locate(u + sun_dir_ * (0.5 * s), &cm);
-    float at_y[2];  // density and the sun's transmittance at y
+    double sigma_u = c.sigma, depth = 0, previous = -1;
+    for (;;) {
+      const double plane = la > 0 ? std::floor(u[a]) + 1 : std::ceil(u[a]) - 1;
+      const double s = (plane - u[a]) / la;  // voxels, in (0, sqrt(3)]
+      Vec3 y = u + sun_dir_ * s;
+      y[a] = plane;
+      Cell cy, cm;
+      lattice_.locate(y, &cy);
+      lattice_.locate(u + sun_dir_ * (0.5 * s), &cm);
+      float at_y[2];  // density and the sun's transmittance at y
+      if (!pack_.empty()) {
+        lattice_.readPacked(pack_.data(), stride_, cy, kDensity, 2, at_y);
+      } else {
+        at_y[kDensity] = density(cy);
+        at_y[kTsun] = lattice_.read(tsun_, cy);
+      }
+      double t_y = at_y[kTsun];
+      if (!cy.interior) {
+        // Beyond the lattice there is no medium: the sun's transmittance is 1 there, not the
+        // lookup's zero background (that darkened samples by a lattice face towards the sun).
+        double outside = 1;
+        for (const float wq : cy.corners.weight) outside -= wq;
+        t_y += outside;
+      }
+      const double sigma_y = extinction_ * at_y[kDensity], sigma_m = extinction_ * density(cm);
+      depth += s * grid_.voxel_size * (sigma_u + 4 * sigma_m + sigma_y) / 6;
+      const double beyond = std::exp(-depth), estimate = t_y * beyond;
+      // A lattice's margin voxels are empty, so a point off its interior has smooth light.
+      if (!cy.interior) return estimate;
+      float lo, hi;
+      sunCornerRange(cy, &lo, &hi);
+      // The bake holds Tsun within three voxels of the density (sunTransmittanceSupport) and 0
+      // beyond, where a plane after the first may reach: its own light is then unknown.
+      if (previous >= 0 && lo == 0) return previous;
+      if (!(double(hi) * beyond > kSunNegligible && hi > kSunCornerRatio * lo)) return estimate;
+      previous = estimate;
+      u = y;
+      sigma_u = sigma_y;
+    }
+  }
+
+  /// The smallest and largest of the bake's sun transmittance over the voxels a lookup at c
+  /// reads.
+  void sunCornerRange(const Cell& c, float* lo, float* hi) const {
     if (!pack_.empty()) {
-      lattice_.readPacked(pack_.data(), stride_, cy, kDensity, 2, at_y);
+      lattice_.cornerRange(pack_.data(), stride_, kTsun, c, lo, hi);
     } else {
-      at_y[kDensity] = density(cy);
-      at_y[kTsun] = lattice_.read(tsun_, cy);
+      lattice_.cornerRange(tsun_, 1, 0, c, lo, hi);
     }
-    double t_y = at_y[kTsun];
-    if (!cy.interior) {
-      // Beyond the lattice there is no medium: the sun's transmittance is 1 there, not the
-      // lookup's zero background (that darkened samples by a lattice face towards the sun).
-      double outside = 1;
-      for (const float w : cy.corners.weight) outside -= w;
-      t_y += outside;
-    }
-    const double sigma_y = extinction_ * at_y[kDensity], sigma_m = extinction_ * density(cm);
-    const double segment = s * grid_.voxel_size * (c.sigma + 4 * sigma_m + sigma_y) / 6;
-    return t_y * std::exp(-segment);
   }
 
   /// The source terms at a sample: Tsun, Vsky, and the multiple term J_ms (RGB, per unit E).
@@ -1302,7 +1379,7 @@ class BakeMarcher {
         const double a0 = transmittance * w0, a1 = transmittance * w1;
         const Source& p0 = *src_prev;
         const Source& p1 = *src_cur;
-        ss += a0 * p0.tsun + a1 * p1.tsun;
+        ss += transmittance * sunStep(delta, w0, w1, p0.tsun, p1.tsun);
         sky += a0 * p0.vsky + a1 * p1.vsky;
         if (has_ms) ms += (p0.ms * a0 + p1.ms * a1) * scale_ms_;
         if (has_sky_ms) sky_ms += p0.csky * a0 + p1.csky * a1;
