@@ -60,7 +60,7 @@ std::vector<Knob> precomputedKnobs() {
       Knob::number("future_cost", 0, kMaxFutureCost, d.walk.future_cost, "",
                    "`sequence` volumes only: alpha, the weight of what a jump leads to (Schoedl "
                    "et al. 2000's future costs), so the walk does not loop at the input's end; "
-                   "0: each jump's own cost only (version 9's walk)",
+                   "0: each jump's own cost only, which loops at the database's end",
                    /*exclusive_min=*/false),
       Knob::integer("dissolve", 0, 10000, std::nullopt,
                     "`sequence` volumes only: H, frames of cross-dissolve per jump; at most the "
@@ -453,7 +453,8 @@ class PrecomputedMethod final : public BakeMethod {
         "(Pacific Graphics, Computer Graphics Forum 30(7))";
     // 8: the sky transmittance's SHEXP on every second voxel, interpolated between (knob
     //    sky_spacing; 1 is version 7's output). 9: a box volume's exact means on the lattice.
-    // 10: the walk's future costs (knob future_cost; 0 is version 9's walk).
+    // 10: the walk's future costs (knob future_cost) on costs sqrt(D), and the last volume may
+    //     jump to the first.
     info_.version = 10;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
