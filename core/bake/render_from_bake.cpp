@@ -338,26 +338,18 @@ class LatticeReader {
   }
 
   /// The smallest and largest of float `slot` (of `stride` per voxel) over the voxels a lookup
-  /// at c reads with a weight above 0.
+  /// at c reads with a weight above 0. c must be interior (the characteristic stops before any
+  /// other).
   void cornerRange(const float* data, size_t stride, int slot, const Cell& c, float* lo,
                    float* hi) const {
     *lo = std::numeric_limits<float>::max();
     *hi = std::numeric_limits<float>::lowest();
-    auto take = [&](size_t voxel) {
-      const float v = data[voxel * stride + size_t(slot)];
-      *lo = std::min(*lo, v);
-      *hi = std::max(*hi, v);
-    };
-    if (!c.interior) {
-      for (int q = 0; q < 8; ++q) {
-        if (c.corners.weight[q] > 0) take(c.corners.offset[q]);
-      }
-      return;
-    }
     for (int q = 0; q < 8; ++q) {
       const bool x = q & 1, y = q & 2, z = q & 4;
       if ((x ? c.fx : 1 - c.fx) > 0 && (y ? c.fy : 1 - c.fy) > 0 && (z ? c.fz : 1 - c.fz) > 0) {
-        take(c.base + (x ? 1 : 0) + (y ? stride_y_ : 0) + (z ? stride_z_ : 0));
+        const size_t voxel = c.base + (x ? 1 : 0) + (y ? stride_y_ : 0) + (z ? stride_z_ : 0);
+        *lo = std::min(*lo, data[voxel * stride + size_t(slot)]);
+        *hi = std::max(*hi, data[voxel * stride + size_t(slot)]);
       }
     }
   }
@@ -1203,7 +1195,7 @@ class BakeMarcher {
   }
 
   /// The smallest and largest of the bake's sun transmittance over the voxels a lookup at c
-  /// reads.
+  /// (interior) reads.
   void sunCornerRange(const Cell& c, float* lo, float* hi) const {
     if (!pack_.empty()) {
       lattice_.cornerRange(pack_.data(), stride_, kTsun, c, lo, hi);
