@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <stdexcept>
 
+#include "core/error.h"
 #include "core/job/file_util.h"
 
 namespace cloudbake {
@@ -29,8 +30,10 @@ void ReplacedOutputs::keep(const std::string& path) {
   fs::rename(path, hidden, ec);
   if (ec) {
     seen_.erase(path);
-    throw std::runtime_error(path + ": cannot keep the earlier file aside while it is replaced (" +
-                             ec.message() + ")");
+    // As for any other output that cannot be written (a read-only folder, say): the user's to
+    // fix, not a bug of ours.
+    throw InputError(path + ": cannot write over the earlier file: cannot move it aside (" +
+                     ec.message() + ")");
   }
   kept_.push_back({path, hidden});
 }
