@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """The sun's transmittance between lattice voxels where it falls steeply: a low sun grazing a
-dense flat layer (1.7, 5 and 15 degrees over it; extinction 10, and 1 for a thin one) and a
+dense flat layer (1.7, 5 and 15 degrees over it; extinction 10, 1 for a thin one, and 50, three
+mean free paths a voxel, at 5 degrees) and a
 dense sphere seen against the sun (its lit rim) and from the side (extinctions 150 and 30). For
 each, the `single` layer of the given bake methods against `pathtrace` with max_depth 1 (single
 scattering only; 256 paths a pixel, cached under WORK/ref), 48x36 views: the ratio of the means
@@ -75,6 +76,7 @@ def main():
     scenes = [("layer 1.7 deg", layer(1.7), ["above"]), ("layer 5 deg", layer(5), ["above"]),
               ("layer 15 deg", layer(15), ["above"]),
               ("thin layer 1.7 deg", layer(1.7, 1.0), ["above"]),
+              ("dense layer 5 deg", layer(5, 50.0), ["above"]),
               ("sphere 150", sphere(150), ["back", "side"]),
               ("sphere 30", sphere(30), ["back", "side"])]
     run = os.path.join(a.work, str(os.getpid()))
@@ -82,7 +84,8 @@ def main():
     print("|---|---|---|---|---|")
     for i, (name, shot, views) in enumerate(scenes):
         ref = render(a.cloudbake, shot, {"method": "pathtrace", "max_depth": 1, "samples": 256,
-                                         "seed": 1}, os.path.join(a.work, "ref", str(i)),
+                                         "seed": 1},
+                     os.path.join(a.work, "ref", name.replace(" ", "_")),
                      a.threads)
         for m in a.methods.split(","):
             test = render(a.cloudbake, shot, {"method": m, "samples": 4},

@@ -106,7 +106,9 @@ const std::vector<Golden>& goldens() {
       {"single", R"(, "light_resolution": 16)", 6, {{"", 0.0112219108}, {"sun", 0.00247336212}, {"sky", 0.00874854867}, {"single", 0.0112219108}, {"multiple", 0}}, 0.0192717854, kBox},
       {"pointcloud", R"(, "light_resolution": 16, "points": 1024, "passes": 4)", 10, {{"", 0.0314045495}, {"sun", 0.0118994317}, {"sky", 0.0195051178}, {"single", 0.0112219108}, {"multiple", 0.0201826389}}, 0.0937412009, kBox},
       {"photon", R"(, "light_resolution": 16, "photons": 20000, "order": 2, "tally_resolution": 8)", 11, {{"", 0.0315819262}, {"sun", 0.0113007443}, {"sky", 0.0202811819}, {"single", 0.0103094341}, {"multiple", 0.0212724922}}, 0.0969458222, kBox},
-      {"precomputed", R"(, "light_resolution": 12, "sample_points": 128, "transfer_resolution": 6)", 10, {{"", 0.0277642063}, {"sun", 0.00955215672}, {"sky", 0.0182120497}, {"single", 0.00846045493}, {"multiple", 0.0193037515}}, 0.0808126852, kBox},
+      // render_from_bake 8 splits the steps into optically thick blocks at the lattice's cells:
+      // precomputed's thick, coarse box moved by about 1 %, the rows above not at all.
+      {"precomputed", R"(, "light_resolution": 12, "sample_points": 128, "transfer_resolution": 6)", 10, {{"", 0.0279559719}, {"sun", 0.00957394262}, {"sky", 0.0183820293}, {"single", 0.00842257717}, {"multiple", 0.0195333947}}, 0.0812937915, kBox},
       // clang-format on
   };
   return kGoldens;
