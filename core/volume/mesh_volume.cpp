@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <sstream>
 #include <vector>
 
@@ -68,8 +69,8 @@ bool triangleOverlapsBox(const Vec3& center, const Vec3& half, const std::array<
 class MeshBlockEvaluator {
  public:
   MeshBlockEvaluator(const TriangleMesh& mesh, const MeshSourceOptions& options, double h,
-                     const IndexBox& range)
-      : wn_(mesh), options_(options), h_(h), noise_(options.noise.seed) {
+                     const IndexBox& range, const std::function<bool()>& stop)
+      : wn_(mesh), options_(options), h_(h), noise_(options.noise.seed), stop_(stop) {
     const Bounds3 b = meshBounds(mesh);
     max_extent_ = maxComponent(b.extent());
     for (int a = 0; a < 3; ++a) {
@@ -140,12 +141,23 @@ class MeshBlockEvaluator {
     return (static_cast<size_t>(bz - b0_[2]) * nb_[1] + (by - b0_[1])) * nb_[0] + (bx - b0_[0]);
   }
 
-  bool insideAt(int x, int y, int z) const { return wn_(Vec3(x, y, z) * h_) > 0.5; }
+  bool insideAt(int x, int y, int z) const {
+    pollStop();
+    return wn_(Vec3(x, y, z) * h_) > 0.5;
+  }
+
+  // Polled at every voxel a block evaluates, not only between blocks: on a degenerate mesh (a
+  // soup of large overlapping triangles) one winding number costs the whole mesh, and a block
+  // took tens of seconds (an outside probe: a cancel answered after 86 s).
+  void pollStop() const {
+    if (stop_ && stop_()) throw Cancelled("mesh voxelisation cancelled");
+  }
 
   // Fraction of the voxel inside, from a 2^3 stratified sub-sample at +-1/4 voxel: voxels the
   // surface passes through get fractional density, so the boundary is placed to sub-voxel
   // accuracy instead of in voxel-sized steps.
   float surfaceCoverage(int x, int y, int z) const {
+    pollStop();
     int inside = 0;
     for (int k = 0; k < 8; ++k) {
       const Vec3 p(x + ((k & 1) ? kSubSample : -kSubSample),
@@ -229,6 +241,7 @@ class MeshBlockEvaluator {
   const MeshSourceOptions& options_;
   double h_, max_extent_ = 1;
   PerlinNoise noise_;
+  const std::function<bool()>& stop_;
   int b0_[3], nb_[3];
   std::vector<TriBox> boxes_;
   std::vector<std::array<Vec3, 3>> tris_;  // vertices in index units
@@ -316,7 +329,7 @@ DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& 
   const Bounds3 b = meshBounds(mesh);
   const double h = meshVoxelSize(options, b);
   const IndexBox range = voxelRange(b, h);
-  const MeshBlockEvaluator eval(mesh, options, h, range);
+  const MeshBlockEvaluator eval(mesh, options, h, range, stop);
   auto grid = buildGridFromBlocks(
       openvdb::CoordBBox(openvdb::Coord(range.lo[0], range.lo[1], range.lo[2]),
                          openvdb::Coord(range.hi[0], range.hi[1], range.hi[2])),

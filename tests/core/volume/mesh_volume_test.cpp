@@ -298,6 +298,16 @@ TEST_F(MeshVolumeTest, AStopPredicateCancelsTheVoxelisation) {
             dynamic_cast<const GridVolume&>(*polled).activeVoxelCount());
 }
 
+// Within a block too: on a degenerate mesh (a soup of large overlapping triangles) one 8^3 block
+// took tens of seconds, and an outside probe's cancel was answered after 86 s. A tetrahedron at
+// 6 voxels is one block, so a stop polled only between blocks would let it finish.
+TEST_F(MeshVolumeTest, AStopIsPolledWithinABlock) {
+  const TriangleMesh tet = tetrahedron();
+  const MeshSourceOptions o = withResolution(6);
+  std::atomic<int> polls{0};
+  EXPECT_THROW(meshToVolume(tet, o, [&] { return ++polls > 3; }), Cancelled);
+}
+
 TEST_F(MeshVolumeTest, IndependentOfThreadCount) {
   MeshSourceOptions o = withResolution(40);
   o.noise_enabled = true;
