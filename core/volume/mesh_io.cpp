@@ -54,6 +54,9 @@ TriangleMesh parseObj(const std::string& text, const std::string& path) {
   auto fail = [&](const std::string& why) {
     throw InputError(path + ":" + std::to_string(line_no) + ": " + why);
   };
+  // A UTF-8 byte-order mark (some Windows exporters write one) would make the first line's
+  // key unknown, and so silently drop it.
+  if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) pos = 3;
   while (pos < text.size()) {
     ++line_no;
     size_t end = text.find('\n', pos);

@@ -55,6 +55,15 @@ TEST_F(MeshIoTest, ObjFansNegativeIndicesAndIgnoredStatements) {
   EXPECT_EQ(mesh.vertices[3], Vec3(0, 1, 0));
 }
 
+// A UTF-8 byte-order mark before the first line (an outside probe: its vertex was dropped and
+// the error blamed a face on line 12).
+TEST_F(MeshIoTest, ObjWithAByteOrderMark) {
+  const auto mesh = readMesh(write("bom.obj", "\xEF\xBB\xBFv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));
+  ASSERT_EQ(mesh.vertices.size(), 3u);
+  ASSERT_EQ(mesh.triangles.size(), 1u);
+  EXPECT_EQ(mesh.vertices[0], Vec3(0, 0, 0));
+}
+
 TEST_F(MeshIoTest, MalformedObjNamesTheLine) {
   EXPECT_NE(error("a.obj", "v 0 0 0\nv 1 2\n").find("a.obj:2"), std::string::npos);
   EXPECT_NE(error("b.obj", "v 0 0 0\nv 1 x 2\nv 1 1 1\nf 1 2 3\n").find("b.obj:2"),
