@@ -10,6 +10,7 @@
 
 #include "common/json_limits.h"
 #include "common/printable.h"
+#include "core/error.h"
 #include "core/job/file_util.h"
 
 namespace cloudbake {
@@ -116,6 +117,7 @@ std::string JobStore::outputDir(const std::string& id) const {
 }
 
 void JobStore::save(const JobRecord& record) const {
+  if (!isJobId(record.id)) throw InternalError("job store: '" + record.id + "' is not a job id");
   fs::create_directories(jobDir(record.id));
   writeFileAtomic((fs::path(jobDir(record.id)) / "job.json").string(), toJson(record).dump(1));
 }
@@ -136,6 +138,17 @@ JobRecord unreadableRecord(const std::string& id) {
   return r;
 }
 
+// The record in `file`, the job.json of the folder named `id`. Its own id must be that name: the
+// server builds every path of the job from it, and an edited record's "../../x" had it write
+// outside its state folder.
+JobRecord readRecord(const fs::path& file, const std::string& id) {
+  JobRecord r = fromJson(parseJsonLimited(readWholeFile(file.string()), file.string()));
+  if (r.id != id) {
+    throw std::runtime_error("its id '" + r.id + "' is not its folder's name '" + id + "'");
+  }
+  return r;
+}
+
 }  // namespace
 
 std::vector<JobRecord> JobStore::loadAll() const {
@@ -151,7 +164,7 @@ std::vector<JobRecord> JobStore::loadAll() const {
       continue;
     }
     try {
-      records.push_back(fromJson(parseJsonLimited(readWholeFile(file.string()), file.string())));
+      records.push_back(readRecord(file, dir.path().filename().string()));
     } catch (const std::exception& e) {
       // A record that exists but cannot be read belonged to a job a client may know of: it is
       // reported FAILED with the reason rather than vanishing.
@@ -172,7 +185,7 @@ std::optional<JobRecord> JobStore::load(const std::string& id) const {
   std::error_code ec;
   if (!fs::exists(file, ec)) return std::nullopt;
   try {
-    return fromJson(parseJsonLimited(readWholeFile(file.string()), file.string()));
+    return readRecord(file, id);
   } catch (const std::exception& e) {
     spdlog::warn("job store: {}: unreadable record: {}", file.string(), printable(e.what()));
     return std::nullopt;

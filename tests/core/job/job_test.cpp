@@ -995,6 +995,35 @@ TEST(JobStore, CorruptRecordIsReportedFailedNotDropped) {
   fs::remove_all(dir);
 }
 
+// A record whose id is not its folder's name (an outside probe edited a queued job's to
+// "../../x": the restarted server wrote outside its state folder) is reported FAILED under the
+// folder's name, like any unreadable record, and nothing is written outside the store.
+TEST(JobStore, ARecordWhoseIdIsNotItsFolderIsUnreadable) {
+  const fs::path dir = freshDir("record-id");
+  JobStore store((dir / "jobs").string());
+  JobRecord edited;
+  edited.id = newJobId();
+  edited.state = JobState::kQueued;
+  store.save(edited);
+  const std::string file = (fs::path(store.jobDir(edited.id)) / "job.json").string();
+  const std::string escape = "x" + newJobId();  // beside the test's folder: dir/../escape
+  for (const std::string& forged : {"../../" + escape, newJobId()}) {
+    nlohmann::json j = nlohmann::json::parse(readWholeFile(file));
+    j["id"] = forged;
+    writeFileAtomic(file, j.dump());
+    const std::vector<JobRecord> all = store.loadAll();
+    ASSERT_EQ(all.size(), 1u) << forged;
+    EXPECT_EQ(all[0].id, edited.id);
+    EXPECT_EQ(all[0].state, JobState::kFailed);
+    EXPECT_FALSE(store.load(edited.id).has_value()) << forged;
+  }
+  JobRecord outside;
+  outside.id = "../../" + escape;
+  EXPECT_THROW(store.save(outside), InternalError);
+  EXPECT_FALSE(fs::exists(dir.parent_path() / escape));
+  fs::remove_all(dir);
+}
+
 // A replica: its own state folder `name` under `dir`, and dir/shared shared with the others.
 JobManagerOptions replicaOptions(const fs::path& dir, const std::string& name) {
   JobManagerOptions o;
