@@ -41,7 +41,8 @@ class PointcloudMethod final : public BakeMethod {
     info_.citation =
         "Reimschuessel 2011, \"Rendering Realistic Cloud Effects for Computer Generated Films\" "
         "(BYU thesis)";
-    info_.version = 10;
+    // 11: the geometric tail of the orders not computed takes each channel's own ratio.
+    info_.version = 11;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
