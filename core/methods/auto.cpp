@@ -27,7 +27,8 @@ class AutoMethod final : public BakeMethod {
         "cloudbake's own measured trade curves (2026; docs/methods.md, \"Method auto\"): the "
         "model and its fit; the methods it chooses cite their papers";
     // 12: a sequence's choice, `precomputed`, walks with future costs (its version 10).
-    info_.version = 12;
+    // 13: photon rungs whose tally voxels are optically thick are not candidates.
+    info_.version = 13;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {

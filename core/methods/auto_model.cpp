@@ -241,6 +241,11 @@ bool latticeResolves(const SceneTraits& traits, int resolution) {
   return traits.thinnest_voxels_128 * resolution / 128.0 >= kThinLatticeVoxels;
 }
 
+bool photonTallyResolves(const SceneTraits& traits, const PhotonRung& rung) {
+  const int tally = rung.tally_resolution > 0 ? rung.tally_resolution : rung.light_resolution;
+  return traits.tau_voxel_128 * 128.0 / std::max(tally, 1) <= kPhotonMaxTallyDepth;
+}
+
 double pathtraceMargin(const SceneTraits& traits) {
   return traits.phase_spikiness > kHeavyTailSpikiness ? kHeavyTailMargin : kPathtraceMargin;
 }
@@ -266,7 +271,7 @@ std::vector<AutoCandidate> autoCandidates(const SceneTraits& traits, const Pilot
   if (!traits.photon_refuses &&
       (traits.phase_spikiness <= kPhotonMaxSpikiness || traits.peak_split)) {
     for (const PhotonRung& rung : photonRungs()) {
-      if (latticeResolves(traits, rung.light_resolution)) {
+      if (latticeResolves(traits, rung.light_resolution) && photonTallyResolves(traits, rung)) {
         all.push_back(photonCandidate(traits, pilot, rung, factor));
       }
     }

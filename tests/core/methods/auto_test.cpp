@@ -131,6 +131,32 @@ TEST(AutoModel, LatticesThatDoNotResolveTheCloudAreLeftOut) {
   for (const AutoCandidate& c : autoCandidates(t, p, 0.3, 0)) EXPECT_EQ(c.method, "pathtrace");
 }
 
+// A tally voxel spanning several mean free paths reads a dense cloud's lit skin too dark (an
+// outside probe: photon's multiple scattering 0.73-0.87 of the path tracer's on dense spheres and
+// a layer, where auto had predicted 0.1 and 0.3): rungs whose tally voxels are thicker than
+// kPhotonMaxTallyDepth are left out, and the five bench scenes (at most 0.575 a 1/128 voxel,
+// Disney's cloud) keep every rung of 48 tally voxels.
+TEST(AutoModel, PhotonRungsWhoseTalliesAreOpticallyThickAreLeftOut) {
+  const PilotMeasure p = pilotOf(2, 0.6);
+  SceneTraits t = traitsOf(0.575);
+  int rungs = 0;
+  for (const PhotonRung& r : photonRungs()) rungs += r.tally_resolution >= 48;
+  int offered = 0;
+  for (const AutoCandidate& c : autoCandidates(t, p, 0.1, 0)) offered += c.method == "photon";
+  EXPECT_EQ(offered, rungs);
+  t.tau_voxel_128 = 0.78;  // the probe's sphere at extinction 50: 2.1 a voxel of 48
+  for (const AutoCandidate& c : autoCandidates(t, p, 0.1, 0)) {
+    if (c.method != "photon") continue;
+    for (const auto& [knob, value] : c.knobs) {
+      if (knob == "tally_resolution") {
+        EXPECT_GE(value, 96);
+      }
+    }
+  }
+  t.tau_voxel_128 = 3.1;  // the probe's sphere at extinction 200: even 96 is 4.1
+  for (const AutoCandidate& c : autoCandidates(t, p, 0.3, 0)) EXPECT_NE(c.method, "photon");
+}
+
 // The last rung (16M photons, lattices 320/96) is what reaches the tolerances between the 4M
 // rung's prediction (1.1 x 2.25 x 0.0387 = 0.096) and its own (0.076) on four 640x480 views; below
 // that only the path tracer is predicted to meet them. A Disney-like pilot: 2.08 at one path a
