@@ -1337,8 +1337,11 @@ class BakeMarcher {
   /// The ray's sums while a run is marched (kept in registers; stored back on every exit), and
   /// the sources of the step's two ends.
   struct MarchSums {
-    explicit MarchSums(const RayState& s)
-        : transmittance(s.transmittance),
+    MarchSums(const BakeMarcher& bm, const RayState& s)
+        : has_ms(bm.co_ || !bm.msh_.empty()),
+          has_sky_ms(bm.csky_ || !bm.msky_sh_.empty()),
+          has_sky_ss(!bm.ssky_sh_.empty()),
+          transmittance(s.transmittance),
           ss(s.ss),
           sky(s.sky),
           ms(s.ms),
@@ -1357,9 +1360,9 @@ class BakeMarcher {
       const Source& p1 = *src_cur;
       ss += transmittance * sunStep(delta, w0, w1, p0.tsun, p1.tsun);
       sky += a0 * p0.vsky + a1 * p1.vsky;
-      if (bm.co_ || !bm.msh_.empty()) ms += (p0.ms * a0 + p1.ms * a1) * bm.scale_ms_;
-      if (bm.csky_ || !bm.msky_sh_.empty()) sky_ms += p0.csky * a0 + p1.csky * a1;
-      if (!bm.ssky_sh_.empty()) sky_ss += p0.ssky * a0 + p1.ssky * a1;
+      if (has_ms) ms += (p0.ms * a0 + p1.ms * a1) * bm.scale_ms_;
+      if (has_sky_ms) sky_ms += p0.csky * a0 + p1.csky * a1;
+      if (has_sky_ss) sky_ss += p0.ssky * a0 + p1.ssky * a1;
       if (bm.sky_sh_ || bm.sky_unit_sh_) bm.addSkyShSums(a0, p0, a1, p1, s);
       transmittance *= e;
       std::swap(src_prev, src_cur);
@@ -1380,6 +1383,7 @@ class BakeMarcher {
       s->sky_ss = sky_ss;
     }
 
+    const bool has_ms, has_sky_ms, has_sky_ss;  // the layers this bake's sources carry
     double transmittance, ss, sky;
     Rgb ms, sky_ms, sky_ss;
     Source sources[2];
@@ -1403,7 +1407,7 @@ class BakeMarcher {
     Cell* cur = &buf[1];
     Cell* piece = &buf[2];
     sample(s, t0, prev);
-    MarchSums m(*s);
+    MarchSums m(*this, *s);
     double split_until = -std::numeric_limits<double>::infinity();
     for (int64_t i = 1; i <= n; ++i) {
       sample(s, i == n ? t1 : t0 + double(i) * dt, cur);
