@@ -14,6 +14,7 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/bake/bake_grid.h"
@@ -433,19 +434,29 @@ TEST(NormalisedRule, EachChannelOfAColouredAlbedoScattersAsItsGreyMedium) {
   }
 }
 
+// A sphere of radius 1 and extinction 5 on a lattice of `resolution`, lit from above: `passes`
+// passes and the geometric tail (first), and the passes until an order changes Co by less than
+// `all_tolerance`, without a tail (second).
+std::pair<PointCloudResult, PointCloudResult> tailAndAllOrders(const Rgb& albedo, int resolution,
+                                                               int points, int passes,
+                                                               double all_tolerance) {
+  const Lattice l = sphereLattice(1, 1, resolution);
+  const Medium m = sphereMedium(1, 5, albedo, isotropic());
+  PointcloudOptions o;
+  o.points = points;
+  o.passes = passes;
+  o.tolerance = 1e-6;
+  PointCloudResult tail = runPointcloud(l.grid, l.density, {}, m, Vec3(0, 0, 1), o, true);
+  o.passes = 1000;
+  o.tolerance = all_tolerance;
+  PointCloudResult all = runPointcloud(l.grid, l.density, {}, m, Vec3(0, 0, 1), o, false);
+  return {std::move(tail), std::move(all)};
+}
+
 TEST(NormalisedRule, GeometricTailMatchesRunningAllOrders) {
   // A thick conservative sphere: 24 passes plus the tail vs passes until < 1e-4 change. (The
   // ratio of successive orders still creeps up after 24 passes, so the tail is a little low.)
-  const Lattice l = sphereLattice(1, 1, 24);
-  const Medium m = sphereMedium(1, 5, Rgb(1.0), isotropic());
-  PointcloudOptions o;
-  o.points = 4000;
-  o.passes = 24;
-  o.tolerance = 1e-6;
-  const PointCloudResult tail = runPointcloud(l.grid, l.density, {}, m, Vec3(0, 0, 1), o, true);
-  o.passes = 1000;
-  o.tolerance = 1e-4;
-  const PointCloudResult all = runPointcloud(l.grid, l.density, {}, m, Vec3(0, 0, 1), o, false);
+  const auto [tail, all] = tailAndAllOrders(Rgb(1.0), 24, 4000, 24, 1e-4);
   EXPECT_GT(tail.tail_ratio, 0);
   EXPECT_LT(tail.tail_ratio, 1);
   EXPECT_GT(all.passes_run, 20);
@@ -471,16 +482,7 @@ TEST(NormalisedRule, GeometricTailMatchesRunningAllOrders) {
 // 8 passes and the tail against all orders: -1.9 / -0.0 / -0.0 % per channel, against -4.7 /
 // +0.7 / +0.0 % with the luminance's ratio.
 TEST(NormalisedRule, GeometricTailPerChannel) {
-  const Lattice l = sphereLattice(1, 1, 20);
-  const Medium m = sphereMedium(1, 5, Rgb(0.9, 0.6, 0.3), isotropic());
-  PointcloudOptions o;
-  o.points = 3000;
-  o.passes = 8;
-  o.tolerance = 1e-6;
-  const PointCloudResult tail = runPointcloud(l.grid, l.density, {}, m, Vec3(0, 0, 1), o, true);
-  o.passes = 1000;
-  o.tolerance = 1e-5;
-  const PointCloudResult all = runPointcloud(l.grid, l.density, {}, m, Vec3(0, 0, 1), o, false);
+  const auto [tail, all] = tailAndAllOrders(Rgb(0.9, 0.6, 0.3), 20, 3000, 8, 1e-5);
   Rgb st(0.0), sa(0.0);
   for (size_t j = 0; j < all.co.size(); ++j) {
     st += tail.co[j];
