@@ -24,7 +24,7 @@ ShotCacheKeys computeCacheKeys(const ShotSpec& shot);
 std::string lightKeyAt(const ShotCacheKeys& keys, const Vec3& direction);
 std::string viewKeyAt(const ShotCacheKeys& keys, size_t view, const Vec3& direction);
 
-/// "pointcloud/2 volume/1 phase/2 transport/2 ...": the method's algorithm version and those of the
+/// "pointcloud/2 volume/2 phase/2 transport/2 ...": the method's algorithm version and those of the
 /// shared pieces it uses, salted into every key of what it computes.
 std::string algorithmSalt(const MethodInfo& info);
 
