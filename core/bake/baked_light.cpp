@@ -170,6 +170,7 @@ void checkValues(const std::string& name, const BakeChannel& c, size_t n, const 
   const bool non_negative = name == bake_grids::kMultipleFluence ||
                             name == bake_grids::kSkyMultipleFluence || name == bake_grids::kCd;
   const bool direction = name == bake_grids::kLightDir;
+  const bool signed_unit = name == bake_grids::kSkyVisibilityVector;
   // Checks the voxel's values in order; with `report` it throws at the first bad one,
   // otherwise it says whether there is one (the parallel scan finds the voxel, then the
   // report names it as a serial scan would).
@@ -177,11 +178,15 @@ void checkValues(const std::string& name, const BakeChannel& c, size_t n, const 
     const float* x = &c.data[v * size_t(c.components)];
     for (int e = 0; e < c.components; ++e) {
       const bool finite = std::isfinite(x[e]);
-      const bool outside = unit_range && (x[e] < 0 || x[e] > 1);
+      const bool outside =
+          (unit_range && (x[e] < 0 || x[e] > 1)) || (signed_unit && (x[e] < -1 || x[e] > 1));
       const bool negative = non_negative && x[e] < 0;
       if (!report && (!finite || outside || negative)) return true;
       if (!finite) fail(v, "value is not finite");
-      if (outside) fail(v, "value " + std::to_string(x[e]) + " outside [0, 1]");
+      if (outside) {
+        fail(v,
+             "value " + std::to_string(x[e]) + " outside " + (signed_unit ? "[-1, 1]" : "[0, 1]"));
+      }
       if (negative) fail(v, "negative value " + std::to_string(x[e]));
     }
     if (direction && c.components == 3) {
@@ -195,8 +200,10 @@ void checkValues(const std::string& name, const BakeChannel& c, size_t n, const 
   };
   if (!direction) {
     // The values' rules as one range: finite, and >= 0 or within [0, 1] where the grid says.
-    const float lo = unit_range || non_negative ? 0.f : -std::numeric_limits<float>::max();
-    const float hi = unit_range ? 1.f : std::numeric_limits<float>::max();
+    const float lo = unit_range || non_negative ? 0.f
+                     : signed_unit              ? -1.f
+                                                : -std::numeric_limits<float>::max();
+    const float hi = unit_range || signed_unit ? 1.f : std::numeric_limits<float>::max();
     const size_t values = n * size_t(c.components);
     constexpr size_t kChunk = size_t(1) << 16;
     std::atomic<bool> any{false};

@@ -23,6 +23,12 @@ constexpr const char* kSunTransmittance = "sun_transmittance";
 /// float in [0, 1]: transmittance to the sky averaged over all directions (only when the shot's
 /// sky is not black).
 constexpr const char* kSkyVisibility = "sky_visibility";
+/// Vec3, unitless, length <= sky_visibility: the first moment of the transmittance to the sky,
+/// B = (1 / 4 pi) integral T(x, w) w dw, w the unit direction from the voxel towards the sky,
+/// from the same 26 directions (methods single and pointcloud, when the sky is not black). With
+/// sky_visibility it is the transmittance's P1 expansion, T(w) ~ V + 3 B . w, by which a view
+/// weights the phase function in the sky's single scattering (docs/methods.md).
+constexpr const char* kSkyVisibilityVector = "sky_visibility_vector";
 /// Vec3 (RGB), unitless: fluence (radiance integrated over the sphere) of sun light that has
 /// already been scattered at least once, per unit E (seed 000's Co; what it scatters towards a
 /// view is multiple scattering; arbitrary scale under the paper's rule).

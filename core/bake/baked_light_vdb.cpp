@@ -91,10 +91,13 @@ void writeBakedLight(const std::string& path, const BakedLight& bake) {
       auto grid = makeGrid<openvdb::Vec3SGrid>(cg, mask, name, [&](size_t v) {
         return openvdb::Vec3s(c.data[3 * v], c.data[3 * v + 1], c.data[3 * v + 2]);
       });
-      // light_dir is a direction: a DCC's transform of the volume must rotate it (with the
-      // transform's linear part, not its translation); colours and fluences stay as they are.
-      grid->setVectorType(name == bake_grids::kLightDir ? openvdb::VEC_CONTRAVARIANT_RELATIVE
-                                                        : openvdb::VEC_INVARIANT);
+      // light_dir and the sky's vector are directions: a DCC's transform of the volume must
+      // rotate them (with the transform's linear part, not its translation); colours and
+      // fluences stay as they are.
+      const bool directional =
+          name == bake_grids::kLightDir || name == bake_grids::kSkyVisibilityVector;
+      grid->setVectorType(directional ? openvdb::VEC_CONTRAVARIANT_RELATIVE
+                                      : openvdb::VEC_INVARIANT);
       grids.push_back(grid);
     } else {
       throw InputError(path + ": bake grid '" + name + "' has " + std::to_string(c.components) +

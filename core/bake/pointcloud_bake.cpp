@@ -131,9 +131,12 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
     report(kSun, "sky visibility");
     std::vector<double> ext{medium.extinction};
     if (normalised && pass_ext != medium.extinction) ext.push_back(pass_ext);
+    std::vector<float> vector;
     std::vector<std::vector<float>> v =
-        skyVisibilities(bake.grid, bake.density.data(), ext, subRange(progress, kSun, kSky));
+        skyVisibilities(bake.grid, bake.density.data(), ext, subRange(progress, kSun, kSky),
+                        options.sky ? &vector : nullptr);
     bake.add(bake_grids::kSkyVisibility, 1).data = std::move(v[0]);
+    if (options.sky) bake.add(bake_grids::kSkyVisibilityVector, 3).data = std::move(vector);
     if (v.size() > 1) pass_vis = std::move(v[1]);
   }
   seconds.sky = secondsSince(t0);

@@ -46,7 +46,14 @@
 //                       peak only, E p_peak(cos_s) (Tsun^e - Tsun) per channel
 //                       (PhotonPeakLight: e = 1 - albedo x the peak's fraction, p_peak the phase
 //                       convolved with the peak);
-//   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere;
+//   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere,
+//                       for bakes without the grids below;
+//                       with sky_visibility_vector B (methods single and pointcloud), per
+//                       channel (1 - f) Lsky_mean clamp(Vsky + 3 g~ B . d, 0, 1) +
+//                       f Lsky(+-d) T(x, +-d): the phase's residual weights the transmittance's
+//                       P1 expansion and its peak f (delta-M; forward +, backward -) scatters
+//                       the sky behind or in front of x on, in closed form along the ray
+//                       (BakeMarcher::addSkyP1, sky_p1_scatter.h);
 //                       or, when the bake holds sky_transmittance_sh_0..15 (method
 //                       precomputed), seed 002's Eq. 5: J_sky = integral Lsky(w) T(x, w)
 //                       p(w . d) dw = sum_i T_i(x) (Gamma y(d))_i (core/bake/sky_sh_scatter.h),
@@ -99,6 +106,7 @@
 
 #include "core/bake/phase_lut.h"
 #include "core/bake/photon_bake.h"
+#include "core/bake/sky_p1_scatter.h"
 #include "core/bake/sky_sh_scatter.h"
 #include "core/bake/sparse_film.h"
 #include "core/bake/sun_transmittance.h"
@@ -520,6 +528,19 @@ class BakeMarcher {
       Sky unit;
       unit.radiance = Rgb(1.0);
       if (csky_) sky_unit_sh_.emplace(projectSkyRadiance(SkyLight(unit)), lut_);
+    } else if (!sky.black()) {
+      svec_ = channel(bake, bake_grids::kSkyVisibilityVector, 3, false, "");
+      if (svec_) {
+        const std::array<std::array<double, 4>, 3> lambda = phaseEigenvalues(lut_);
+        for (int c = 0; c < 3; ++c) {
+          sky_split_[size_t(c)] = deltaSplit(lambda[size_t(c)][1], lambda[size_t(c)][2]);
+          const bool peak = sky_split_[size_t(c)].f > 0;
+          forward_peak_ = forward_peak_ || (peak && !sky_split_[size_t(c)].backward);
+          backward_peak_ = backward_peak_ || (peak && sky_split_[size_t(c)].backward);
+        }
+        sky_split_grey_ = !medium.phase->chromatic();
+        albedo_ = medium.albedo;
+      }
     }
     if (angularModel(bake) == "sh") {
       loadPhotonTallies(bake, medium, sky);
@@ -578,7 +599,11 @@ class BakeMarcher {
       march(&s, t_in, t_out);
     }
     if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
-    if (s.sky > 0) sum->sky += scale_sky_ * s.sky;
+    if (svec_) {
+      addSkyP1(ray.d, &s, sum);
+    } else if (s.sky > 0) {
+      sum->sky += scale_sky_ * s.sky;
+    }
     sum->sky += scale_sky_ * s.sky_ss;
     addSkyShTerms(ray.d, &s, sum);
     sum->sky_multiple += scale_sky_ * s.sky_ms;
@@ -599,7 +624,13 @@ class BakeMarcher {
   struct RayState {
     Vec3 w0, dw, d;
     double transmittance = 1;
-    double ss = 0, sky = 0;               // integrals of T_v sigma_t Tsun and T_v sigma_t Vsky
+    double ss = 0, sky = 0;  // integrals of T_v sigma_t Tsun and T_v sigma_t Vsky
+    // With sky_visibility_vector: integral of T_v sigma_t J~ (the residual's sky scattering per
+    // unit sky, sky_p1_scatter.h), the optical depth marched, and the peak's share of the
+    // shaped sky multiple term (skyPeakSums)
+    Rgb sky_res;
+    double tau = 0;
+    Rgb sky_peak_ahead, sky_peak_behind;
     Rgb ms;                               // integral of T_v sigma_t J_ms, scaled
     Rgb sky_ms;                           // integral of T_v sigma_t Co_sky / (4 pi)
     Rgb sky_ss;                           // integral of T_v sigma_t J_sky (photon tally)
@@ -614,6 +645,30 @@ class BakeMarcher {
     TallyAnchor anchor[2];       // the last two tally anchors along the ray (tallySources)
     bool done = false;
   };
+
+  // The sky's single scattering of bakes with sky_visibility_vector (sky_p1_scatter.h): per
+  // channel, the phase's residual weights the transmittance's P1 expansion (mean sky
+  // radiance), and its peak scatters the sky straight behind (forward) or in front (backward)
+  // of each sample. Along the ray T_v(t) T(x(t), d) is the ray's whole transmittance, so the
+  // forward peak's integral of T_v sigma_t L(d) T(x, d) is L(d) T_v(end) tau; towards the
+  // camera T(x, -d) is T_v(t) (from a camera outside the lattice; inside it, an upper bound),
+  // and the integral of T_v^2 sigma_t is (1 - T_v(end)^2) / 2.
+  void addSkyP1(const Vec3& d, RayState* s, PixelSum* sum) const {
+    if (!(s->tau > 0)) return;
+    const double t_end = s->transmittance;
+    Rgb ahead, behind;  // what the forward and the backward peak scatter
+    if (forward_peak_) ahead = sky_.radiance(d) * (t_end * s->tau);
+    if (backward_peak_) behind = sky_.radiance(-d) * (0.5 * (1 - t_end * t_end));
+    for (int c = 0; c < 3; ++c) {
+      const DeltaSplit& split = sky_split_[size_t(c)];
+      const double peak = split.backward ? behind[c] : ahead[c];
+      sum->sky[c] += scale_sky_[c] * s->sky_res[c] + split.f * albedo_[c] * peak;
+      if (!csky_) continue;
+      // The shaped multiple term's complement of the peak (skyMsShape).
+      const double peak_ms = split.backward ? s->sky_peak_behind[c] : t_end * s->sky_peak_ahead[c];
+      s->sky_ms[c] = std::max(0.0, s->sky_ms[c] - split.f * peak_ms);
+    }
+  }
 
   // Seed 002's Eq. 5 terms of the sky (precomputed's bakes): its single scattering and the
   // view-dependent shape of its multiple scattering, from the ray's SH sums.
@@ -1114,6 +1169,11 @@ class BakeMarcher {
       for (int i = 0; i < kShCoefficients; ++i) ch.push_back({sh_[size_t(i)], 1, kSh + i});
       used = kSlotCount;
     }
+    if (svec_) {  // never with sky_sh_, whose slots it may take
+      svec_slot_ = used;
+      ch.push_back({svec_, 3, used});
+      used += 3;
+    }
     stride_ = size_t((used + 3) / 4 * 4);
     // A record of 4 floats (method single) is read faster grid by grid (measured: 0.34 against
     // 0.37 s a view): pack only where a sample reads more.
@@ -1215,10 +1275,27 @@ class BakeMarcher {
   /// The source terms at a sample: Tsun, Vsky, and the multiple term J_ms (RGB, per unit E).
   struct Source {
     double tsun = 0, vsky = 0;
-    Rgb ms, csky;  // csky: Co_sky / (4 pi)
-    Rgb ssky;      // photon: the sky's single scattering per unit sky radiance
+    Rgb sky_res;    // the phase's residual's sky scattering per unit sky (sky_p1_scatter.h)
+    Rgb csky_peak;  // with sky_res: Co_sky / (4 pi) / (1 - Vsky), which the peak's part takes
+    Rgb ms, csky;   // csky: Co_sky / (4 pi)
+    Rgb ssky;       // photon: the sky's single scattering per unit sky radiance
     float tsh[kShCoefficients] = {};
   };
+
+  /// The residual's share of the sky's single scattering per unit sky at a sample of record v,
+  /// per channel (1 - f) clamp(V + 3 g~ B . d, 0, 1) (sky_p1_scatter.h).
+  void skyP1Source(const float* v, const Vec3& d, Source* s) const {
+    const Vec3 b(v[svec_slot_], v[svec_slot_ + 1], v[svec_slot_ + 2]);
+    if (sky_split_grey_) {
+      const DeltaSplit& split = sky_split_[0];
+      s->sky_res = Rgb((1 - split.f) * p1SkyScatter(v[kVsky], b, d, split.g_residual, 1));
+      return;
+    }
+    for (int c = 0; c < 3; ++c) {
+      const DeltaSplit& split = sky_split_[size_t(c)];
+      s->sky_res[c] = (1 - split.f) * p1SkyScatter(v[kVsky], b, d, split.g_residual, 1);
+    }
+  }
 
   void source(Cell& c, RayState* rs, Source* s) const {
     const Vec3& d = rs->d;
@@ -1245,9 +1322,17 @@ class BakeMarcher {
     } else if (vsky_ && ssky_sh_.empty()) {
       s->vsky = v[kVsky];
     }
+    if (svec_) skyP1Source(v, rs->d, s);
     if (csky_) {
       s->csky = Rgb(v[kCsky], v[kCsky + 1], v[kCsky + 2]) * kInv4Pi;
       if (sky_unit_sh_) s->csky = skyMsShape(s->csky, v[kVsky]);
+      if (svec_) {
+        // The scattered sky light has the shape of the sky light removed, as precomputed's
+        // (skyMsShape): the complement of the single scattering, whose peak's part
+        // addSkyP1 takes off.
+        s->csky_peak = skyMsShape(s->csky, v[kVsky]);
+        s->csky = s->csky_peak * (Rgb(1.0) - s->sky_res);
+      }
     }
     if (co_) {
       const float* co = v + kCo;
@@ -1341,12 +1426,17 @@ class BakeMarcher {
         : has_ms(bm.co_ || !bm.msh_.empty()),
           has_sky_ms(bm.csky_ || !bm.msky_sh_.empty()),
           has_sky_ss(!bm.ssky_sh_.empty()),
+          has_sky_vec(bm.svec_ != nullptr),
           transmittance(s.transmittance),
           ss(s.ss),
           sky(s.sky),
           ms(s.ms),
           sky_ms(s.sky_ms),
-          sky_ss(s.sky_ss) {}
+          sky_ss(s.sky_ss),
+          sky_res(s.sky_res),
+          tau(s.tau),
+          sky_peak_ahead(s.sky_peak_ahead),
+          sky_peak_behind(s.sky_peak_behind) {}
 
     /// Adds the step from sample `a` to sample `b`, whose sources are *src_prev and *src_cur;
     /// false once the ray's transmittance is below the march's floor.
@@ -1363,6 +1453,11 @@ class BakeMarcher {
       if (has_ms) ms += (p0.ms * a0 + p1.ms * a1) * bm.scale_ms_;
       if (has_sky_ms) sky_ms += p0.csky * a0 + p1.csky * a1;
       if (has_sky_ss) sky_ss += p0.ssky * a0 + p1.ssky * a1;
+      if (has_sky_vec) {
+        sky_res += p0.sky_res * a0 + p1.sky_res * a1;
+        if (bm.csky_) skyPeakSums(bm, a, b, a0, a1, e);
+      }
+      tau += delta;
       if (bm.sky_sh_ || bm.sky_unit_sh_) bm.addSkyShSums(a0, p0, a1, p1, s);
       transmittance *= e;
       std::swap(src_prev, src_cur);
@@ -1374,6 +1469,21 @@ class BakeMarcher {
       return true;
     }
 
+    /// The peak's part of the shaped sky multiple term (addSkyP1): the forward peak's
+    /// integral of T_v sigma_t c T(x, d) is T_v(end) times that of sigma_t c; the backward
+    /// peak's is that of T_v^2 sigma_t c (T(x, -d) = T_v), c = Source::csky_peak.
+    void skyPeakSums(const BakeMarcher& bm, const Cell& a, const Cell& b, double a0, double a1,
+                     double e) {
+      const Source& p0 = *src_prev;
+      const Source& p1 = *src_cur;
+      if (bm.forward_peak_) {
+        sky_peak_ahead += (p0.csky_peak * a.sigma + p1.csky_peak * b.sigma) * (0.5 * (b.t - a.t));
+      }
+      if (bm.backward_peak_) {
+        sky_peak_behind += (p0.csky_peak * a0 + p1.csky_peak * (a1 * e)) * transmittance;
+      }
+    }
+
     void store(RayState* s) const {
       s->transmittance = transmittance;
       s->ss = ss;
@@ -1381,11 +1491,19 @@ class BakeMarcher {
       s->ms = ms;
       s->sky_ms = sky_ms;
       s->sky_ss = sky_ss;
+      s->sky_res = sky_res;
+      s->tau = tau;
+      s->sky_peak_ahead = sky_peak_ahead;
+      s->sky_peak_behind = sky_peak_behind;
     }
 
-    const bool has_ms, has_sky_ms, has_sky_ss;  // the layers this bake's sources carry
+    // the layers this bake's sources carry
+    const bool has_ms, has_sky_ms, has_sky_ss, has_sky_vec;
     double transmittance, ss, sky;
     Rgb ms, sky_ms, sky_ss;
+    Rgb sky_res;
+    double tau;
+    Rgb sky_peak_ahead, sky_peak_behind;
     Source sources[2];
     Source* src_prev = &sources[0];
     Source* src_cur = &sources[1];
@@ -1489,6 +1607,11 @@ class BakeMarcher {
   // Densities above which a voxel is optically thicker than kThinVoxelDepth (thickBlock).
   double thick_density_ = 0;
   const float* vsky_ = nullptr;
+  const float* svec_ = nullptr;                        // sky_visibility_vector (sky_p1_scatter.h)
+  int svec_slot_ = 0;                                  // its first slot in the packed record
+  std::array<DeltaSplit, 3> sky_split_{};              // the phase per channel, split for it
+  bool forward_peak_ = false, backward_peak_ = false;  // any channel's split has one
+  bool sky_split_grey_ = false;                        // one split for every channel (a grey phase)
   const float* co_ = nullptr;
   const float* csky_ = nullptr;
   const float* ldir_ = nullptr;

@@ -45,7 +45,7 @@ BakedLight bakeSingle(const Medium& medium, const Vec3& sun_dir, const SingleBak
   bake.metadata["cloudbake:seconds_sun_transmittance"] = str(secondsSince(t0));
   if (options.sky) {
     t0 = Clock::now();
-    computeSkyVisibility(bake, medium.extinction, stage(0.1 + w_sun, 0.9 - w_sun));
+    computeSkyVisibility(bake, medium.extinction, stage(0.1 + w_sun, 0.9 - w_sun), true);
     bake.metadata["cloudbake:seconds_sky_visibility"] = str(secondsSince(t0));
   }
   // Cd: the isotropic preview (grey: direct sun only, since single models no multiple scattering).

@@ -89,12 +89,39 @@ void halfSegments(const float* rho, size_t n, double seg, float* e) {
   });
 }
 
+// Where one direction's weighted transmittances go: the visibility's sum and, when `b` is set,
+// the vector's three sums (one array each, so a row's adds vectorise), at a row's first voxel.
+struct RowSums {
+  double* v;
+  float* b[3];
+};
+
+// What one direction adds to the sums: its weight, and its weight times its unit vector.
+struct DirectionWeights {
+  double w;
+  float wb[3];
+};
+
+// Adds a row's weighted transmittances `tv` to the sums.
+CLOUDBAKE_VECTOR_CLONES void addRow(const float* __restrict tv, int nx, const DirectionWeights& dw,
+                                    const RowSums& s) {
+  double* __restrict v = s.v;
+  for (int i = 0; i < nx; ++i) v[i] += dw.w * double(tv[i]);
+  if (!s.b[0]) return;
+  for (int a = 0; a < 3; ++a) {
+    float* __restrict b = s.b[a];
+    const float wa = dw.wb[a];
+    for (int i = 0; i < nx; ++i) b[i] += wa * tv[i];
+  }
+}
+
 // One row of voxels along x, each from its upstream neighbour x + ex in the upstream row `tu`
 // (null where that row lies outside the lattice: then every voxel is the last before leaving,
 // half a segment of its own density), and its weighted value added to the row's sums.
 CLOUDBAKE_VECTOR_CLONES void sweepRowX(const float* __restrict ev, const float* __restrict eu,
-                                       const float* __restrict tu, int nx, int ex, double w,
-                                       float* __restrict tv, double* __restrict sum) {
+                                       const float* __restrict tu, int nx, int ex,
+                                       const DirectionWeights& dw, float* __restrict tv,
+                                       const RowSums& sums) {
   int lo = 0, hi = nx;  // voxels whose upstream neighbour is in the row
   if (!tu) {
     hi = 0;
@@ -106,18 +133,19 @@ CLOUDBAKE_VECTOR_CLONES void sweepRowX(const float* __restrict ev, const float* 
   for (int i = 0; i < lo; ++i) tv[i] = ev[i];
   for (int i = lo; i < hi; ++i) tv[i] = tu[i + ex] * (ev[i] * eu[i + ex]);
   for (int i = std::max(hi, lo); i < nx; ++i) tv[i] = ev[i];
-  for (int i = 0; i < nx; ++i) sum[i] += w * double(tv[i]);
+  addRow(tv, nx, dw, sums);
 }
 
 // Direction (+-1, 0, 0): the row's own voxels are upstream of each other, so it runs in order.
-void sweepAlongX(const float* ev, int nx, int ex, double w, float* tv, double* sum) {
+void sweepAlongX(const float* ev, int nx, int ex, const DirectionWeights& dw, float* tv,
+                 const RowSums& sums) {
   const int first = ex > 0 ? nx - 1 : 0;
   tv[first] = ev[first];
   for (int n = 1; n < nx; ++n) {
     const int i = ex > 0 ? nx - 1 - n : n, u = i + ex;
     tv[i] = tv[u] * (ev[i] * ev[u]);
   }
-  for (int i = 0; i < nx; ++i) sum[i] += w * double(tv[i]);
+  addRow(tv, nx, dw, sums);
 }
 
 // One direction's sweep for one extinction: t over the lattice and w t added to `sum`. A row
@@ -126,12 +154,20 @@ void sweepAlongX(const float* ev, int nx, int ex, double w, float* tv, double* s
 // outside the lattice and runs downstream. One task per chain: no wait between slices, which
 // cost the sweep half its scaling to two threads.
 void sweepDirection(const BakeGrid& g, const LatticeDirection& d, const float* e, float* t,
-                    double* sum) {
+                    double* sum, float* const* b) {
   const int nx = g.nx, ny = g.ny, nz = g.nz;
+  DirectionWeights dw{d.weight, {}};
+  const Vec3 unit = normalize(Vec3(d.dx, d.dy, d.dz));
+  for (int a = 0; a < 3; ++a) dw.wb[a] = float(d.weight * unit[a]);
+  auto sums = [&](size_t v) {
+    RowSums s{sum + v, {}};
+    for (int a = 0; b && a < 3; ++a) s.b[a] = b[a] + v;
+    return s;
+  };
   if (!d.dy && !d.dz) {
     parallelFor(0, int64_t(ny) * nz, [&](int64_t r) {
       const size_t v = size_t(r) * size_t(nx);
-      sweepAlongX(e + v, nx, d.dx, d.weight, t + v, sum + v);
+      sweepAlongX(e + v, nx, d.dx, dw, t + v, sums(v));
     });
     return;
   }
@@ -151,7 +187,7 @@ void sweepDirection(const BakeGrid& g, const LatticeDirection& d, const float* e
       const int ua = ia + ea, ub = ib + eb;
       const bool inside = ua >= 0 && ua < na && ub >= 0 && ub < nb;
       const size_t v = row(ia, ib), u = inside ? row(ua, ub) : 0;
-      sweepRowX(e + v, e + u, inside ? t + u : nullptr, nx, d.dx, d.weight, t + v, sum + v);
+      sweepRowX(e + v, e + u, inside ? t + u : nullptr, nx, d.dx, dw, t + v, sums(v));
     }
   });
 }
@@ -160,7 +196,8 @@ void sweepDirection(const BakeGrid& g, const LatticeDirection& d, const float* e
 
 std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* rho,
                                                 const std::vector<double>& extinctions,
-                                                const BakeProgressFn& progress) {
+                                                const BakeProgressFn& progress,
+                                                std::vector<float>* vector) {
   if (extinctions.empty() || extinctions.size() > 2) {
     throw InternalError("skyVisibilities: one or two extinctions, got " +
                         std::to_string(extinctions.size()));
@@ -168,17 +205,24 @@ std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* 
   const size_t n = g.voxelCount(), k = extinctions.size();
   std::vector<double> sum(n);
   std::vector<float> t(n), e(n);
+  // The vector's components while the first extinction's directions are swept.
+  std::vector<float> b_sums[3];
+  if (vector) {
+    for (auto& b : b_sums) b.assign(n, 0.f);
+  }
+  float* const b_ptrs[3] = {b_sums[0].data(), b_sums[1].data(), b_sums[2].data()};
   std::vector<std::vector<float>> out(k, std::vector<float>(n));
   const LatticeDirection* dirs = latticeDirections();
   int done = 0;
   for (size_t x = 0; x < k; ++x) {
     std::fill(sum.begin(), sum.end(), 0.0);
+    float* const* b = vector && x == 0 ? b_ptrs : nullptr;
     // By segment length (axes, face diagonals, body diagonals): one set of half segments each.
     for (int cls = 1; cls <= 3; ++cls) {
       halfSegments(rho, n, extinctions[x] * g.voxel_size * std::sqrt(double(cls)) * 0.5, e.data());
       for (int d = 0; d < 26; ++d) {
         if (std::abs(dirs[d].dx) + std::abs(dirs[d].dy) + std::abs(dirs[d].dz) != cls) continue;
-        sweepDirection(g, dirs[d], e.data(), t.data(), sum.data());
+        sweepDirection(g, dirs[d], e.data(), t.data(), sum.data(), b);
         if (progress && !progress(double(++done) / (26.0 * double(k)), "sky visibility")) {
           throw Cancelled("bake cancelled while computing the sky visibility");
         }
@@ -186,13 +230,28 @@ std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* 
     }
     for (size_t v = 0; v < n; ++v) out[x][v] = float(std::min(1.0, std::max(0.0, sum[v])));
   }
+  if (vector) {
+    vector->resize(3 * n);
+    // |B| <= V <= 1 holds for the exact sums; rounding may leave a component a hair over.
+    parallelFor(0, int64_t(n),
+                [&](int64_t v) {
+                  for (int a = 0; a < 3; ++a) {
+                    (*vector)[3 * size_t(v) + size_t(a)] =
+                        std::clamp(b_sums[a][size_t(v)], -1.f, 1.f);
+                  }
+                },
+                {kCheapIterationGrain});
+  }
   return out;
 }
 
-void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgressFn& progress) {
-  std::vector<std::vector<float>> v =
-      skyVisibilities(bake.grid, bake.density.data(), {extinction}, progress);
+void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgressFn& progress,
+                          bool with_vector) {
+  std::vector<float> vector;
+  std::vector<std::vector<float>> v = skyVisibilities(bake.grid, bake.density.data(), {extinction},
+                                                      progress, with_vector ? &vector : nullptr);
   bake.add(bake_grids::kSkyVisibility, 1).data = std::move(v[0]);
+  if (with_vector) bake.add(bake_grids::kSkyVisibilityVector, 3).data = std::move(vector);
 }
 
 }  // namespace cloudbake

@@ -28,7 +28,8 @@ class AutoMethod final : public BakeMethod {
         "model and its fit; the methods it chooses cite their papers";
     // 12: a sequence's choice, `precomputed`, walks with future costs (its version 10).
     // 13: photon rungs whose tally voxels are optically thick are not candidates.
-    info_.version = 13;
+    // 14: its choice `single` scatters the sky with the phase function (single 7).
+    info_.version = 14;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {

@@ -42,7 +42,8 @@ class PointcloudMethod final : public BakeMethod {
         "Reimschuessel 2011, \"Rendering Realistic Cloud Effects for Computer Generated Films\" "
         "(BYU thesis)";
     // 11: the geometric tail of the orders not computed takes each channel's own ratio.
-    info_.version = 11;
+    // 12: the sky's single scattering weights the phase function, as single's 7 does.
+    info_.version = 12;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

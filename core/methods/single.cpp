@@ -15,7 +15,9 @@ class SingleMethod final : public BakeMethod {
     info_.citation =
         "slsdo 2010, \"Volumetric Clouds: a volume renderer that utilizes ray casting and ray "
         "marching through a 3D voxel grid\"";
-    info_.version = 6;
+    // 7: the sky's single scattering weights the phase function (sky_visibility_vector and
+    // its forward peak; it had been the ambient term L_mean Vsky).
+    info_.version = 7;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

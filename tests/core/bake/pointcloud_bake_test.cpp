@@ -21,6 +21,7 @@
 #include "core/bake/neighbour_grid.h"
 #include "core/bake/point_cloud.h"
 #include "core/bake/point_splat.h"
+#include "core/bake/render_from_bake.h"
 #include "core/bake/scattering_passes.h"
 #include "core/bake/sky_visibility.h"
 #include "core/error.h"
@@ -932,6 +933,49 @@ TEST(Pointcloud, ScatteredSkyLightStaysWithinTheFurnaceBound) {
   }
   EXPECT_GT(worst, 0.9);  // the bound is nearly reached, as it is exactly in truth
   EXPECT_GT(std::stoi(bake.metadata.at("cloudbake:sky_fraction_capped")), 0);
+}
+
+// A white cloud under a uniform sky alone is a furnace: every view of it is the sky, L alpha. Its
+// single scattering now weights the phase (sky_p1_scatter.h), and the scattered sky light takes
+// the complementary shape, Co_sky / (4 pi (1 - V)) times one minus the single scattering, as
+// precomputed's does (measured 0.99 and 0.96 of the sky here). With the phase-weighted single
+// scattering and the isotropic shape, the extremes matrix's white sphere of HG -0.999 had a sky
+// layer 1.09x the sky: its single scattering about half the sky, and its multiple term 0.6.
+TEST(Pointcloud, AWhiteCloudUnderASkyAloneRendersTheSky) {
+  for (const double g : {0.8, -0.95}) {
+    const Medium m = sphereMedium(1, 6, Rgb(1.0), std::make_shared<HenyeyGreensteinPhase>(g));
+    PointcloudOptions o;
+    o.points = 8192;
+    o.light_resolution = 32;
+    o.sky = true;
+    const BakedLight bake = bakePointcloud(m, Vec3(0, 0, 1), o);
+    ASSERT_NE(bake.find(bake_grids::kSkyVisibilityVector), nullptr);
+    Sun sun;
+    sun.direction = Vec3(0, 0, 1);
+    sun.irradiance = Rgb(0.0);
+    Sky sky;
+    sky.type = Sky::Type::kConstant;
+    sky.radiance = Rgb(0.5);
+    Camera cam;
+    cam.position = Vec3(0.5, -4, 0.3);
+    cam.look_at = Vec3(0.0);
+    cam.width_px = 24;
+    cam.height_px = 24;
+    const RenderLayers l = renderFromBake(bake, m, sun, sky, cam, {});
+    double sum = 0, covered = 0;
+    for (int y = 0; y < l.sky.height; ++y) {
+      for (int x = 0; x < l.sky.width; ++x) {
+        const double alpha = l.beauty.at(x, y)[3];
+        const double v = l.sky.at(x, y)[0] / 0.5;
+        EXPECT_LE(v, alpha + 0.02) << "g " << g << " pixel " << x << ", " << y;
+        sum += v;
+        covered += alpha;
+      }
+    }
+    ASSERT_GT(covered, 10);
+    EXPECT_GT(sum / covered, 0.94) << "g " << g;
+    EXPECT_LE(sum / covered, 1.0) << "g " << g;
+  }
 }
 
 // The points' sun transmittance (a march per point: seconds for millions of points) polls the

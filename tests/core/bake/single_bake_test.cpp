@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -233,6 +234,51 @@ TEST(SkyVisibility, TwoExtinctionsInOneSweepEqualTwoSweeps) {
   EXPECT_THROW(skyVisibilities(thin.grid, thin.density.data(), {1.0, 2.0, 3.0}), InternalError);
 }
 
+// The visibility's first moment: 0 in empty space (the weights' directions cancel), pointing
+// up out of a dense lower half, and no longer than the visibility anywhere (|B| <= V for any
+// transmittance in [0, 1]).
+TEST(SkyVisibility, TheVectorPointsToTheOpenSky) {
+  const double ext = 200.0;
+  const Medium m = boxMedium(ext, Vec3(-1, -1, -1), Vec3(1, 1, 0));
+  BakedLight b = makeBakeLattice(*m.density, 33);
+  computeSkyVisibility(b, ext, {}, true);
+  const BakeChannel* vec = b.find(bake_grids::kSkyVisibilityVector);
+  ASSERT_NE(vec, nullptr);
+  ASSERT_EQ(vec->components, 3);
+  EXPECT_NO_THROW(b.validate("bake"));
+  const std::vector<float>& vis = b.find(bake_grids::kSkyVisibility)->data;
+  const BakeGrid& g = b.grid;
+  for (size_t v = 0; v < g.voxelCount(); ++v) {
+    const Vec3 bv(vec->data[3 * v], vec->data[3 * v + 1], vec->data[3 * v + 2]);
+    ASSERT_LE(length(bv), vis[v] + 1e-5) << v;
+  }
+  // The first voxel above the box's top face (z = 0), mid-lattice: the opaque box hides the
+  // lower directions, so B points up. Of the 26 directions the 9 upward ones give
+  // B_z = 0.23 (the continuous half-space's 1/4) and V = 0.33, and the 8 level ones, which
+  // graze the face, add up to 0.34 to V.
+  const int c = g.nx / 2;
+  int k = 0;
+  while (k < g.nz && !(g.center(c, c, k).z > 0)) ++k;
+  ASSERT_LT(k, g.nz);
+  const size_t v = g.index(c, c, k);
+  EXPECT_GT(vis[v], 0.3);
+  EXPECT_LT(vis[v], 0.7);
+  EXPECT_NEAR(vec->data[3 * v + 2], 0.23, 0.03);
+  EXPECT_NEAR(vec->data[3 * v], 0.0, 0.02);
+  EXPECT_NEAR(vec->data[3 * v + 1], 0.0, 0.02);
+  // No medium: every voxel sees the whole sky, V = 1 and B = 0.
+  BakedLight empty = b;
+  std::fill(empty.density.begin(), empty.density.end(), 0.f);
+  computeSkyVisibility(empty, ext, {}, true);
+  const std::vector<float>& ev = empty.find(bake_grids::kSkyVisibilityVector)->data;
+  for (float x : ev) ASSERT_NEAR(x, 0.f, 1e-6);
+  // Without the vector, the visibility is the same, bit for bit.
+  BakedLight plain = makeBakeLattice(*m.density, 33);
+  computeSkyVisibility(plain, ext);
+  EXPECT_EQ(plain.find(bake_grids::kSkyVisibilityVector), nullptr);
+  EXPECT_EQ(plain.find(bake_grids::kSkyVisibility)->data, vis);
+}
+
 TEST(BakeSingle, IsDeterministicAcrossThreadCounts) {
   Medium m;
   m.density = std::make_shared<SphereDensity>(Vec3(0.0), 1.0, 1.0);
@@ -257,11 +303,13 @@ TEST(BakeSingle, IsDeterministicAcrossThreadCounts) {
   }
   EXPECT_EQ(one.method, "single");
   EXPECT_NO_THROW(one.validate("bake"));
-  for (const char* g : {"sun_transmittance", "sky_visibility", "Cd"}) {
+  for (const char* g : {"sun_transmittance", "sky_visibility", "sky_visibility_vector", "Cd"}) {
     EXPECT_NE(one.find(g), nullptr) << g;
   }
   o.sky = false;
-  EXPECT_EQ(bakeSingle(m, sun, o).find("sky_visibility"), nullptr);
+  const BakedLight no_sky = bakeSingle(m, sun, o);
+  EXPECT_EQ(no_sky.find("sky_visibility"), nullptr);
+  EXPECT_EQ(no_sky.find("sky_visibility_vector"), nullptr);
 }
 
 TEST(BakeSingle, ExtremesStayFiniteAndInRange) {
