@@ -1,6 +1,7 @@
 #include "core/bake/sky_p1_scatter.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace cloudbake {
 
@@ -14,6 +15,45 @@ DeltaSplit deltaSplit(double lambda1, double lambda2) {
   const double g_res = s.f < 1 ? (g - s.f) / (1 - s.f) : 0.0;
   s.g_residual = s.backward ? -g_res : g_res;
   return s;
+}
+
+std::array<Vec3, 3> skyFirstMoment(const SkyLight& sky) {
+  std::array<Vec3, 3> m{Vec3(0.0), Vec3(0.0), Vec3(0.0)};
+  if (sky.black()) return m;
+  constexpr int kNz = 64, kNphi = 128;
+  double largest = 0;
+  for (int i = 0; i < kNz; ++i) {
+    const double z = 1 - 2 * (i + 0.5) / kNz;
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    for (int j = 0; j < kNphi; ++j) {
+      const double phi = 2 * kPi * (j + 0.5) / kNphi;
+      const Vec3 w(r * std::cos(phi), r * std::sin(phi), z);
+      const Rgb l = sky.radiance(w);
+      for (int c = 0; c < 3; ++c) {
+        m[size_t(c)] += w * l[c];
+        largest = std::max(largest, l[c]);
+      }
+    }
+  }
+  for (Vec3& v : m) {
+    v = v / (double(kNz) * kNphi);
+    for (int a = 0; a < 3; ++a) {
+      if (std::abs(v[a]) < 1e-12 * largest) v[a] = 0;
+    }
+  }
+  return m;
+}
+
+P1RayWeights p1RayWeights(const std::array<Vec3, 3>& l, const double* g_residual, const Vec3& d) {
+  P1RayWeights w;
+  for (int c = 0; c < 3; ++c) {
+    const Vec3& lc = l[size_t(c)];
+    const double g = g_residual[c];
+    w.alpha[c] = 1 + 3 * g * dot(lc, d);
+    w.beta[c] = (lc + d * g) * 3.0;
+    w.upper[c] = 1 + 3 * length(lc);
+  }
+  return w;
 }
 
 }  // namespace cloudbake

@@ -4,8 +4,10 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 
 #include "core/math/vec3.h"
+#include "core/transport/sky.h"
 
 namespace cloudbake {
 
@@ -36,5 +38,25 @@ inline double p1SkyScatter(double v, const Vec3& b, const Vec3& d, double g_resi
                            double upper) {
   return std::clamp(v + 3 * g_residual * dot(b, d), 0.0, std::max(upper, 0.0));
 }
+
+/// The sky radiance's first moment per channel, (1 / 4 pi) integral L_sky(w) w dw, so that
+/// L_sky(w) ~ L_mean + 3 L1 . w (its P1 expansion). Midpoint rule on 64 x 128 equal-area cells
+/// (uniform in cos theta and azimuth, the horizon a cell boundary); components under 1e-12 of
+/// the largest radiance met are set to 0, so a constant sky has none.
+std::array<Vec3, 3> skyFirstMoment(const SkyLight& sky);
+
+/// Per camera ray, the P1 residual's weights of V and B for each channel: the residual's sky
+/// scattering per unit mean sky radiance is clamp(alpha_c V + beta_c . B, 0, upper_c), the DC and
+/// P1 terms of the product of the sky's and the transmittance's P1 expansions, the P1 term
+/// scaled by g~: V (1 + 3 g~ l . d) + 3 B . (l + g~ d), l = L1 / L_mean, and upper_c =
+/// 1 + 3 |l|, the expansion's largest radiance over the mean. A uniform sky gives alpha = 1,
+/// beta = 3 g~ d, upper = 1: p1SkyScatter.
+struct P1RayWeights {
+  double alpha[3];
+  Vec3 beta[3];
+  double upper[3];
+};
+/// l[c] = L1 / L_mean of channel c (0 where the mean is 0), g_residual[c] its split's.
+P1RayWeights p1RayWeights(const std::array<Vec3, 3>& l, const double* g_residual, const Vec3& d);
 
 }  // namespace cloudbake

@@ -832,14 +832,15 @@ TEST(BakeRender, SkySingleScatteringWeightsThePhase) {
   const Camera outside = perspectiveCamera(Vec3(0.5, -4, 0.3), Vec3(0.0), 40, 32, 24);
   const Camera inside = perspectiveCamera(Vec3(0.2, -0.3, 0.1), Vec3(0.3, 1, 0.2), 70, 32, 24);
   // The ratio of the baked view's mean single layer to the path tracer's, per channel.
-  auto ratio = [&](const BakedLight& bake, const Camera& cam) {
+  auto ratio = [&](const BakedLight& bake, const Camera& cam, const Sky& light = {}) {
+    const Sky& lit = light.type == Sky::Type::kGradient ? light : sky;
     BakeRenderOptions opt;
     opt.samples_per_pixel = 4;
-    const RenderLayers baked = renderFromBake(bake, m, sun, sky, cam, opt);
+    const RenderLayers baked = renderFromBake(bake, m, sun, lit, cam, opt);
     PathTracerOptions pto;
     pto.samples_per_pixel = 256;
     pto.max_depth = 1;
-    const RenderLayers traced = renderPathTraced(m, sun, sky, cam, pto);
+    const RenderLayers traced = renderPathTraced(m, sun, lit, cam, pto);
     Rgb r;
     for (int c = 0; c < 3; ++c) {
       const double mt = mean(traced.single, c);
@@ -860,6 +861,23 @@ TEST(BakeRender, SkySingleScatteringWeightsThePhase) {
     EXPECT_NEAR(r_fine[c], 1.0, 0.07) << "outside, channel " << c;
     EXPECT_LT(std::abs(r_fine[c] - 1), std::abs(r_coarse[c] - 1)) << "channel " << c;
     EXPECT_NEAR(r_inside[c], 1.0, 0.05) << "inside, channel " << c;
+  }
+  // A backward peak (HG -0.9) seen from inside scatters the sky in front of each sample through
+  // the medium behind the camera too: without that, 14.6x (an outside probe).
+  m.phase = std::make_shared<HenyeyGreensteinPhase>(-0.9);
+  const Rgb r_back = ratio(fine, inside);
+  // Under a sky lit from above (a dark ground), the residual's sky is its P1 expansion: the
+  // sphere's lower half, which sees the ground, is no longer lit by the sky's mean.
+  Sky lit_above;
+  lit_above.type = Sky::Type::kGradient;
+  lit_above.zenith = Rgb(0.6, 0.7, 1.0);
+  lit_above.horizon = Rgb(0.3, 0.35, 0.5);
+  lit_above.ground = Rgb(0.02);
+  m.phase = std::make_shared<HenyeyGreensteinPhase>(0.8);
+  const Rgb r_gradient = ratio(fine, outside, lit_above);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(r_back[c], 1.0, 0.05) << "inside, HG -0.9, channel " << c;
+    EXPECT_NEAR(r_gradient[c], 1.0, 0.07) << "gradient sky, channel " << c;
   }
 }
 

@@ -5,11 +5,13 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 
 #include "core/bake/phase_lut.h"
 #include "core/bake/sky_sh_scatter.h"
 #include "core/phase/henyey_greenstein.h"
+#include "core/transport/sky.h"
 
 namespace cloudbake {
 namespace {
@@ -102,6 +104,50 @@ TEST(P1SkyScatter, AHalfSpacesSkyWithinAFewPercentOfTheExactIntegral) {
   EXPECT_EQ(p1SkyScatter(0.5, n * 0.5, -n, 0.9, 1), 0.0);
   EXPECT_EQ(p1SkyScatter(0.5, n * 0.5, n, 0.9, 1), 1.0);
   EXPECT_EQ(p1SkyScatter(0.2, n * 0.2, n, 0.9, 0.3), 0.3);
+}
+
+// The sky's first moment: none for a constant sky; for a gradient sky (1/4 pi) integral L z dw =
+// H / 4 + (Z - H) / 6 - G / 4 (azimuth integrated out; L = H + (Z - H) z above the horizon, G
+// below), and none across.
+TEST(SkyFirstMoment, IsZeroForAConstantSkyAndExactForAGradient) {
+  Sky constant;
+  constant.radiance = Rgb(0.3, 0.5, 2.0);
+  for (const Vec3& m : skyFirstMoment(SkyLight(constant))) EXPECT_EQ(m, Vec3(0.0));
+  Sky gradient;
+  gradient.type = Sky::Type::kGradient;
+  gradient.zenith = Rgb(1.0, 0.5, 0.2);
+  gradient.horizon = Rgb(0.4, 0.4, 0.4);
+  gradient.ground = Rgb(0.1, 0.0, 0.8);
+  const std::array<Vec3, 3> m = skyFirstMoment(SkyLight(gradient));
+  for (int c = 0; c < 3; ++c) {
+    const double z = gradient.zenith[c], h = gradient.horizon[c], g = gradient.ground[c];
+    EXPECT_NEAR(m[size_t(c)].z, h / 4 + (z - h) / 6 - g / 4, 1e-4) << c;
+    EXPECT_NEAR(m[size_t(c)].x, 0.0, 1e-12) << c;
+    EXPECT_NEAR(m[size_t(c)].y, 0.0, 1e-12) << c;
+  }
+  Sky black;
+  black.radiance = Rgb(0.0);
+  for (const Vec3& v : skyFirstMoment(SkyLight(black))) EXPECT_EQ(v, Vec3(0.0));
+}
+
+// The per-ray weights: a uniform sky gives p1SkyScatter's, and the product of two P1
+// expansions integrates exactly, here for T = 1 (V = 1, B = 0): the residual then scatters
+// the sky's P1 radiance convolved with p~, 1 + 3 g~ l . d per unit mean.
+TEST(P1RayWeights, ReduceToTheUniformSkysAndScatterTheSkysDipole) {
+  const double g[3] = {0.44, 0.0, -0.3};
+  const Vec3 d = normalize(Vec3(0.2, -0.4, 0.9)), b(0.05, -0.1, 0.2);
+  const std::array<Vec3, 3> none{Vec3(0.0), Vec3(0.0), Vec3(0.0)};
+  const P1RayWeights w = p1RayWeights(none, g, d);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(w.alpha[c] * 0.6 + dot(w.beta[c], b), p1SkyScatter(0.6, b, d, g[c], 1), 1e-12);
+    EXPECT_EQ(w.upper[c], 1.0);
+  }
+  const std::array<Vec3, 3> l{Vec3(0, 0, 0.2), Vec3(0.1, 0, 0), Vec3(0, 0.1, -0.1)};
+  const P1RayWeights wl = p1RayWeights(l, g, d);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(wl.alpha[c], 1 + 3 * g[c] * dot(l[size_t(c)], d), 1e-12);
+    EXPECT_NEAR(wl.upper[c], 1 + 3 * length(l[size_t(c)]), 1e-12);
+  }
 }
 
 }  // namespace
