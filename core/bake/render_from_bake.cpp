@@ -48,12 +48,13 @@
 //                       convolved with the peak);
 //   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere,
 //                       for bakes without the grids below;
-//                       with sky_visibility_vector B (methods single and pointcloud), per
-//                       channel (1 - f) Lsky_mean clamp(Vsky + 3 g~ B . d, 0, 1) +
-//                       f Lsky(+-d) T(x, +-d): the phase's residual weights the transmittance's
-//                       P1 expansion and its peak f (delta-M; forward +, backward -) scatters
-//                       the sky behind or in front of x on, in closed form along the ray
-//                       (BakeMarcher::addSkyP1, sky_p1_scatter.h);
+//                       with sky_visibility_vector B (methods single, pointcloud, photon), per
+//                       channel (1 - f) Lsky_mean clamp(alpha Vsky + beta . B, 0, upper) +
+//                       f Lsky(+-d) T(x, +-d): the phase's residual weights the product of the
+//                       transmittance's and the sky's P1 expansions (P1RayWeights) and its peak
+//                       f (delta-M; forward +, backward -) scatters the sky behind or in front
+//                       of x on, in closed form along the ray (BakeMarcher::addSkyP1,
+//                       sky_p1_scatter.h);
 //                       or, when the bake holds sky_transmittance_sh_0..15 (method
 //                       precomputed), seed 002's Eq. 5: J_sky = integral Lsky(w) T(x, w)
 //                       p(w . d) dw = sum_i T_i(x) (Gamma y(d))_i (core/bake/sky_sh_scatter.h),
@@ -696,8 +697,8 @@ class BakeMarcher {
   // radiance), and its peak scatters the sky straight behind (forward) or in front (backward)
   // of each sample. Along the ray T_v(t) T(x(t), d) is the ray's whole transmittance, so the
   // forward peak's integral of T_v sigma_t L(d) T(x, d) is L(d) T_v(end) tau; towards the
-  // camera T(x, -d) is T_v(t) (from a camera outside the lattice; inside it, an upper bound),
-  // and the integral of T_v^2 sigma_t is (1 - T_v(end)^2) / 2.
+  // camera T(x, -d) is T_v(t) t_back (t_back: transmittanceBehind), and the integral of
+  // T_v^2 sigma_t is (1 - T_v(end)^2) / 2.
   void addSkyP1(const Vec3& d, double t_back, RayState* s, PixelSum* sum) const {
     if (!(s->tau > 0)) return;
     const double t_end = s->transmittance;
@@ -1330,8 +1331,9 @@ class BakeMarcher {
     float tsh[kShCoefficients] = {};
   };
 
-  /// The residual's share of the sky's single scattering per unit sky at a sample of record v,
-  /// per channel (1 - f) clamp(V + 3 g~ B . d, 0, 1) (sky_p1_scatter.h).
+  /// The residual's share of the sky's single scattering at a sample of record v, per channel
+  /// and per unit mean sky radiance: (1 - f) clamp(alpha V + beta . B, 0, upper) with the ray's
+  /// P1RayWeights; and, with Co_sky, that of a uniform sky (sky_p1_scatter.h).
   void skyP1Source(const float* v, const RayState& rs, Source* s) const {
     const Vec3 b(v[svec_slot_], v[svec_slot_ + 1], v[svec_slot_ + 2]);
     const double vis = v[kVsky];
