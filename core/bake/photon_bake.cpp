@@ -642,10 +642,8 @@ void bakeSunPhotons(const PhotonRun& r, const Vec3& sun_dir, const ForwardPeak& 
   tally.store(r.bake, bake_grids::photonSh);
 }
 
-// The sky's tally, photonSkySh; under a black sun, the error estimates are the sky's. The sky's
-// unscattered light is not tallied: a view scatters it from the lattice's sky_visibility and
-// its vector (sky_p1_scatter.h), which the coarser tally lattice blurred at dense clouds' edges
-// (photonSkyDirectSh up to version 11: a sphere of optical radius 15 under a sky, 1.5x).
+// The sky's tallies, photonSkySh and photonSkyDirectSh; under a black sun, the error estimates
+// are the sky's.
 void bakeSkyPhotons(const PhotonRun& r, const std::function<bool(double)>& progress) {
   const PhotonBakeOptions& o = r.options;
   std::optional<SkyLight> shape;
@@ -655,14 +653,17 @@ void bakeSkyPhotons(const PhotonRun& r, const std::function<bool(double)>& progr
   // A sky whose shape differs per channel makes sky photons' weights chromatic.
   const int sky_channels = shape ? 3 : r.channels;
   PhotonTally tally(r.bake->tally_grid, o.order, sky.weight(), sky_channels);
+  PhotonTally direct(r.bake->tally_grid, o.order, sky.weight(), sky_channels);
   std::optional<PhotonTally> odd;  // the error estimates' half, under a black sun only
   if (!o.sun) odd.emplace(r.bake->tally_grid, 0, sky.weight(), sky_channels);
   PhotonTallies to;
   to.scattered = &tally;
+  to.direct = &direct;
   to.half = odd ? &*odd : nullptr;
   tracePhotons(r.medium, r.grid, sky, o.photons, o.seed, 2, to, nullptr, progress);
   if (odd) recordErrors(r, tally, *odd);
   tally.store(r.bake, bake_grids::photonSkySh);
+  direct.store(r.bake, bake_grids::photonSkyDirectSh);
 }
 
 // The bake's knobs and its peak's cut in its metadata (docs/outputs.md); the cut to full
@@ -731,10 +732,9 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
     return !progress || progress(0.05 + 0.1 * f, s);
   });
   if (options.sky) {
-    computeSkyVisibility(
-        bake, medium.extinction,
-        [&](double f, const std::string& s) { return !progress || progress(0.15 + 0.1 * f, s); },
-        true);
+    computeSkyVisibility(bake, medium.extinction, [&](double f, const std::string& s) {
+      return !progress || progress(0.15 + 0.1 * f, s);
+    });
   }
   bake.metadata["cloudbake:seconds_lattice"] = str(secondsSince(t0));
   t0 = std::chrono::steady_clock::now();

@@ -27,7 +27,6 @@ std::string photonSh(int i);
 std::string photonSkySh(int i);
 /// Vec3 (RGB): the same for sky light not yet scattered (the sky seen through the cloud): its
 /// convolution with the phase is the sky's single scattering, view-dependent for any phase.
-/// Written up to photon version 11; views of such bakes still read it.
 std::string photonSkyDirectSh(int i);
 /// Vec3 (RGB): the zonal coefficient of degree l (order < l <= zonal_order) of the radiance of
 /// sunlight scattered at least once, about the axis along which sunlight travels (-sun
@@ -129,9 +128,8 @@ struct PhotonPeakLight {
 /// Bakes `medium` for a sun in direction `sun_dir` (unit, towards the sun): the lattice, the
 /// sun_transmittance grid (exact single scattering at render time), sky_visibility when
 /// options.sky, the photon tallies photonSh(i) (and photonSkySh(i)) of the light that has
-/// scattered at least once, and photonZonal(l) of the sunlight's zonal degrees above the order
-/// (and, when options.sky, sky_visibility_vector: a view scatters the sky's unscattered light
-/// from it, sky_p1_scatter.h; up to version 11, a tally photonSkyDirectSh(i)). Photons are
+/// scattered at least once, photonZonal(l) of the sunlight's zonal degrees above the order, and
+/// photonSkyDirectSh(i) of the sky light that has not. Photons are
 /// emitted per unit sun irradiance over the lattice's shadow (and per unit mean radiance of the
 /// sky, options.sky_shape or uniform, from its bounding sphere), tracked by decomposition tracking
 /// through the medium's own density (core/transport/tracking.h), scatter with the albedo and the

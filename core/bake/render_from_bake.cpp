@@ -48,7 +48,7 @@
 //                       convolved with the peak);
 //   sky ambient J_sky = Lsky_mean Vsky(x), Lsky_mean the sky radiance averaged over the sphere,
 //                       for bakes without the grids below;
-//                       with sky_visibility_vector B (methods single, pointcloud, photon), per
+//                       with sky_visibility_vector B (methods single and pointcloud), per
 //                       channel (1 - f) Lsky_mean clamp(alpha Vsky + beta . B, 0, upper) +
 //                       f Lsky(+-d) T(x, +-d): the phase's residual weights the product of the
 //                       transmittance's and the sky's P1 expansions (P1RayWeights) and its peak

@@ -57,9 +57,7 @@ class PhotonMethod final : public BakeMethod {
         "1977, "
         "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
         "approximation (JQSRT), for a droplet's forward peak split off";
-    // 12: the sky's single scattering from the lattice's sky visibility and its vector
-    // (sky_p1_scatter.h), as single's 7, not from a tally of the sky's unscattered light.
-    info_.version = 12;
+    info_.version = 11;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
@@ -133,11 +131,10 @@ class PhotonMethod final : public BakeMethod {
     const PhotonBakeOptions o = photonBakeOptions(shot);
     // Per voxel: the fixed-point counts (two floats' worth each) and the stored floats, RGB,
     // per coefficient and per tally, plus the lattice's own grids.
-    const double sky_tallies = o.sky ? 1 : 0;  // the sky's scattered light
+    const double sky_tallies = o.sky ? 2 : 0;  // sky scattered and unscattered
     const double zonal = std::max(0, o.zonal_order - o.order);
-    // The bake's lattice: density, transmittance to the sun, sky visibility and its vector, Cd
-    // (RGB).
-    checkLatticeVoxels(o.light_resolution, 9, "a photon bake lattice", limits, source);
+    // The bake's lattice: density, transmittance to the sun, sky visibility, Cd (RGB).
+    checkLatticeVoxels(o.light_resolution, 6, "a photon bake lattice", limits, source);
     checkLatticeVoxels(
         o.tally_resolution > 0 ? o.tally_resolution : o.light_resolution,
         ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3,
