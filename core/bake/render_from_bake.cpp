@@ -60,7 +60,9 @@
 //                       p(w . d) dw = sum_i T_i(x) (Gamma y(d))_i (core/bake/sky_sh_scatter.h),
 //                       view-dependent and for any sky, not only its mean;
 //   sky multiple J_skm = Lsky_mean Co_sky(x) / (4 pi), only with a Co_sky grid (the normalised
-//                       pointcloud rule bakes the sky's scattered light for a uniform sky);
+//                       pointcloud rule bakes the sky's scattered light for a uniform sky); with
+//                       sky_visibility_vector too, shaped as the sky light removed: Co_sky /
+//                       (4 pi (1 - Vsky)) x (1 - J_sky per unit uniform sky) (skyMsShape);
 // E = sun.irradiance (the baked grids are per unit E), p = medium.phase via a PhaseLut. Layers:
 // sun = J_ss + J_ms terms, sky = J_sky + J_skm terms, single = J_ss + J_sky terms, multiple =
 // J_ms + J_skm terms,

@@ -7,11 +7,19 @@ namespace cloudbake {
 
 DeltaSplit deltaSplit(double lambda1, double lambda2) {
   DeltaSplit s;
+  // A quadrature's rounding leaves an isotropic phase's moments at 1e-16 to 1e-9, not 0: a peak
+  // that small would only cost each view a march behind the camera.
+  constexpr double kNoPeak = 1e-6;
+  if (std::abs(lambda1) < kNoPeak) {
+    s.g_residual = lambda1;
+    return s;
+  }
   s.backward = lambda1 < 0;
   const double g = std::abs(lambda1);
   // lambda2 <= |lambda1| keeps the residual's mean cosine on the peak's side; a peak of f = 1
   // leaves no residual to weight.
   s.f = std::clamp(lambda2, 0.0, std::min(g, 1.0));
+  if (s.f < kNoPeak) s.f = 0;
   const double g_res = s.f < 1 ? (g - s.f) / (1 - s.f) : 0.0;
   s.g_residual = s.backward ? -g_res : g_res;
   return s;

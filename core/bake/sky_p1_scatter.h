@@ -16,8 +16,9 @@ namespace cloudbake {
 /// side of its first moment lambda1 (`backward` where lambda1 < 0), and p~ keeps the first
 /// moment: g_residual = (lambda1 -+ f) / (1 - f). The peak is what a P1 expansion cannot weight:
 /// for HG g, f = g^2 (0.64 at g = 0.8) and g_residual = g / (1 + |g|). An isotropic phase has
-/// f = 0. lambda1, lambda2: the Legendre moments 2 pi integral p(mu) P_l(mu) dmu of a normalised
-/// phase (phaseEigenvalues).
+/// f = 0, and so has any whose |lambda1| or peak is under 1e-6 (a quadrature's rounding). lambda1,
+/// lambda2: the Legendre moments 2 pi integral p(mu) P_l(mu) dmu of a normalised phase
+/// (phaseEigenvalues).
 struct DeltaSplit {
   double f = 0;
   double g_residual = 0;
@@ -31,9 +32,8 @@ DeltaSplit deltaSplit(double lambda1, double lambda2);
 /// transmittance that changes steeply across directions over- and undershoots, while the
 /// integral of T <= 1 against a normalised p~ lies in [0, 1]: upper = 1 for one voxel. d: unit
 /// direction of the camera ray, from the camera into the scene (sky light from w = d scatters
-/// forward). Linear in (v, b) before the clamp, so a view applies it to the integrals of v and b
-/// along a ray, with upper the integral of 1 (the ray's opacity).
-/// Inline: a view evaluates it per march sample and channel.
+/// forward). Inline: views evaluate it per march sample and channel (with the sky's own P1 part,
+/// p1RayWeights).
 inline double p1SkyScatter(double v, const Vec3& b, const Vec3& d, double g_residual,
                            double upper) {
   return std::clamp(v + 3 * g_residual * dot(b, d), 0.0, std::max(upper, 0.0));

@@ -11,6 +11,7 @@
 #include "core/bake/phase_lut.h"
 #include "core/bake/sky_sh_scatter.h"
 #include "core/phase/henyey_greenstein.h"
+#include "core/phase/isotropic.h"
 #include "core/transport/sky.h"
 
 namespace cloudbake {
@@ -30,6 +31,13 @@ TEST(DeltaSplit, KeepsThePhasesFirstTwoMoments) {
   const DeltaSplit iso = deltaSplit(0, 0);
   EXPECT_EQ(iso.f, 0);
   EXPECT_EQ(iso.g_residual, 0);
+  // An isotropic phase's moments from its table are rounding, not a peak: none, either way.
+  const auto lambda = phaseEigenvalues(PhaseLut(IsotropicPhase()));
+  const DeltaSplit table = deltaSplit(lambda[0][1], lambda[0][2]);
+  EXPECT_EQ(table.f, 0);
+  EXPECT_FALSE(table.backward);
+  EXPECT_EQ(deltaSplit(-5e-16, 1.25e-9).f, 0);
+  EXPECT_FALSE(deltaSplit(-5e-16, 1.25e-9).backward);
   // A second moment above the first (a phase with lobes both ways) is capped so the residual
   // never peaks the other way; a pure delta leaves no residual.
   const DeltaSplit capped = deltaSplit(0.3, 0.5);
@@ -147,6 +155,24 @@ TEST(P1RayWeights, ReduceToTheUniformSkysAndScatterTheSkysDipole) {
   for (int c = 0; c < 3; ++c) {
     EXPECT_NEAR(wl.alpha[c], 1 + 3 * g[c] * dot(l[size_t(c)], d), 1e-12);
     EXPECT_NEAR(wl.upper[c], 1 + 3 * length(l[size_t(c)]), 1e-12);
+    // The product's cross terms by quadrature: (1/4 pi) integral of the sky's and the
+    // transmittance's P1 expansions times p~'s P1 expansion, (1 + 3 l . w)(V + 3 B . w)
+    // (1 + 3 g~ w . d), is exactly alpha V + beta . B (the degree-2 part of the product meets
+    // the weight's degree-1 part only in odd terms, which vanish).
+    const double v = 0.6;
+    const int n = 400;
+    double sum = 0;
+    for (int i = 0; i < n; ++i) {
+      const double z = 1 - 2 * (i + 0.5) / n, r = std::sqrt(1 - z * z);
+      for (int j = 0; j < 2 * n; ++j) {
+        const double phi = kPi * (j + 0.5) / n;
+        const Vec3 w(r * std::cos(phi), r * std::sin(phi), z);
+        const double sky = 1 + 3 * dot(l[size_t(c)], w), t = v + 3 * dot(b, w);
+        sum += sky * t * (1 + 3 * g[c] * dot(w, d));
+      }
+    }
+    sum /= double(n) * 2 * n;
+    EXPECT_NEAR(wl.alpha[c] * v + dot(wl.beta[c], b), sum, 1e-4) << c;
   }
 }
 
