@@ -599,16 +599,8 @@ class BakeMarcher {
     s.w0 = (ray.o - grid_.origin) * inv_h_ + Vec3(1.0);
     s.dw = ray.d * inv_h_;
     if (!isFinite(s.w0) || !isFinite(s.dw)) return;
-    Bounds3 domain;
-    domain.min = Vec3(0.0);
-    domain.max = Vec3(nx_ + 1, ny_ + 1, nz_ + 1);
     double t_in = 0, t_out = 0;
-    // The domain in world units along the ray; the ray starts at t = 0.
-    if (intersectBounds(domain, Ray{s.w0, s.dw}, 0.0, std::numeric_limits<double>::infinity(),
-                        &t_in, &t_out) &&
-        t_out > t_in) {
-      march(&s, t_in, t_out);
-    }
+    if (domainSpan(s.w0, s.dw, &t_in, &t_out)) march(&s, t_in, t_out);
     if (s.ss > 0) sum->sun_single += lut_.eval(dot(sun_dir_, ray.d)) * scale_ss_ * s.ss;
     if (svec_) {
       // A backward peak sees the sky in front of each sample through the medium between the
@@ -662,25 +654,26 @@ class BakeMarcher {
     bool done = false;
   };
 
-  /// The transmittance from the ray's origin back along -d to where it leaves the lattice:
-  /// 1 for an origin outside it; else marched in the view's steps (trapezoids of the density).
-  double transmittanceBehind(const RayState& s) const {
-    const double n[3] = {double(nx_), double(ny_), double(nz_)};
-    for (int a = 0; a < 3; ++a) {
-      if (!(s.w0[a] > 0 && s.w0[a] < n[a] + 1)) return 1.0;
-    }
-    RayState back;
-    back.w0 = s.w0;
-    back.dw = -s.dw;
+  /// The span [t_in, t_out] (world units, t >= 0) of a block-space ray w0 + dw t inside the
+  /// trilinear field's support, w in (0, n + 1); false where it misses.
+  bool domainSpan(const Vec3& w0, const Vec3& dw, double* t_in, double* t_out) const {
     Bounds3 domain;
     domain.min = Vec3(0.0);
     domain.max = Vec3(nx_ + 1, ny_ + 1, nz_ + 1);
+    return intersectBounds(domain, Ray{w0, dw}, 0.0, std::numeric_limits<double>::infinity(), t_in,
+                           t_out) &&
+           *t_out > *t_in;
+  }
+
+  /// The transmittance from the ray's origin back along -d to where it leaves the lattice:
+  /// 1 for an origin outside it; else marched in the view's steps (trapezoids of the density).
+  double transmittanceBehind(const RayState& s) const {
+    RayState back;
+    back.w0 = s.w0;
+    back.dw = -s.dw;
     double t_in = 0, t_out = 0;
-    if (!intersectBounds(domain, Ray{back.w0, back.dw}, 0.0,
-                         std::numeric_limits<double>::infinity(), &t_in, &t_out) ||
-        !(t_out > 0)) {
-      return 1.0;
-    }
+    // A line meets the box in one interval: from an origin outside it, nothing lies behind.
+    if (!domainSpan(back.w0, back.dw, &t_in, &t_out) || t_in > 0) return 1.0;
     const int64_t steps = std::max<int64_t>(1, int64_t(std::ceil(t_out / step_)));
     const double dt = t_out / double(steps);
     Cell a, b;
@@ -1341,15 +1334,12 @@ class BakeMarcher {
     const double vis = v[kVsky];
     const P1RayWeights& w = rs.p1w;
     if (sky_split_grey_) {
-      const double r = std::clamp(w.alpha[0] * vis + dot(w.beta[0], b), 0.0, w.upper[0]);
-      s->sky_res = Rgb((1 - sky_split_[0].f) * r);
+      s->sky_res = Rgb((1 - sky_split_[0].f) * w.residual(0, vis, b));
       s->sky_res_unit = s->sky_res;
       return;
     }
-    for (int c = 0; c < 3; ++c) {
-      const double r = std::clamp(w.alpha[c] * vis + dot(w.beta[c], b), 0.0, w.upper[c]);
-      s->sky_res[c] = (1 - sky_split_[size_t(c)].f) * r;
-    }
+    for (int c = 0; c < 3; ++c)
+      s->sky_res[c] = (1 - sky_split_[size_t(c)].f) * w.residual(c, vis, b);
     if (!csky_) return;
     // The shaped multiple term's complement is that of a uniform sky, which Co_sky is baked for.
     if (sky_uniform_) {

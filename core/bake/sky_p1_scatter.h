@@ -55,6 +55,11 @@ struct P1RayWeights {
   double alpha[3];
   Vec3 beta[3];
   double upper[3];
+  /// The residual's sky scattering per unit mean sky radiance at a voxel of visibility v and
+  /// vector b, channel c (before the (1 - f) weight).
+  double residual(int c, double v, const Vec3& b) const {
+    return std::clamp(alpha[c] * v + dot(beta[c], b), 0.0, upper[c]);
+  }
 };
 /// l[c] = L1 / L_mean of channel c (0 where the mean is 0), g_residual[c] its split's.
 P1RayWeights p1RayWeights(const std::array<Vec3, 3>& l, const double* g_residual, const Vec3& d);
