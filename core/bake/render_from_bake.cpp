@@ -478,6 +478,50 @@ LargeArray<float> packChannels(const std::vector<PackedChannel>& channels, size_
   return pack;
 }
 
+bool operator==(const PackedChannel& a, const PackedChannel& b) {
+  return a.data == b.data && a.components == b.components && a.slot == b.slot;
+}
+
+}  // namespace
+
+/// The cached blocks and packs, each with the key it was built for (BakeViewCache).
+struct BakeViewCache::Impl {
+  struct Blocks {
+    const float* density = nullptr;  // null: none built
+    int nx = 0, ny = 0, nz = 0;
+    std::vector<float> max;  // per 8^3 block, dilated by a voxel (BakeMarcher::buildBlockMax)
+    double max_density = 0;
+  };
+  struct Pack {
+    std::vector<PackedChannel> layout;
+    size_t voxels = 0, stride = 0;
+    LargeArray<float> data;
+  };
+  Blocks blocks;
+  Pack march, tally;  // the march's record per voxel; photon's tallies per voxel of theirs
+  int builds = 0;
+
+  /// The pack of `channels`, built unless the last one of *p had the same key.
+  const float* pack(Pack* p, const std::vector<PackedChannel>& channels, size_t voxels,
+                    size_t stride) {
+    if (p->data.empty() || p->layout != channels || p->voxels != voxels || p->stride != stride) {
+      p->data = LargeArray<float>();  // the old one's memory goes before the new one's comes
+      p->data = packChannels(channels, voxels, stride);
+      p->layout = channels;
+      p->voxels = voxels;
+      p->stride = stride;
+      ++builds;
+    }
+    return p->data.data();
+  }
+};
+
+BakeViewCache::BakeViewCache() : impl_(std::make_unique<Impl>()) {}
+BakeViewCache::~BakeViewCache() = default;
+int BakeViewCache::builds() const { return impl_->builds; }
+
+namespace {
+
 /// Per-pixel sums of the layers (radiance per the lights' units).
 struct PixelSum {
   Rgb sun_single, multiple, sky, sky_multiple, background;
@@ -499,7 +543,7 @@ class BakeMarcher {
  public:
   BakeMarcher(const BakedLight& bake, const Medium& medium, const Sun& sun, const SkyLight& sky,
               const Rgb& sky_mean, const Vec3& sun_dir, double step, double min_transmittance,
-              const ViewGeometry& view)
+              const ViewGeometry& view, BakeViewCache::Impl& cache)
       : grid_(bake.grid),
         lattice_(bake.grid),
         density_(bake.density.data()),
@@ -510,7 +554,8 @@ class BakeMarcher {
         sun_dir_(sun_dir),
         extinction_(medium.extinction),
         step_(step),
-        min_transmittance_(min_transmittance) {
+        min_transmittance_(min_transmittance),
+        cache_(cache) {
     tsun_ = channel(bake, bake_grids::kSunTransmittance, 1, true, "");
     // The bake holds the sun's transmittance where the short characteristic reads it.
     sun_characteristic_ = bake.metadata.count(kSunTransmittanceMarginKey) > 0;
@@ -811,7 +856,7 @@ class BakeMarcher {
     msky_slot_ = add(msky_sh_);
     tally_floats_ = slot;
     tally_stride_ = size_t((slot + 3) / 4 * 4);
-    tally_pack_ = packChannels(ch, voxels, tally_stride_);
+    tally_pack_ = cache_.pack(&cache_.tally, ch, voxels, tally_stride_);
   }
 
   // Where the tallies lie on a lattice of their own: its reader, and the map from the bake
@@ -1099,8 +1144,7 @@ class BakeMarcher {
   CLOUDBAKE_VECTOR_CLONES void shSources(const Cell& c, const Rgb* w, Rgb* ms, Rgb* ssky,
                                          Rgb* csky) const {
     float v[kMaxTallyFloats];
-    (tally_ ? *tally_ : lattice_)
-        .readPacked(tally_pack_.data(), tally_stride_, c, 0, tally_floats_, v);
+    (tally_ ? *tally_ : lattice_).readPacked(tally_pack_, tally_stride_, c, 0, tally_floats_, v);
     *ms = shSum(v, msh_.size(), w);
     *ssky = ssky_sh_.empty() ? Rgb(0.0) : shSum(v + ssky_slot_, ssky_sh_.size(), w);
     *csky = msky_sh_.empty() ? Rgb(0.0) : shSum(v + msky_slot_, msky_sh_.size(), w);
@@ -1117,11 +1161,33 @@ class BakeMarcher {
     return Rgb(std::max(0.0, sum.x), std::max(0.0, sum.y), std::max(0.0, sum.z));
   }
 
+  /// The densest voxel of each 8^3 block, from the cache where it holds this density's.
   void buildBlockMax() {
     nbx_ = (nx_ + 1 + kBlock - 1) / kBlock;
     nby_ = (ny_ + 1 + kBlock - 1) / kBlock;
     nbz_ = (nz_ + 1 + kBlock - 1) / kBlock;
-    block_max_.assign(size_t(nbx_) * nby_ * nbz_, 0.f);
+    BakeViewCache::Impl::Blocks& b = cache_.blocks;
+    if (b.density != density_ || b.nx != nx_ || b.ny != ny_ || b.nz != nz_) {
+      b.density = nullptr;  // no key while it is built: a bad voxel throws
+      b.max = blockMaxima();
+      b.max_density = 0;
+      for (float v : b.max) b.max_density = std::max(b.max_density, double(v));
+      b.density = density_;
+      b.nx = nx_;
+      b.ny = ny_;
+      b.nz = nz_;
+      ++cache_.builds;
+    }
+    block_max_ = b.max.data();
+    if (!std::isfinite(extinction_ * b.max_density)) {
+      throw InputError("medium.extinction: extinction * max density overflows");
+    }
+  }
+
+  /// buildBlockMax's maxima; InputError naming the first voxel whose density is negative or
+  /// not finite.
+  std::vector<float> blockMaxima() const {
+    std::vector<float> block_max(size_t(nbx_) * nby_ * nbz_, 0.f);
     // Block b covers w in [8b, 8b + 8), i.e. lookups with floor(index) in [8b - 1, 8b + 6],
     // which read voxels 8b - 1 .. 8b + 7: the block dilated by one voxel.
     std::atomic<bool> bad{false};
@@ -1142,7 +1208,7 @@ class BakeMarcher {
               }
             }
           }
-          block_max_[(size_t(bk) * nby_ + bj) * nbx_ + bi] = m;
+          block_max[(size_t(bk) * nby_ + bj) * nbx_ + bi] = m;
         }
       }
     });
@@ -1161,11 +1227,7 @@ class BakeMarcher {
         }
       }
     }
-    double max_density = 0;
-    for (float v : block_max_) max_density = std::max(max_density, double(v));
-    if (!std::isfinite(extinction_ * max_density)) {
-      throw InputError("medium.extinction: extinction * max density overflows");
-    }
+    return block_max;
   }
 
   /// Finds the cell of block-space point w on the bake's lattice.
@@ -1176,8 +1238,8 @@ class BakeMarcher {
   // The record of the grids a source reads at c: one vectorised read of the packed record, or,
   // for the few grids of method single (no pack), a read of each.
   void readSources(Cell& c) const {
-    if (!pack_.empty()) {
-      lattice_.readRecord(pack_.data(), stride_, c, c.record);
+    if (pack_) {
+      lattice_.readRecord(pack_, stride_, c, c.record);
       return;
     }
     c.record[kTsun] = lattice_.read(tsun_, c);
@@ -1219,7 +1281,7 @@ class BakeMarcher {
     stride_ = size_t((used + 3) / 4 * 4);
     // A record of 4 floats (method single) is read faster grid by grid (measured: 0.34 against
     // 0.37 s a view): pack only where a sample reads more.
-    if (used > kCo) pack_ = packChannels(ch, grid_.voxelCount(), stride_);
+    if (used > kCo) pack_ = cache_.pack(&cache_.march, ch, grid_.voxelCount(), stride_);
   }
 
   /// Precomputed's scattered sky light has the angular shape of the sky light the medium
@@ -1270,8 +1332,8 @@ class BakeMarcher {
       lattice_.locate(y, &cy);
       lattice_.locate(u + sun_dir_ * (0.5 * s), &cm);
       float at_y[2];  // density and the sun's transmittance at y
-      if (!pack_.empty()) {
-        lattice_.readPacked(pack_.data(), stride_, cy, kDensity, 2, at_y);
+      if (pack_) {
+        lattice_.readPacked(pack_, stride_, cy, kDensity, 2, at_y);
       } else {
         at_y[kDensity] = density(cy);
         at_y[kTsun] = lattice_.read(tsun_, cy);
@@ -1307,8 +1369,8 @@ class BakeMarcher {
   /// The smallest and largest of the bake's sun transmittance over the voxels a lookup at c
   /// (interior) reads.
   void sunCornerRange(const Cell& c, float* lo, float* hi) const {
-    if (!pack_.empty()) {
-      lattice_.cornerRange(pack_.data(), stride_, kTsun, c, lo, hi);
+    if (pack_) {
+      lattice_.cornerRange(pack_, stride_, kTsun, c, lo, hi);
     } else {
       lattice_.cornerRange(tsun_, 1, 0, c, lo, hi);
     }
@@ -1696,19 +1758,20 @@ class BakeMarcher {
   double inv_h_ = 1;
   Rgb scale_ss_, scale_ms_, scale_sky_;
   int nbx_ = 0, nby_ = 0, nbz_ = 0;
-  std::vector<float> block_max_;
-  LargeArray<float> pack_;  // the grids a sample reads, per voxel (buildPack)
+  const float* block_max_ = nullptr;  // the densest voxel per block (buildBlockMax)
+  const float* pack_ = nullptr;       // the grids a sample reads, per voxel (buildPack; null: none)
   size_t stride_ = 4;
   // Photon tallies per voxel of their lattice (buildTallyPack): radiance, then the sky's.
   static constexpr int kMaxTallyFloats = 3 * (3 * shCount(kMaxShDegree) + kMaxZonalDegree) + 4;
-  LargeArray<float> tally_pack_;
+  const float* tally_pack_ = nullptr;
   size_t tally_stride_ = 4;
   int tally_floats_ = 0, ssky_slot_ = 0, msky_slot_ = 0;
   std::vector<double> zonal_sinc_;  // 1 - sinc(pi l / (top + 1)) per zonal degree l
   // photon: the tallies' light towards the view per voxel (buildViewField; empty: none)
   static constexpr int kFieldFloats = 9;
   LargeArray<float> field_;
-  double field_near_ = 0;  // samples nearer the eye than this keep the per-ray weights
+  double field_near_ = 0;       // samples nearer the eye than this keep the per-ray weights
+  BakeViewCache::Impl& cache_;  // the blocks and packs, this render's own or shared by views
 };
 
 // Below this fraction of the light's scale (an isotropic scattering of the sun, plus the sky's
@@ -1977,17 +2040,25 @@ int filmSpacingOf(const BakedLight& bake, const Camera& camera, const BakeRender
                            bake.grid.voxel_size, options.max_film_spacing);
 }
 
+namespace {
+
+void validateSunIrradiance(const Sun& sun) {
+  if (!isFinite(sun.irradiance) || sun.irradiance.x < 0 || sun.irradiance.y < 0 ||
+      sun.irradiance.z < 0) {
+    throw InputError("sun.irradiance: must be finite and >= 0 per channel, got " +
+                     str(sun.irradiance));
+  }
+}
+
+}  // namespace
+
 RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const Sun& sun,
                             const Sky& sky, const Camera& camera, const BakeRenderOptions& options,
                             const ProgressFn& progress) {
   validateMediumOptics(medium);
   validateBake(bake);
   validateOptions(options, bake.grid.voxel_size);
-  if (!isFinite(sun.irradiance) || sun.irradiance.x < 0 || sun.irradiance.y < 0 ||
-      sun.irradiance.z < 0) {
-    throw InputError("sun.irradiance: must be finite and >= 0 per channel, got " +
-                     str(sun.irradiance));
-  }
+  validateSunIrradiance(sun);
   const CameraRays rays(camera);
   const SkyLight sky_light(sky);
   const Rgb sky_mean = meanSkyRadiance(sky, sky_light);
@@ -2011,6 +2082,7 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
 
   RenderLayers out = makeRenderLayers(w, h);
   std::optional<BakeMarcher> marcher;
+  std::optional<BakeViewCache> own_cache;  // where options.cache is null
   // Calls f(ray) for each of pixel (x, y)'s rays.
   auto for_each_ray = [&](int x, int y, Rng& rng, auto&& f) {
     if (spp == 1) {
@@ -2053,7 +2125,8 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
   const bool finished = renderFilm(
       w, h, spacing, tolerance, options.threads, progress, out, trace_pixel, sky_behind, [&] {
         marcher.emplace(bake, medium, sun, sky_light, sky_mean, sun_dir, step,
-                        options.min_transmittance, view);
+                        options.min_transmittance, view,
+                        options.cache ? options.cache->impl() : own_cache.emplace().impl());
       });
   if (!finished) throw Cancelled("render from bake of view '" + camera.name + "' cancelled");
   return out;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 
 #include "core/bake/baked_light.h"
 #include "core/bake/sparse_film.h"
@@ -18,6 +19,29 @@ class SkyLight;
 
 /// The longest march step a view takes, in lattice voxels (BakeRenderOptions::step).
 constexpr double kMaxStepVoxels = 4;
+
+/// What the views of one bake share whatever their camera, built by the first view that reads
+/// it and reused by the rest (render_from_bake.cpp): the empty-space blocks' densest voxels and
+/// the grids a sample reads, packed per voxel. Building them is a fifth of a 640x480 view of a
+/// 128^3 bake (docs/methods.md, "Cost of a view"). It holds the grids' addresses as its key and
+/// rebuilds what a render's grids or their layout (a black sky reads fewer) do not match; so
+/// use it only while the bake it was filled from is alive and unchanged, one render at a time.
+class BakeViewCache {
+ public:
+  BakeViewCache();
+  ~BakeViewCache();
+  BakeViewCache(const BakeViewCache&) = delete;
+  BakeViewCache& operator=(const BakeViewCache&) = delete;
+
+  /// How many times a render built the blocks and packs (0 for a render that reused them).
+  int builds() const;
+
+  struct Impl;
+  Impl& impl() { return *impl_; }
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
 
 /// Options of renderFromBake.
 struct BakeRenderOptions {
@@ -35,6 +59,8 @@ struct BakeRenderOptions {
   /// The largest spacing of a sparse film (core/bake/sparse_film.h), 1..4 pixels, rounded down
   /// to a power of two; 1 traces every pixel.
   int max_film_spacing = kMaxFilmSpacing;
+  /// Not owned; null: the render builds what it needs for itself (BakeViewCache).
+  BakeViewCache* cache = nullptr;
 };
 
 /// Whether a photon view builds its field of the tallies' light towards the camera

@@ -337,7 +337,9 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
   const ShotSpec& shot = run.shot();
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   const Scene& lights = run.lights();
-  const BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
+  BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
+  BakeViewCache view_cache;  // the views share the bake's blocks and packs
+  ro.cache = &view_cache;
   // Progress weights: predicted seconds of each part. A bake found in the cache is not known
   // before obtainBake looks (a lookup verifies the entry's checksums: not worth doing twice), so
   // the bar then jumps over the bake's share.

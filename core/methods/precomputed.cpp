@@ -396,7 +396,9 @@ void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, 
                  const FrameProgress& progress, const FrameReuse& reuse = {}) {
   const ShotSpec& shot = run.shot();
   const Scene& lights = run.lights();
-  const BakeRenderOptions ro = frameRenderOptions(shot, light, run.threads());
+  BakeRenderOptions ro = frameRenderOptions(shot, light, run.threads());
+  BakeViewCache cache;  // a frame's views share its blocks and packs
+  ro.cache = &cache;
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   for (int i = 0; i < n_views; ++i) {
     const Camera& camera = lights.cameras[size_t(i)];

@@ -542,6 +542,50 @@ BakedLight lumpyBake() {
   return bake;
 }
 
+// The views of one bake share its blocks and packs (BakeViewCache): a further view builds none
+// and renders the same image as one that builds its own; another bake, a black sky (fewer
+// grids read) or a bake refused for a bad voxel does not reuse what does not match it.
+TEST(BakeRender, AViewCacheServesFurtherViewsOfTheSameBake) {
+  const BakedLight bake = lumpyBake();
+  const Medium m = medium(6.0, 0.9, std::make_shared<HenyeyGreensteinPhase>(0.6));
+  const Sky sky = constantSky(Rgb(0.3, 0.4, 0.5));
+  const Camera a = perspectiveCamera(Vec3(0.3, -3, 0.6), Vec3(0.0), 35, 48, 36);
+  const Camera b = perspectiveCamera(Vec3(-2.5, 1.0, -0.8), Vec3(0.0), 40, 40, 40);
+  const auto render = [&](const BakedLight& bk, const Sky& s, const Camera& c,
+                          BakeViewCache* cache) {
+    BakeRenderOptions o;
+    o.cache = cache;
+    return renderFromBake(bk, m, sunOf(bk, Rgb(2.0)), s, c, o);
+  };
+  const auto expectSame = [](const RenderLayers& x, const RenderLayers& y) {
+    EXPECT_EQ(x.beauty.data, y.beauty.data);
+    EXPECT_EQ(x.single.data, y.single.data);
+    EXPECT_EQ(x.multiple.data, y.multiple.data);
+    EXPECT_EQ(x.sky.data, y.sky.data);
+  };
+  BakeViewCache cache;
+  expectSame(render(bake, sky, a, &cache), render(bake, sky, a, nullptr));
+  const int first = cache.builds();
+  EXPECT_GE(first, 2);  // the blocks and the march's pack
+  expectSame(render(bake, sky, b, &cache), render(bake, sky, b, nullptr));
+  EXPECT_EQ(cache.builds(), first);
+
+  expectSame(render(bake, Sky{}, a, &cache), render(bake, Sky{}, a, nullptr));
+  EXPECT_GT(cache.builds(), first);
+
+  BakedLight other = lumpyBake();
+  for (float& d : other.density) d *= 0.5f;
+  const int before = cache.builds();
+  expectSame(render(other, sky, a, &cache), render(other, sky, a, nullptr));
+  EXPECT_GT(cache.builds(), before);
+
+  BakedLight bad = lumpyBake();
+  bad.density[bad.grid.index(5, 6, 7)] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(render(bad, sky, a, &cache), InputError);
+  bad.density[bad.grid.index(5, 6, 7)] = 0.25f;
+  expectSame(render(bad, sky, a, &cache), render(bad, sky, a, nullptr));
+}
+
 // Where a voxel covers several pixels the view traces a sparse film (core/bake/sparse_film.h):
 // the cloud's own light stays within 0.5 % RMS of every pixel traced, its mean within 0.1 %, and
 // the image is the same on one thread and two and whatever the spacing's spelling.
