@@ -248,9 +248,13 @@ void framePart(const Args& a) {
   };
   // The view at the last film spacing asked for (render_from_bake.h, max_film_spacing).
   const int film = a.film_spacings.empty() ? kMaxFilmSpacing : a.film_spacings.back();
+  // As the method's frames do: one cache, its memory kept and its contents forgotten a frame.
+  BakeViewCache cache;
   const auto render = [&](int threads) {
     BakeRenderOptions ro = frameRenderOptions(shot, light, threads);
     ro.max_film_spacing = film;
+    ro.cache = &cache;
+    cache.forget();
     renderFromBake(light, lights.medium, lights.sun, lights.sky, camera, ro);
   };
   std::printf("frame: views at a film spacing of at most %d\n", film);

@@ -451,9 +451,8 @@ struct PackedChannel {
 /// The channels interleaved in one record of `stride` floats per voxel (unused floats 0): a
 /// trilinear lookup then reads eight contiguous records instead of eight voxels of every grid,
 /// which is what the march's reads cost (issue 18's profile: scattered loads, not arithmetic).
-LargeArray<float> packChannels(const std::vector<PackedChannel>& channels, size_t voxels,
-                               size_t stride) {
-  LargeArray<float> pack(voxels * stride);
+void packChannels(const std::vector<PackedChannel>& channels, size_t voxels, size_t stride,
+                  float* pack) {
   constexpr size_t kChunk = 1 << 14;
   // Voxels whose records stay in the core's cache while every channel is copied into them: a
   // photon tally's records are up to 208 floats, and a chunk's 13 MB of them went through
@@ -464,18 +463,17 @@ LargeArray<float> packChannels(const std::vector<PackedChannel>& channels, size_
     for (size_t b0 = v0; b0 < v1; b0 += kBlock) {
       const size_t b1 = std::min(v1, b0 + kBlock);
       // Zeroed here, in parallel: the slots no channel fills read as 0.
-      std::fill(pack.data() + b0 * stride, pack.data() + b1 * stride, 0.f);
+      std::fill(pack + b0 * stride, pack + b1 * stride, 0.f);
       for (const PackedChannel& ch : channels) {
         const size_t n = size_t(ch.components);
         for (size_t v = b0; v < b1; ++v) {
-          float* out = pack.data() + v * stride + size_t(ch.slot);
+          float* out = pack + v * stride + size_t(ch.slot);
           const float* in = ch.data + v * n;
           for (size_t k = 0; k < n; ++k) out[k] = in[k];
         }
       }
     }
   });
-  return pack;
 }
 
 bool operator==(const PackedChannel& a, const PackedChannel& b) {
@@ -504,9 +502,13 @@ struct BakeViewCache::Impl {
   /// The pack of `channels`, built unless the last one of *p had the same key.
   const float* pack(Pack* p, const std::vector<PackedChannel>& channels, size_t voxels,
                     size_t stride) {
-    if (p->data.empty() || p->layout != channels || p->voxels != voxels || p->stride != stride) {
-      p->data = LargeArray<float>();  // the old one's memory goes before the new one's comes
-      p->data = packChannels(channels, voxels, stride);
+    if (p->layout.empty() || p->layout != channels || p->voxels != voxels || p->stride != stride) {
+      p->layout.clear();  // no key while it is built
+      if (p->data.size() != voxels * stride) {
+        p->data = LargeArray<float>();  // the old one's memory goes before the new one's comes
+        p->data = LargeArray<float>(voxels * stride);
+      }
+      packChannels(channels, voxels, stride, p->data.data());
       p->layout = channels;
       p->voxels = voxels;
       p->stride = stride;
@@ -518,6 +520,11 @@ struct BakeViewCache::Impl {
 
 BakeViewCache::BakeViewCache() : impl_(std::make_unique<Impl>()) {}
 BakeViewCache::~BakeViewCache() = default;
+void BakeViewCache::forget() {
+  impl_->blocks.density = nullptr;
+  impl_->march.layout.clear();
+  impl_->tally.layout.clear();
+}
 int BakeViewCache::builds() const { return impl_->builds; }
 
 namespace {

@@ -392,12 +392,16 @@ struct FrameReuse {
   RepeatedFrames* frames = nullptr;
 };
 
+/// Renders frame f's views of `light`; `cache` keeps its memory from frame to frame and what it
+/// holds from view to view of the frame.
+
 void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, int f,
-                 const FrameProgress& progress, const FrameReuse& reuse = {}) {
+                 const FrameProgress& progress, BakeViewCache& cache,
+                 const FrameReuse& reuse = {}) {
   const ShotSpec& shot = run.shot();
   const Scene& lights = run.lights();
   BakeRenderOptions ro = frameRenderOptions(shot, light, run.threads());
-  BakeViewCache cache;  // a frame's views share its blocks and packs
+  cache.forget();  // another frame's light, maybe at the same addresses
   ro.cache = &cache;
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   for (int i = 0; i < n_views; ++i) {
@@ -619,8 +623,9 @@ bool renderEmptyCloud(MethodRun& run, const PrecomputedShotOptions& o,
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
   const FrameProgress progress{double(o.frames) * per_frame, per_frame};
+  BakeViewCache cache;
   for (int f = 0; f < o.frames; ++f) {
-    if (run.scope().renders(f)) renderFrame(run, light, BlendFrame{0, 0, 1}, f, progress);
+    if (run.scope().renders(f)) renderFrame(run, light, BlendFrame{0, 0, 1}, f, progress, cache);
   }
   // A static volume is one basic volume, shown by every frame (an outside probe: the walk was
   // not written for an empty cloud, by a run or a farm's gather).
@@ -656,6 +661,7 @@ void PrecomputedMethod::run(MethodRun& run) const {
   const int per_frame = n_views + (shot.outputs.vdb ? 1 : 0) + 1;
   const FrameProgress progress{double(o.frames) * per_frame, per_frame};
   RepeatedFrames repeated(walk, scope);
+  BakeViewCache cache;
   for (int f = 0; f < o.frames; ++f) {
     if (!scope.renders(f)) continue;
     const BlendFrame& bf = walk[size_t(f)];
@@ -683,7 +689,7 @@ void PrecomputedMethod::run(MethodRun& run) const {
                  blend + "lit in " + fixed(stats.seconds, 2) + " s, " +
                      std::to_string(stats.orders) + " orders");
     }
-    renderFrame(run, *light, bf, f, progress, reuse);
+    renderFrame(run, *light, bf, f, progress, cache, reuse);
     repeated.done(size_t(f));
     run.report("render", progress.at(f + 1, 0),
                "frame " + std::to_string(f) + " done in " + fixed(secondsSince(t0), 2) + " s");

@@ -544,7 +544,8 @@ BakedLight lumpyBake() {
 
 // The views of one bake share its blocks and packs (BakeViewCache): a further view builds none
 // and renders the same image as one that builds its own; another bake, a black sky (fewer
-// grids read) or a bake refused for a bad voxel does not reuse what does not match it.
+// grids read) or a bake refused for a bad voxel does not reuse what does not match it, nor does
+// a bake after forget().
 TEST(BakeRender, AViewCacheServesFurtherViewsOfTheSameBake) {
   const BakedLight bake = lumpyBake();
   const Medium m = medium(6.0, 0.9, std::make_shared<HenyeyGreensteinPhase>(0.6));
@@ -584,6 +585,14 @@ TEST(BakeRender, AViewCacheServesFurtherViewsOfTheSameBake) {
   EXPECT_THROW(render(bad, sky, a, &cache), InputError);
   bad.density[bad.grid.index(5, 6, 7)] = 0.25f;
   expectSame(render(bad, sky, a, &cache), render(bad, sky, a, nullptr));
+
+  // Forgotten (an animation's next frame, whose grids may lie at the same addresses): the same
+  // bake, changed in place, is packed again into the memory kept.
+  const int kept = cache.builds();
+  for (float& d : bad.density) d *= 2.0f;
+  cache.forget();
+  expectSame(render(bad, sky, b, &cache), render(bad, sky, b, nullptr));
+  EXPECT_GE(cache.builds(), kept + 2);
 }
 
 // Where a voxel covers several pixels the view traces a sparse film (core/bake/sparse_film.h):
