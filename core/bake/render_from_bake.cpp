@@ -2088,8 +2088,8 @@ RenderLayers renderFromBake(const BakedLight& bake, const Medium& medium, const 
   if (progress) view.cancelled = [&progress](double) { return !progress(0.0); };
 
   RenderLayers out = makeRenderLayers(w, h);
+  std::optional<BakeViewCache> own_cache;  // where options.cache is null; outlives the marcher
   std::optional<BakeMarcher> marcher;
-  std::optional<BakeViewCache> own_cache;  // where options.cache is null
   // Calls f(ray) for each of pixel (x, y)'s rays.
   auto for_each_ray = [&](int x, int y, Rng& rng, auto&& f) {
     if (spp == 1) {

@@ -23,9 +23,12 @@ constexpr double kMaxStepVoxels = 4;
 /// What the views of one bake share whatever their camera, built by the first view that reads
 /// it and reused by the rest (render_from_bake.cpp): the empty-space blocks' densest voxels and
 /// the grids a sample reads, packed per voxel. Building them is a fifth of a 640x480 view of a
-/// 128^3 bake (docs/methods.md, "Cost of a view"). It holds the grids' addresses as its key and
+/// 128-voxel cloud's bake (docs/methods.md, "A further view reuses its bake's blocks and
+/// packs"); they stay allocated while the cache lives. It holds the grids' addresses as its key and
 /// rebuilds what a render's grids or their layout (a black sky reads fewer) do not match; so
-/// use it only while the bake it was filled from is alive and unchanged, one render at a time.
+/// use it only while the bake it was filled from is alive and unchanged, one render at a time,
+/// and forget() it before the views of a bake made after that one was freed (which may take
+/// its addresses).
 class BakeViewCache {
  public:
   BakeViewCache();

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 
 #include "core/bake/bake_lattice.h"
@@ -338,8 +339,9 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
   const int n_views = shot.outputs.exr ? int(shot.views.size()) : 0;
   const Scene& lights = run.lights();
   BakeRenderOptions ro = bakeRenderOptions(shot, run.threads());
-  BakeViewCache view_cache;  // the views share the bake's blocks and packs
-  ro.cache = &view_cache;
+  // The views share the bake's blocks and packs (up to 32 floats a voxel), freed after them.
+  std::optional<BakeViewCache> view_cache;
+  ro.cache = &view_cache.emplace();
   // Progress weights: predicted seconds of each part. A bake found in the cache is not known
   // before obtainBake looks (a lookup verifies the entry's checksums: not worth doing twice), so
   // the bar then jumps over the bake's share.
@@ -389,6 +391,8 @@ void runLightBake(MethodRun& run, const LightBakeFn& bake, const LightBakeWork& 
     run.report("render", v1, label + ": rendered in " + fixed(secondsSince(t0), 2) + " s",
                camera.name);
   }
+  view_cache.reset();
+  ro.cache = nullptr;
   if (shot.outputs.vdb && run.scope().writesShotFiles()) {
     run.report("vdb", start.back() / total, "writing bake.vdb (the baked light)");
     auto write = [&] {

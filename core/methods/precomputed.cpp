@@ -394,7 +394,6 @@ struct FrameReuse {
 
 /// Renders frame f's views of `light`; `cache` keeps its memory from frame to frame and what it
 /// holds from view to view of the frame.
-
 void renderFrame(MethodRun& run, const BakedLight& light, const BlendFrame& bf, int f,
                  const FrameProgress& progress, BakeViewCache& cache,
                  const FrameReuse& reuse = {}) {

@@ -544,6 +544,45 @@ TEST(PhotonBake, ViewFieldMatchesPerRayWeights) {
   }
 }
 
+// Views that weight the tallies per ray read them packed per tally voxel: a BakeViewCache keeps
+// that pack for the next view of the bake, and the images are those of views without one.
+TEST(PhotonBake, AViewCacheKeepsTheTallyPack) {
+  const Medium m = sphere(4, Rgb(0.95), std::make_shared<HenyeyGreensteinPhase>(0.8));
+  Sun sun;
+  sun.direction = normalize(Vec3(0.15, 1, 0.1));
+  sun.irradiance = Rgb(1.0);
+  Sky sky;
+  sky.radiance = Rgb(0.3);
+  Camera inside = perspectiveCamera(24, 60);
+  inside.position = Vec3(0, 0.1, 0.5);
+  inside.look_at = Vec3(0, 1, 0.5);
+  Camera outside = perspectiveCamera(24);
+  BakeRenderOptions cached, own;
+  cached.view_field = own.view_field = false;
+  for (int tally : {16, 0}) {
+    // One per bake: the next bake's grids may lie at this one's addresses (BakeViewCache).
+    BakeViewCache cache;
+    cached.cache = &cache;
+    int builds = 0;
+    PhotonBakeOptions o = small(50000, 3);
+    o.light_resolution = 32;
+    o.tally_resolution = tally;
+    const BakedLight bake = bakePhoton(m, sun.direction, o);
+    for (const Camera* cam : {&inside, &outside}) {
+      const RenderLayers a = renderFromBake(bake, m, sun, sky, *cam, cached);
+      const RenderLayers b = renderFromBake(bake, m, sun, sky, *cam, own);
+      EXPECT_EQ(a.beauty.data, b.beauty.data) << "tallies at " << tally;
+      EXPECT_EQ(a.multiple.data, b.multiple.data) << "tallies at " << tally;
+      if (cam == &inside) {
+        EXPECT_GE(cache.builds(), builds + 2) << "the blocks and the tallies' pack";
+        builds = cache.builds();
+      } else {
+        EXPECT_EQ(cache.builds(), builds) << "a further view builds nothing";
+      }
+    }
+  }
+}
+
 // The white furnace of WhiteFurnaceSeesTheSky, seen by a view large enough to read the tallies
 // from its field (ViewFieldMatchesPerRayWeights): the field holds the same energy, so the cloud
 // still shows the sky's radiance. Pixels of 64 x 64 on a 16-voxel tally overshoot more than the
