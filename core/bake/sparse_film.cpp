@@ -68,12 +68,10 @@ std::vector<uint8_t> filmCellsToTrace(const std::vector<FilmPixel>& grid,
 }
 
 std::array<bool, 4> filmQuadrantsToTrace(const FilmPixel (&p)[3][3], const FilmTolerance& tol) {
-  FilmTolerance fine = tol;
-  fine.curvature *= kRefinedCurvature;
   bool row[3], col[3];  // the middle pixel of row b (column a) bends along it
   for (int k = 0; k < 3; ++k) {
-    row[k] = curved(p[k][0], p[k][1], p[k][2], 2, 2, fine);
-    col[k] = curved(p[0][k], p[1][k], p[2][k], 2, 2, fine);
+    row[k] = curved(p[k][0], p[k][1], p[k][2], 2, 2, tol);
+    col[k] = curved(p[0][k], p[1][k], p[2][k], 2, 2, tol);
   }
   std::array<bool, 4> q{};
   for (int qy = 0; qy < 2; ++qy) {

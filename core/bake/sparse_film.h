@@ -66,20 +66,12 @@ std::vector<uint8_t> filmCellsToTrace(const std::vector<FilmPixel>& grid,
                                       const std::vector<int>& xs, const std::vector<int>& ys,
                                       const FilmTolerance& tol);
 
-/// The share of FilmTolerance::curvature that a refined cell's quadrants may bend
-/// (filmQuadrantsToTrace). A bent cell lies along an edge or a peak, where more of what the
-/// test lets through is near its bound than in the cells it interpolates whole: at the full
-/// tolerance the views of bench/speed/view_mie.json measured 1.7-1.8x the old film's error
-/// against every pixel traced, at half of it the same (docs/methods.md, "A sparse film").
-constexpr double kRefinedCurvature = 0.5;
-
 /// Which quadrants of a cell of 4 x 4 pixels that filmCellsToTrace found bent must be traced
 /// pixel by pixel, from its nine pixels 2 apart, traced (`p[b][a]` at 2a pixels right of the
 /// cell's first corner and 2b below): a quadrant is where one of its corners bends along the
 /// cell's middle row or column or along its own edges within the cell, by the same second
-/// difference against kRefinedCurvature of the tolerance. Flags in the order (left, top),
-/// (right, top), (left, bottom), (right, bottom). The other quadrants are interpolated from
-/// their corners 2 pixels apart.
+/// difference and tolerance. Flags in the order (left, top), (right, top), (left, bottom),
+/// (right, bottom). The other quadrants are interpolated from their corners 2 pixels apart.
 std::array<bool, 4> filmQuadrantsToTrace(const FilmPixel (&p)[3][3], const FilmTolerance& tol);
 
 /// The pixel at fractions fx (from x0 towards x1) and fy (from y0 towards y1) of the cell of
