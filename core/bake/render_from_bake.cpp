@@ -1897,173 +1897,47 @@ std::vector<int> tileLine(const std::vector<int>& all, int lo, int hi, int spaci
   return std::vector<int>(all.begin() + a, all.begin() + b + 1);
 }
 
-// A tile's share of a sparse film after its first pass (sparse_film.h): the traced positions its
-// pixels read, and which of their cells bend; the same for any tiling.
-struct TileFilm {
-  TileFilm(const TileRect& t, const std::vector<int>& film_xs, const std::vector<int>& film_ys,
-           int spacing, const FilmTolerance& tol, const RenderLayers& out)
-      : x0(t.x0),
-        y0(t.y0),
-        xs(tileLine(film_xs, t.x0, t.x1, spacing)),
-        ys(tileLine(film_ys, t.y0, t.y1, spacing)),
-        nx(int(xs.size())),
-        ny(int(ys.size())),
-        grid(size_t(nx) * ny),
-        quadrants(size_t(std::max(0, nx - 1)) * std::max(0, ny - 1), -1) {
-    for (int j = 0; j < ny; ++j) {
-      for (int i = 0; i < nx; ++i) grid[size_t(j) * nx + i] = readFilm(out, xs[i], ys[j]);
-    }
-    cells = filmCellsToTrace(grid, xs, ys, tol);
-    locateOnLine(xs, t.x0, t.x1, &ci, &on_x);
-    locateOnLine(ys, t.y0, t.y1, &cj, &on_y);
-  }
-  bool bent(int i, int j) const {
-    return i >= 0 && j >= 0 && i < nx - 1 && j < ny - 1 && cells[size_t(j) * (nx - 1) + i];
-  }
-  /// A bent cell of 4 x 4 pixels, refined by its pixels 2 apart (filmQuadrantsToTrace).
-  bool refined(int i, int j) const {
-    return bent(i, j) && xs[size_t(i) + 1] - xs[size_t(i)] == 4 &&
-           ys[size_t(j) + 1] - ys[size_t(j)] == 4;
-  }
-  /// Pixel (x, y) of the tile: its cell (i, j), and whether it lies on a traced column or row.
-  void place(int x, int y, int* i, int* j, bool* col, bool* row) const {
-    *i = ci[size_t(x - x0)];
-    *j = cj[size_t(y - y0)];
-    *col = on_x[size_t(x - x0)];
-    *row = on_y[size_t(y - y0)];
-  }
-  /// The cells pixel (x, y) lies in or borders (one or two; -1: none).
-  void cellsOf(int x, int y, int c[2][2]) const {
-    int i, j;
-    bool col, row;
-    place(x, y, &i, &j, &col, &row);
-    c[0][0] = i;
-    c[0][1] = j;
-    c[1][0] = row || col ? (col ? i - 1 : i) : -1;
-    c[1][1] = row || col ? (row ? j - 1 : j) : -1;
-  }
-  /// Whether the film's second pass traces (x, y): a middle pixel of a refined cell's edge or
-  /// of the cell itself.
-  bool secondPass(int x, int y) const {
-    int i, j;
-    bool col, row;
-    place(x, y, &i, &j, &col, &row);
-    const bool mid_x = !col && x - xs[size_t(i)] == 2, mid_y = !row && y - ys[size_t(j)] == 2;
-    if (mid_x && mid_y) return refined(i, j);
-    if (mid_x && row) return refined(i, j - 1) || refined(i, j);
-    if (mid_y && col) return refined(i - 1, j) || refined(i, j);
-    return false;
-  }
-  /// Refined cell (i, j)'s quadrants to trace, as bits (filmQuadrantsToTrace), once per cell.
-  int quadrantsOf(int i, int j, const RenderLayers& out, const FilmTolerance& tol) {
-    int8_t& q = quadrants[size_t(j) * (nx - 1) + i];
-    if (q < 0) {
-      FilmPixel p[3][3];
-      for (int b = 0; b < 3; ++b) {
-        for (int a = 0; a < 3; ++a) {
-          p[b][a] = readFilm(out, xs[size_t(i)] + 2 * a, ys[size_t(j)] + 2 * b);
-        }
-      }
-      const std::array<bool, 4> t = filmQuadrantsToTrace(p, tol);
-      q = int8_t(t[0] | t[1] << 1 | t[2] << 2 | t[3] << 3);
-    }
-    return q;
-  }
-
-  int x0, y0;
-  std::vector<int> xs, ys;
-  int nx, ny;
-  std::vector<FilmPixel> grid;
-  std::vector<uint8_t> cells;
-  std::vector<int8_t> quadrants;  // per cell: bits of quadrantsOf, -1 until asked
-  std::vector<int> ci, cj;
-  std::vector<uint8_t> on_x, on_y;
-};
-
-// The film's second pass over a tile (sparse_film.h): the pixels 2 apart of its refined cells.
-template <typename Trace>
-void traceRefinedCells(const TileRect& t, const std::vector<int>& film_xs,
-                       const std::vector<int>& film_ys, int spacing, const FilmTolerance& tol,
-                       const TilePoll& poll, RenderLayers& out, Trace&& trace) {
-  const TileFilm film(t, film_xs, film_ys, spacing, tol, out);
-  for (int y = t.y0; y < t.y1; ++y) {
-    for (int x = t.x0; x < t.x1; ++x) {
-      if (!film.secondPass(x, y)) continue;
-      if (poll.stop()) return;
-      storeFilm(out, x, y, trace(x, y));
-    }
-  }
-}
-
-// How the third pass fills pixel (x, y), neither traced before: traced (kTrace), interpolated
-// within a refined cell's quadrant (kQuadrant, *cell its (i, j)) or within its cell (kCell).
-enum class Fill { kTrace, kQuadrant, kCell };
-Fill fillOf(TileFilm& film, int x, int y, const RenderLayers& out, const FilmTolerance& tol,
-            int cell[2]) {
-  int c[2][2];
-  film.cellsOf(x, y, c);
-  bool in_refined = false;
-  for (const auto& ij : c) {
-    if (ij[0] == -1 && ij[1] == -1) continue;
-    if (!film.bent(ij[0], ij[1])) continue;
-    if (!film.refined(ij[0], ij[1])) return Fill::kTrace;
-    const int q = film.quadrantsOf(ij[0], ij[1], out, tol);
-    const int ax = x - film.xs[size_t(ij[0])], ay = y - film.ys[size_t(ij[1])];
-    for (int qy = 0; qy < 2; ++qy) {
-      for (int qx = 0; qx < 2; ++qx) {
-        const bool in = (qx ? ax >= 2 : ax <= 2) && (qy ? ay >= 2 : ay <= 2);
-        if (in && (q >> (2 * qy + qx) & 1)) return Fill::kTrace;
-      }
-    }
-    if (!in_refined) {
-      cell[0] = ij[0];
-      cell[1] = ij[1];
-      in_refined = true;
-    }
-  }
-  return in_refined ? Fill::kQuadrant : Fill::kCell;
-}
-
-// The film's third pass over a tile (sparse_film.h): every other pixel traced where a cell it lies
-// in or borders bends (in a refined cell, where its quadrant bends), interpolated elsewhere, with
-// the sky behind it (sky_behind(x, y)) seen through its interpolated transmittance.
+// One tile of a sparse film after its traced pixels are stored in `out` (sparse_film.h): every
+// other pixel traced where a cell it lies in or borders bends, interpolated elsewhere, with the
+// sky behind it (sky_behind(x, y)) seen through its interpolated transmittance.
 template <typename Trace, typename SkyBehind>
 void fillSparseTile(const TileRect& t, const std::vector<int>& film_xs,
                     const std::vector<int>& film_ys, int spacing, const FilmTolerance& tol,
                     const TilePoll& poll, RenderLayers& out, Trace&& trace,
                     SkyBehind&& sky_behind) {
-  TileFilm film(t, film_xs, film_ys, spacing, tol, out);
+  const std::vector<int> xs = tileLine(film_xs, t.x0, t.x1, spacing);
+  const std::vector<int> ys = tileLine(film_ys, t.y0, t.y1, spacing);
+  const int nx = int(xs.size()), ny = int(ys.size());
+  std::vector<FilmPixel> grid(size_t(nx) * ny);
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) grid[size_t(j) * nx + i] = readFilm(out, xs[i], ys[j]);
+  }
+  const std::vector<uint8_t> cells = filmCellsToTrace(grid, xs, ys, tol);
+  auto traced = [&](int i, int j) {
+    return i >= 0 && j >= 0 && i < nx - 1 && j < ny - 1 && cells[size_t(j) * (nx - 1) + i];
+  };
+  auto at = [&](int i, int j) -> const FilmPixel& { return grid[size_t(j) * nx + i]; };
+  std::vector<int> ci, cj;
+  std::vector<uint8_t> on_x, on_y;
+  locateOnLine(xs, t.x0, t.x1, &ci, &on_x);
+  locateOnLine(ys, t.y0, t.y1, &cj, &on_y);
   for (int y = t.y0; y < t.y1; ++y) {
+    const int j = cj[size_t(y - t.y0)];
+    const bool row = on_y[size_t(y - t.y0)];
     for (int x = t.x0; x < t.x1; ++x) {
-      int i, j;
-      bool col, row;
-      film.place(x, y, &i, &j, &col, &row);
-      if ((row && col) || film.secondPass(x, y)) continue;  // traced already
-      int cell[2];
-      const Fill fill = fillOf(film, x, y, out, tol, cell);
-      if (fill == Fill::kTrace) {
+      const int i = ci[size_t(x - t.x0)];
+      const bool col = on_x[size_t(x - t.x0)];
+      if (row && col) continue;  // traced in the first pass
+      // A pixel on a traced row or column borders the cells on both sides of it.
+      if (traced(i, j) || (row && traced(i, j - 1)) || (col && traced(i - 1, j))) {
         if (poll.stop()) return;
         storeFilm(out, x, y, trace(x, y));
         continue;
       }
-      FilmPixel p;
-      if (fill == Fill::kQuadrant) {
-        const int ax = x - film.xs[size_t(cell[0])], ay = y - film.ys[size_t(cell[1])];
-        const int qx = ax >= 2, qy = ay >= 2;
-        const int xa = film.xs[size_t(cell[0])] + 2 * qx, ya = film.ys[size_t(cell[1])] + 2 * qy;
-        p = interpolateFilm(readFilm(out, xa, ya), readFilm(out, xa + 2, ya),
-                            readFilm(out, xa, ya + 2), readFilm(out, xa + 2, ya + 2),
-                            0.5 * (ax - 2 * qx), 0.5 * (ay - 2 * qy));
-      } else {
-        const int i1 = col ? i : i + 1, j1 = row ? j : j + 1;
-        const double fx =
-            col ? 0.0 : double(x - film.xs[size_t(i)]) / (film.xs[size_t(i1)] - film.xs[size_t(i)]);
-        const double fy =
-            row ? 0.0 : double(y - film.ys[size_t(j)]) / (film.ys[size_t(j1)] - film.ys[size_t(j)]);
-        p = interpolateFilm(film.grid[size_t(j) * film.nx + i], film.grid[size_t(j) * film.nx + i1],
-                            film.grid[size_t(j1) * film.nx + i],
-                            film.grid[size_t(j1) * film.nx + i1], fx, fy);
-      }
+      const int i1 = col ? i : i + 1, j1 = row ? j : j + 1;
+      const double fx = col ? 0.0 : double(x - xs[i]) / (xs[i1] - xs[i]);
+      const double fy = row ? 0.0 : double(y - ys[j]) / (ys[j1] - ys[j]);
+      FilmPixel p = interpolateFilm(at(i, j), at(i1, j), at(i, j1), at(i1, j1), fx, fy);
       seeSkyThrough(sky_behind(x, y), &p);
       storeFilm(out, x, y, p);
     }
@@ -2071,10 +1945,10 @@ void fillSparseTile(const TileRect& t, const std::vector<int>& film_xs,
 }
 
 // Renders a film of w x h pixels into `out`, each traced by trace_pixel(x, y, rng, scratch):
-// every pixel (spacing 1), or a sparse film in passes over the tiles (sparse_film.h): the
-// traced pixels, at spacing 4 the pixels 2 apart of the cells that bend, and then the cells'
-// other pixels, whose interpolated ones see the sky sky_behind(x, y, rng) through the cloud.
-// `setup` runs first, in the render's arena. False if `progress` cancelled it.
+// every pixel (spacing 1), or a sparse film in two passes over the tiles (sparse_film.h), the
+// traced pixels and then the cells between them, whose interpolated pixels see the sky
+// sky_behind(x, y, rng) through the cloud. `setup` runs first, in the render's arena. False if
+// `progress` cancelled it.
 template <typename TracePixel, typename SkyBehind>
 bool renderFilm(int w, int h, int spacing, const FilmTolerance& tolerance, int threads,
                 const ProgressFn& progress, RenderLayers& out, TracePixel&& trace_pixel,
@@ -2109,23 +1983,14 @@ bool renderFilm(int w, int h, int spacing, const FilmTolerance& tolerance, int t
           [&](int x, int y) { return counted(x, y, rng, &scratch); },
           [&](int x, int y) { return sky_behind(x, y, rng); });
     };
-    auto refine_tile = [&](const TileRect& t, const TilePoll& poll) {
-      Rng rng;
-      BakeMarcher::Scratch scratch;
-      traceRefinedCells(t, film_xs, film_ys, spacing, tolerance, poll, out,
-                        [&](int x, int y) { return counted(x, y, rng, &scratch); });
-    };
     // The traced pixels are about a third of the work, the cells that bend the rest.
-    ProgressFn first, second, third;
+    ProgressFn first, second;
     if (progress) {
       first = [&](double f) { return progress(kFilmFirstPass * f); };
-      second = [&](double f) { return progress(kFilmFirstPass * (1 + f)); };
-      third = [&](double f) { return progress(2 * kFilmFirstPass + (1 - 2 * kFilmFirstPass) * f); };
+      second = [&](double f) { return progress(kFilmFirstPass + (1 - kFilmFirstPass) * f); };
     }
-    // Cells of 4 x 4 pixels are refined by their pixels 2 apart (TileFilm::refined).
     finished = renderTiles(w, h, kTileSize, threads, first, trace_tile, setup) &&
-               (spacing < 4 || renderTiles(w, h, kTileSize, threads, second, refine_tile)) &&
-               renderTiles(w, h, kTileSize, threads, third, fill_tile);
+               renderTiles(w, h, kTileSize, threads, second, fill_tile);
   }
   out.traced_pixels = traced.load();
   return finished;

@@ -6,11 +6,12 @@
 namespace cloudbake {
 
 int sparseFilmSpacing(double pixel_footprint, double voxel_size, int max_spacing) {
-  if (!(pixel_footprint > 0) || !std::isfinite(pixel_footprint)) return 1;
-  // A spacing of 4 refines its bent cells by their pixels 2 apart (filmQuadrantsToTrace), so
-  // either spacing needs only 2 pixels a voxel.
-  if (!(2 * pixel_footprint <= voxel_size)) return 1;
-  return std::min(max_spacing, kMaxFilmSpacing) >= 4 ? 4 : std::min(max_spacing, 2) >= 2 ? 2 : 1;
+  int s = 1;
+  if (!(pixel_footprint > 0) || !std::isfinite(pixel_footprint)) return s;
+  while (2 * s <= std::min(max_spacing, kMaxFilmSpacing) && 2 * s * pixel_footprint <= voxel_size) {
+    s *= 2;
+  }
+  return s;
 }
 
 namespace {
@@ -65,21 +66,6 @@ std::vector<uint8_t> filmCellsToTrace(const std::vector<FilmPixel>& grid,
     }
   }
   return trace;
-}
-
-std::array<bool, 4> filmQuadrantsToTrace(const FilmPixel (&p)[3][3], const FilmTolerance& tol) {
-  bool row[3], col[3];  // the middle pixel of row b (column a) bends along it
-  for (int k = 0; k < 3; ++k) {
-    row[k] = curved(p[k][0], p[k][1], p[k][2], 2, 2, tol);
-    col[k] = curved(p[0][k], p[1][k], p[2][k], 2, 2, tol);
-  }
-  std::array<bool, 4> q{};
-  for (int qy = 0; qy < 2; ++qy) {
-    for (int qx = 0; qx < 2; ++qx) {
-      q[size_t(2 * qy + qx)] = row[1] || col[1] || row[2 * qy] || col[2 * qx];
-    }
-  }
-  return q;
 }
 
 FilmPixel interpolateFilm(const FilmPixel& c00, const FilmPixel& c10, const FilmPixel& c01,

@@ -6,18 +6,15 @@
 // Why it holds: the cloud's light and transmittance in a view from a bake are marched through
 // grids interpolated trilinearly from the lattice, so they have no structure finer than a
 // voxel's projection but what the march's own step adds (in optically thick lattices, a few
-// per cent at single pixels). Where the farthest voxel still covers 2 pixels or more
-// (sparseFilmSpacing), the test (filmCellsToTrace) catches what bilinear interpolation would
-// miss: a second difference across traced pixels over a fraction of their magnitude. At a
-// spacing of 4 a bent cell's pixels 2 apart, at most one voxel, are traced and tested the same
-// way (filmQuadrantsToTrace), and only its bent quadrants are traced pixel by pixel: a third
-// level for about half the traced pixels of a spacing of 2. The sky seen through the cloud is not
-// read from the lattice: an interpolated pixel takes it along its own rays (judgedFloat). Measured
+// per cent at single pixels). Where the farthest voxel still covers s pixels or more
+// (sparseFilmSpacing), a traced pixel is at most one voxel from the next, and the test
+// (filmCellsToTrace) catches what bilinear interpolation would miss: a second difference across
+// traced pixels over a fraction of their magnitude. The sky seen through the cloud is not read
+// from the lattice: an interpolated pixel takes it along its own rays (judgedFloat). Measured
 // against every pixel traced, and against a march of an eighth of the step, in docs/methods.md
 // ("A sparse film").
 #pragma once
 
-#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -41,9 +38,8 @@ constexpr bool judgedFloat(int k) { return k == 3 || k >= 7; }
 constexpr int kMaxFilmSpacing = 4;
 
 /// The spacing of the traced pixels, a power of two up to `max_spacing` (1 disables): the
-/// largest, 2 or 4, where 2 pixels are at most one voxel wide where a pixel is widest over the
-/// lattice (`pixel_footprint`, world units, at the lattice's farthest point from the eye), else
-/// 1. A spacing of 4 traces its bent cells' pixels 2 apart first (filmQuadrantsToTrace).
+/// largest s with s pixels at most one voxel wide where a pixel is widest over the lattice
+/// (`pixel_footprint`, world units, at the lattice's farthest point from the eye).
 int sparseFilmSpacing(double pixel_footprint, double voxel_size, int max_spacing);
 
 /// How much a cell's corners may vary before its pixels are traced. A quantity q (each judged
@@ -65,14 +61,6 @@ struct FilmTolerance {
 std::vector<uint8_t> filmCellsToTrace(const std::vector<FilmPixel>& grid,
                                       const std::vector<int>& xs, const std::vector<int>& ys,
                                       const FilmTolerance& tol);
-
-/// Which quadrants of a cell of 4 x 4 pixels that filmCellsToTrace found bent must be traced
-/// pixel by pixel, from its nine pixels 2 apart, traced (`p[b][a]` at 2a pixels right of the
-/// cell's first corner and 2b below): a quadrant is where one of its corners bends along the
-/// cell's middle row or column or along its own edges within the cell, by the same second
-/// difference and tolerance. Flags in the order (left, top), (right, top), (left, bottom),
-/// (right, bottom). The other quadrants are interpolated from their corners 2 pixels apart.
-std::array<bool, 4> filmQuadrantsToTrace(const FilmPixel (&p)[3][3], const FilmTolerance& tol);
 
 /// The pixel at fractions fx (from x0 towards x1) and fy (from y0 towards y1) of the cell of
 /// corners c00 (x0, y0), c10 (x1, y0), c01 (x0, y1) and c11 (x1, y1), interpolated bilinearly.

@@ -29,8 +29,7 @@ class AutoMethod final : public BakeMethod {
     // 12: a sequence's choice, `precomputed`, walks with future costs (its version 10).
     // 13: photon rungs whose tally voxels are optically thick are not candidates.
     // 14: its choice `single` scatters the sky with the phase function (single 7).
-    // 15: its choices' views refine the sparse film's cells of 4 pixels (render_from_bake 9).
-    info_.version = 15;
+    info_.version = 14;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {

@@ -159,10 +159,9 @@ Knob filmSpacingKnob() {
   return Knob::integer(
              "film_spacing", 1, kMaxFilmSpacing, kMaxFilmSpacing,
              "pixels: the largest spacing (1, 2 or 4; 3 reads as 2) of the pixels a view traces "
-             "first where the lattice's voxels are at least 2 pixels wide; the pixels between are "
-             "traced where the image bends there (at 4, first those 2 apart) and interpolated "
-             "elsewhere; 2 is the more exact film, 1 traces every pixel (not part of the bake's "
-             "cache key)")
+             "first where the lattice's voxels are wider than that many pixels; the pixels between "
+             "are traced where the image bends there and interpolated elsewhere; 1 traces every "
+             "pixel (not part of the bake's cache key)")
       .viewOnly();
 }
 

@@ -43,8 +43,7 @@ class PointcloudMethod final : public BakeMethod {
         "(BYU thesis)";
     // 11: the geometric tail of the orders not computed takes each channel's own ratio.
     // 12: the sky's single scattering weights the phase function, as single's 7 does.
-    // 13: its views' sparse film refines cells of 4 pixels (render_from_bake 9).
-    info_.version = 13;
+    info_.version = 12;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

@@ -460,8 +460,7 @@ class PrecomputedMethod final : public BakeMethod {
     //    sky_spacing; 1 is version 7's output). 9: a box volume's exact means on the lattice.
     // 10: the walk's future costs (knob future_cost) on costs sqrt(D), and the last volume may
     //     jump to the first.
-    // 11: its views' sparse film refines cells of 4 pixels (render_from_bake 9).
-    info_.version = 11;
+    info_.version = 10;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

@@ -17,8 +17,7 @@ class SingleMethod final : public BakeMethod {
         "marching through a 3D voxel grid\"";
     // 7: the sky's single scattering weights the phase function (sky_visibility_vector and
     // its forward peak; it had been the ambient term L_mean Vsky).
-    // 8: its views' sparse film refines cells of 4 pixels (render_from_bake 9).
-    info_.version = 8;
+    info_.version = 7;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

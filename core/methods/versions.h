@@ -18,9 +18,9 @@ constexpr int kPhaseVersion = 2;
 /// core/transport: tracking, sky, camera, the path tracer's estimators and the views' EXR layers.
 constexpr int kTransportVersion = 2;
 /// core/bake/render_from_bake: views ray-marched from a baked-light lattice.
-constexpr int kRenderFromBakeVersion = 9;
+constexpr int kRenderFromBakeVersion = 8;
 
-/// "volume/2 phase/2 transport/2 render_from_bake/9": the shared part of every method's salt.
+/// "volume/2 phase/2 transport/2 render_from_bake/8": the shared part of every method's salt.
 inline std::string sharedVersionSalt() {
   return "volume/" + std::to_string(kVolumeVersion) + " phase/" + std::to_string(kPhaseVersion) +
          " transport/" + std::to_string(kTransportVersion) + " render_from_bake/" +

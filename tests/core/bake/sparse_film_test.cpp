@@ -34,10 +34,8 @@ int count(const std::vector<uint8_t>& flags) {
 }
 
 TEST(SparseFilm, SpacingIsThePixelsAVoxelCoversAtItsWidest) {
-  EXPECT_EQ(sparseFilmSpacing(0.004, 0.0156, 4), 4);   // 3.9 pixels a voxel
-  EXPECT_EQ(sparseFilmSpacing(0.0078, 0.0156, 4), 4);  // 2 pixels a voxel: refined cells
-  EXPECT_EQ(sparseFilmSpacing(0.0078, 0.0156, 2), 2);
-  EXPECT_EQ(sparseFilmSpacing(0.0079, 0.0156, 4), 1);  // 1.97 pixels a voxel
+  EXPECT_EQ(sparseFilmSpacing(0.004, 0.0156, 4), 2);   // 3.9 pixels a voxel
+  EXPECT_EQ(sparseFilmSpacing(0.0039, 0.0156, 4), 4);  // 4 pixels a voxel
   EXPECT_EQ(sparseFilmSpacing(0.0039, 0.0156, 3), 2);  // 3 reads as 2
   EXPECT_EQ(sparseFilmSpacing(0.0039, 0.0156, 1), 1);
   EXPECT_EQ(sparseFilmSpacing(0.001, 0.0156, 8), kMaxFilmSpacing);
@@ -45,27 +43,6 @@ TEST(SparseFilm, SpacingIsThePixelsAVoxelCoversAtItsWidest) {
   EXPECT_EQ(sparseFilmSpacing(0.0, 0.0156, 4), 1);
   EXPECT_EQ(sparseFilmSpacing(std::nan(""), 0.0156, 4), 1);
   EXPECT_EQ(sparseFilmSpacing(std::numeric_limits<double>::infinity(), 0.0156, 4), 1);
-}
-
-// A cell of 4 x 4 pixels refined by its nine pixels 2 apart: a bilinear ramp traces no quadrant,
-// a peak at its middle all four, and one at a corner the three quadrants whose corners see it
-// bend, not the opposite one, which is interpolated.
-TEST(SparseFilm, ARefinedCellTracesTheQuadrantsThatBend) {
-  const auto quadrants = [](auto f) {
-    FilmPixel p[3][3];
-    for (int b = 0; b < 3; ++b) {
-      for (int a = 0; a < 3; ++a) {
-        for (float& v : p[b][a].v) v = float(f(2 * a, 2 * b));
-      }
-    }
-    return filmQuadrantsToTrace(p, FilmTolerance{});
-  };
-  const auto ramp = [](int x, int y) { return 1.0 + 0.9 * x + 0.3 * y + 0.05 * x * y; };
-  EXPECT_EQ(quadrants(ramp), (std::array<bool, 4>{false, false, false, false}));
-  const auto middle = [&](int x, int y) { return ramp(x, y) * (x == 2 && y == 2 ? 1.5 : 1.0); };
-  EXPECT_EQ(quadrants(middle), (std::array<bool, 4>{true, true, true, true}));
-  const auto corner = [&](int x, int y) { return ramp(x, y) * (x == 0 && y == 0 ? 2.0 : 1.0); };
-  EXPECT_EQ(quadrants(corner), (std::array<bool, 4>{true, true, true, false}));
 }
 
 TEST(SparseFilm, ARampIsInterpolatedHoweverSteep) {
