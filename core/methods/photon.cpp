@@ -58,7 +58,8 @@ class PhotonMethod final : public BakeMethod {
         "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
         "approximation (JQSRT), for a droplet's forward peak split off";
     // 12 was taken by a commit that was reverted (dc011db: the sky's single scattering from the
-    // lattice); the next change is 13, so no cache holds two physics under one number.
+    // lattice) and 13 by two (bd0ae60, c0838b0: a sparse film refining its cells); the next
+    // change is 14, so no cache holds two physics under one number.
     info_.version = 11;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;

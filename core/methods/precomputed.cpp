@@ -460,6 +460,8 @@ class PrecomputedMethod final : public BakeMethod {
     //    sky_spacing; 1 is version 7's output). 9: a box volume's exact means on the lattice.
     // 10: the walk's future costs (knob future_cost) on costs sqrt(D), and the last volume may
     //     jump to the first.
+    // 11 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells): the
+    // next change is 12, so no cache holds two physics under one number.
     info_.version = 10;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;

@@ -18,6 +18,8 @@ constexpr int kPhaseVersion = 2;
 /// core/transport: tracking, sky, camera, the path tracer's estimators and the views' EXR layers.
 constexpr int kTransportVersion = 2;
 /// core/bake/render_from_bake: views ray-marched from a baked-light lattice.
+/// 9 was taken by the reverted commits bd0ae60 and c0838b0 (a sparse film that refined its
+/// cells): the next change is 10, so no cache holds two views under one number.
 constexpr int kRenderFromBakeVersion = 8;
 
 /// "volume/2 phase/2 transport/2 render_from_bake/8": the shared part of every method's salt.
