@@ -287,6 +287,15 @@ CLOUDBAKE_VECTOR_CLONES void lerpRecordWide(const float* __restrict p, size_t st
   for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
 }
 
+/// lerp3 of each float of a record of 8 (method single's under a sky): a loop of a known length
+/// the compiler vectorises, where the loop over a record's stride it is not told stays scalar
+/// (callgrind: a further 0.28e9 of 5.64e9 instructions of two 640x480 views). The same
+/// arithmetic per float, so the same bits.
+CLOUDBAKE_VECTOR_CLONES void lerpRecord8(const float* __restrict p, size_t sy, size_t sz, float fx,
+                                         float fy, float fz, float* __restrict out) {
+  for (size_t k = 0; k < 8; ++k) out[k] = lerp3(p + k, 8, sy, sz, fx, fy, fz);
+}
+
 /// Trilinear lookups on one lattice by index coordinates (voxel centres at integers); voxels
 /// outside it read as zero.
 class LatticeReader {
@@ -346,6 +355,10 @@ class LatticeReader {
     // the CPU has AVX2.
     if (stride >= 16) {
       lerpRecordWide(pack + c.base * stride, stride, sy, sz, c.fx, c.fy, c.fz, out);
+      return;
+    }
+    if (stride == 8) {
+      lerpRecord8(pack + c.base * stride, sy, sz, c.fx, c.fy, c.fz, out);
       return;
     }
     const float* __restrict p = pack + c.base * stride;
@@ -2027,14 +2040,21 @@ Rgb meanSkyRadiance(const Sky& sky, const SkyLight& light) {
   if (light.black()) return Rgb(0.0);
   if (sky.type == Sky::Type::kConstant) return sky.radiance;
   constexpr int kNz = 256, kNphi = 512;
+  // The azimuths' cosines and sines once, not once per row: they were 40 % of a view's set-up
+  // (callgrind), and are the same values.
+  std::array<double, kNphi> cos_phi, sin_phi;
+  for (int j = 0; j < kNphi; ++j) {
+    const double phi = 2 * kPi * (j + 0.5) / kNphi;
+    cos_phi[size_t(j)] = std::cos(phi);
+    sin_phi[size_t(j)] = std::sin(phi);
+  }
   Rgb sum(0.0);
   for (int i = 0; i < kNz; ++i) {
     const double z = 1 - 2 * (i + 0.5) / kNz;
     const double r = std::sqrt(std::max(0.0, 1 - z * z));
     Rgb row(0.0);
     for (int j = 0; j < kNphi; ++j) {
-      const double phi = 2 * kPi * (j + 0.5) / kNphi;
-      row += light.radiance(Vec3(r * std::cos(phi), r * std::sin(phi), z));
+      row += light.radiance(Vec3(r * cos_phi[size_t(j)], r * sin_phi[size_t(j)], z));
     }
     sum += row;
   }
