@@ -988,7 +988,11 @@ class BakeMarcher {
     for (const auto* list : lists) {
       for (const float* grid : *list) {
         const float* p = grid + 3 * v0;
-        for (size_t x = 0; x < 3 * nx; ++x) r->active[x / 3] |= uint8_t(p[x] != 0);
+        // Voxel by voxel, not float by float with a division: a fortieth of a view's
+        // instructions before (callgrind), the same flags.
+        for (size_t x = 0; x < nx; ++x) {
+          r->active[x] |= uint8_t((p[3 * x] != 0) | (p[3 * x + 1] != 0) | (p[3 * x + 2] != 0));
+        }
       }
     }
     Rgb w[shCount(kMaxShDegree) + kMaxZonalDegree];
