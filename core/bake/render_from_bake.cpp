@@ -571,6 +571,7 @@ class BakeMarcher {
         lut_(*medium.phase),
         g_(medium.phase->meanCosine()),
         p1_(angularModel(bake) == "p1"),
+        phase_grey_(!medium.phase->chromatic()),
         sun_dir_(sun_dir),
         extinction_(medium.extinction),
         step_(step),
@@ -613,7 +614,7 @@ class BakeMarcher {
           sky_uniform_ = sky_uniform_ && sky_l_[size_t(c)] == Vec3(0.0);
           sky_g_res_[c] = sky_split_[size_t(c)].g_residual;
         }
-        sky_split_grey_ = !medium.phase->chromatic() && sky_uniform_;
+        sky_split_grey_ = phase_grey_ && sky_uniform_;
         albedo_ = medium.albedo;
       }
     }
@@ -1432,6 +1433,11 @@ class BakeMarcher {
       s->sky_res_unit = s->sky_res;
       return;
     }
+    if (phase_grey_) {  // every channel's split is the first's: the same value, once
+      const DeltaSplit& split = sky_split_[0];
+      s->sky_res_unit = Rgb((1 - split.f) * p1SkyScatter(vis, b, rs.d, split.g_residual, 1));
+      return;
+    }
     for (int c = 0; c < 3; ++c) {
       const DeltaSplit& split = sky_split_[size_t(c)];
       s->sky_res_unit[c] = (1 - split.f) * p1SkyScatter(vis, b, rs.d, split.g_residual, 1);
@@ -1486,7 +1492,9 @@ class BakeMarcher {
       if (r > 0 && len > 1e-6) {
         // Interpolated directions are shorter than unit; only the direction is meaningful.
         const double cs = -dot(l, d) / len;
-        if (p1_) {
+        if (p1_ && phase_grey_) {
+          phase = Rgb(kInv4Pi * std::max(0.0, 1 + 3 * g_[0] * r * cs));
+        } else if (p1_) {
           for (int c = 0; c < 3; ++c) phase[c] = kInv4Pi * std::max(0.0, 1 + 3 * g_[c] * r * cs);
         } else {
           phase = lut_.eval(cs) * r + Rgb((1 - r) * kInv4Pi);
@@ -1755,7 +1763,7 @@ class BakeMarcher {
   std::array<Vec3, 3> sky_l_{};  // the sky's first moment over its mean, per channel
   double sky_g_res_[3] = {};     // the splits' residual mean cosines
   bool sky_uniform_ = true;      // sky_l_ is 0: a constant sky
-  bool sky_split_grey_ = false;  // one split for every channel (a grey phase)
+  bool sky_split_grey_ = false;  // one split for every channel (a grey phase) and a constant sky
   const float* co_ = nullptr;
   const float* csky_ = nullptr;
   const float* ldir_ = nullptr;
@@ -1772,7 +1780,8 @@ class BakeMarcher {
   PhaseLut lut_;
   std::optional<PhotonPeakLight> peak_;  // photon: the light scattered through the peak only
   Rgb g_;                                // mean cosine per channel, for the P1 model
-  bool p1_;  // the multiple term's angular model (see the header comment)
+  bool p1_;          // the multiple term's angular model (see the header comment)
+  bool phase_grey_;  // the phase is every channel's: one split, one P1 phase for all three
   Vec3 sun_dir_;
   double extinction_;
   double step_;
