@@ -119,6 +119,7 @@
 #include "core/math/parallel.h"
 #include "core/math/rng.h"
 #include "core/math/sh_basis.h"
+#include "core/math/sphere_quadrature.h"
 #include "core/math/vector_clones.h"
 #include "core/transport/camera.h"
 #include "core/transport/sky.h"
@@ -672,7 +673,7 @@ class BakeMarcher {
       // A backward peak sees the sky in front of each sample through the medium between the
       // camera and the lattice's face behind it too (an outside probe: a camera inside a
       // sphere of HG -0.9 was 14.6x the path tracer's without it).
-      const double t_back = backward_peak_ && s.tau > 0 ? transmittanceBehind(s) : 1.0;
+      const double t_back = backward_peak_ && s.tau > 0 ? transmittanceBehind(ray, s) : 1.0;
       addSkyP1(ray.d, t_back, &s, sum);
     } else if (s.sky > 0) {
       sum->sky += scale_sky_ * s.sky;
@@ -731,26 +732,13 @@ class BakeMarcher {
            *t_out > *t_in;
   }
 
-  /// The transmittance from the ray's origin back along -d to where it leaves the lattice:
-  /// 1 for an origin outside it; else marched in the view's steps (trapezoids of the density).
-  double transmittanceBehind(const RayState& s) const {
-    RayState back;
-    back.w0 = s.w0;
-    back.dw = -s.dw;
+  /// The transmittance from the ray's origin back along -d to where it leaves the lattice
+  /// (marchTransmittance, the view's step): 1 for an origin outside it.
+  double transmittanceBehind(const Ray& ray, const RayState& s) const {
     double t_in = 0, t_out = 0;
     // A line meets the box in one interval: from an origin outside it, nothing lies behind.
-    if (!domainSpan(back.w0, back.dw, &t_in, &t_out) || t_in > 0) return 1.0;
-    const int64_t steps = std::max<int64_t>(1, int64_t(std::ceil(t_out / step_)));
-    const double dt = t_out / double(steps);
-    Cell a, b;
-    sample(&back, 0.0, &a);
-    double tau = 0;
-    for (int64_t i = 1; i <= steps && tau < 50; ++i) {
-      sample(&back, double(i) * dt, &b);
-      tau += 0.5 * (a.sigma + b.sigma) * dt;
-      a = b;
-    }
-    return std::exp(-tau);
+    if (!domainSpan(s.w0, -s.dw, &t_in, &t_out) || t_in > 0) return 1.0;
+    return marchTransmittance(grid_, density_, extinction_, ray.o, -ray.d, step_);
   }
 
   // The sky's single scattering of bakes with sky_visibility_vector (sky_p1_scatter.h): per
@@ -2053,24 +2041,14 @@ Rgb meanSkyRadiance(const Sky& sky, const SkyLight& light) {
   if (light.black()) return Rgb(0.0);
   if (sky.type == Sky::Type::kConstant) return sky.radiance;
   constexpr int kNz = 256, kNphi = 512;
-  // The azimuths' cosines and sines once, not once per row: they were 40 % of this function's
-  // instructions (callgrind), and are the same values.
-  std::array<double, kNphi> cos_phi, sin_phi;
-  for (int j = 0; j < kNphi; ++j) {
-    const double phi = 2 * kPi * (j + 0.5) / kNphi;
-    cos_phi[size_t(j)] = std::cos(phi);
-    sin_phi[size_t(j)] = std::sin(phi);
-  }
+  // Row by row, then the rows in order: a row's sum is of like terms (the gradient sky's are
+  // equal), which keeps its rounding small.
+  std::array<Rgb, kNz> rows;
+  rows.fill(Rgb(0.0));
+  forEachEqualAreaCell<kNz, kNphi>(
+      [&](int i, const Vec3& w) { rows[size_t(i)] += light.radiance(w); });
   Rgb sum(0.0);
-  for (int i = 0; i < kNz; ++i) {
-    const double z = 1 - 2 * (i + 0.5) / kNz;
-    const double r = std::sqrt(std::max(0.0, 1 - z * z));
-    Rgb row(0.0);
-    for (int j = 0; j < kNphi; ++j) {
-      row += light.radiance(Vec3(r * cos_phi[size_t(j)], r * sin_phi[size_t(j)], z));
-    }
-    sum += row;
-  }
+  for (const Rgb& row : rows) sum += row;
   return sum / (double(kNz) * kNphi);
 }
 

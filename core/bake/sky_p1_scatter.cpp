@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/math/sphere_quadrature.h"
+
 namespace cloudbake {
 
 DeltaSplit deltaSplit(double lambda1, double lambda2) {
@@ -30,19 +32,13 @@ std::array<Vec3, 3> skyFirstMoment(const SkyLight& sky) {
   if (sky.black()) return m;
   constexpr int kNz = 64, kNphi = 128;
   double largest = 0;
-  for (int i = 0; i < kNz; ++i) {
-    const double z = 1 - 2 * (i + 0.5) / kNz;
-    const double r = std::sqrt(std::max(0.0, 1 - z * z));
-    for (int j = 0; j < kNphi; ++j) {
-      const double phi = 2 * kPi * (j + 0.5) / kNphi;
-      const Vec3 w(r * std::cos(phi), r * std::sin(phi), z);
-      const Rgb l = sky.radiance(w);
-      for (int c = 0; c < 3; ++c) {
-        m[size_t(c)] += w * l[c];
-        largest = std::max(largest, l[c]);
-      }
+  forEachEqualAreaCell<kNz, kNphi>([&](int, const Vec3& w) {
+    const Rgb l = sky.radiance(w);
+    for (int c = 0; c < 3; ++c) {
+      m[size_t(c)] += w * l[c];
+      largest = std::max(largest, l[c]);
     }
-  }
+  });
   for (Vec3& v : m) {
     v = v / (double(kNz) * kNphi);
     for (int a = 0; a < 3; ++a) {

@@ -29,9 +29,9 @@ class AutoMethod final : public BakeMethod {
     // 12: a sequence's choice, `precomputed`, walks with future costs (its version 10).
     // 13: photon rungs whose tally voxels are optically thick are not candidates.
     // 14: its choice `single` scatters the sky with the phase function (single 7).
-    // 15 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells): the
-    // next change is 16, so no cache holds two physics under one number.
-    info_.version = 14;
+    // 15 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells).
+    // 16: its choice `single` is version 9.
+    info_.version = 16;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {

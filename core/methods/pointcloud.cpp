@@ -43,9 +43,9 @@ class PointcloudMethod final : public BakeMethod {
         "(BYU thesis)";
     // 11: the geometric tail of the orders not computed takes each channel's own ratio.
     // 12: the sky's single scattering weights the phase function, as single's 7 does.
-    // 13 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells): the
-    // next change is 14, so no cache holds two physics under one number.
-    info_.version = 12;
+    // 13 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells).
+    // 14: a backward peak sees the medium behind a camera inside the lattice as single's 9.
+    info_.version = 14;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;

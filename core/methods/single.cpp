@@ -17,9 +17,10 @@ class SingleMethod final : public BakeMethod {
         "marching through a 3D voxel grid\"";
     // 7: the sky's single scattering weights the phase function (sky_visibility_vector and
     // its forward peak; it had been the ambient term L_mean Vsky).
-    // 8 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells): the
-    // next change is 9, so no cache holds two physics under one number.
-    info_.version = 7;
+    // 8 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells).
+    // 9: a backward peak sees the medium behind a camera inside the lattice through
+    //    marchTransmittance (the views' own march before: within 1e-5).
+    info_.version = 9;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
