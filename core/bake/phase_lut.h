@@ -43,6 +43,10 @@ class PhaseLut {
   double nodeCosine(int i) const;
   int nodes() const { return 2 * bins_ + 1; }
 
+  /// The same table, value for value (what a table's users compute from it depends on nothing
+  /// else).
+  bool operator==(const PhaseLut& o) const { return bins_ == o.bins_ && table_ == o.table_; }
+
  private:
   int bins_;
   double scale_;  // bins / sqrt(1/2): node index per unit of u or v

@@ -537,9 +537,31 @@ struct BakeViewCache::Impl {
     size_t voxels = 0, stride = 0;
     LargeArray<float> data;
   };
+  // photon's light scattered through a droplet's peak (PhotonPeakLight): four convolutions of
+  // the phase, the same for every view of a bake, keyed on the phase's table itself.
+  struct Peak {
+    std::optional<PhaseLut> phase;  // none: none built
+    double cut_deg = 0;
+    Rgb albedo;
+    std::optional<PhotonPeakLight> light;
+  };
   Blocks blocks;
   Pack march, tally;  // the march's record per voxel; photon's tallies per voxel of theirs
+  Peak peak;
   int builds = 0;
+
+  const PhotonPeakLight& peakLight(const PhaseLut& phase, double cut_deg, const Rgb& albedo) {
+    Peak& p = peak;
+    if (!p.phase || !(*p.phase == phase) || p.cut_deg != cut_deg || !(p.albedo == albedo)) {
+      p.phase.reset();  // no key while it is built
+      p.light.emplace(phase, cut_deg, albedo);
+      p.cut_deg = cut_deg;
+      p.albedo = albedo;
+      p.phase.emplace(phase);
+      ++builds;
+    }
+    return *p.light;
+  }
 
   /// The pack of `channels`, built unless the last one of *p had the same key.
   const float* pack(Pack* p, const std::vector<PackedChannel>& channels, size_t voxels,
@@ -563,6 +585,7 @@ struct BakeViewCache::Impl {
 BakeViewCache::BakeViewCache() : impl_(std::make_unique<Impl>()) {}
 BakeViewCache::~BakeViewCache() = default;
 void BakeViewCache::forget() {
+  // The peak's light is keyed on the values it was built from, whatever the bake: it stays.
   impl_->blocks.density = nullptr;
   impl_->march.layout.clear();
   impl_->tally.layout.clear();
@@ -871,7 +894,7 @@ class BakeMarcher {
       msh_.push_back(tally(bake_grids::photonZonal(l)));
     }
     const double cut_deg = peakCutDegrees(bake);
-    if (cut_deg > 0) peak_.emplace(lut_, cut_deg, medium.albedo);
+    if (cut_deg > 0) peak_ = &cache_.peakLight(lut_, cut_deg, medium.albedo);
     phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order, zonal_order_));
   }
 
@@ -1793,8 +1816,8 @@ class BakeMarcher {
   Rgb albedo_;
   const SkyLight& sky_;
   PhaseLut lut_;
-  std::optional<PhotonPeakLight> peak_;  // photon: the light scattered through the peak only
-  Rgb g_;                                // mean cosine per channel, for the P1 model
+  const PhotonPeakLight* peak_ = nullptr;  // photon: the light scattered through the peak only
+  Rgb g_;                                  // mean cosine per channel, for the P1 model
   bool p1_;          // the multiple term's angular model (see the header comment)
   bool phase_grey_;  // the phase is every channel's: one split, one P1 phase for all three
   Vec3 sun_dir_;

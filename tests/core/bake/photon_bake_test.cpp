@@ -7,6 +7,7 @@
 #include <tbb/global_control.h>
 
 #include <cmath>
+#include <list>
 #include <memory>
 #include <string>
 #include <vector>
@@ -581,6 +582,43 @@ TEST(PhotonBake, AViewCacheKeepsTheTallyPack) {
       }
     }
   }
+}
+
+// A phase whose peak photon splits off: the views' light scattered through the peak
+// (PhotonPeakLight, four convolutions of the phase) is built once per cache and kept for every
+// view of the same phase, cut and albedo, even of another bake; another albedo builds its own.
+// The images are those of views without a cache.
+TEST(PhotonBake, AViewCacheKeepsThePeaksLight) {
+  Sun sun;
+  sun.direction = normalize(Vec3(0.3, -0.2, 1));
+  sun.irradiance = Rgb(1.0);
+  const Camera cam = perspectiveCamera(16);
+  BakeViewCache cache;
+  BakeRenderOptions cached, own;
+  cached.cache = &cache;
+  const Rgb albedos[3] = {Rgb(0.9, 0.95, 1.0), Rgb(0.9, 0.95, 1.0), Rgb(0.8)};
+  std::list<BakedLight> bakes;  // kept: a freed bake's grids may lie at the next one's addresses
+  int first_builds[3] = {};
+  for (int k = 0; k < 3; ++k) {
+    const Medium m = sphere(4, albedos[k], std::make_shared<HenyeyGreensteinPhase>(0.95));
+    const BakedLight& bake = bakes.emplace_back(bakePhoton(m, sun.direction, small(20000)));
+    ASSERT_GT(std::stod(bake.metadata.at("cloudbake:peak_cut_deg")), 0);
+    for (int view = 0; view < 2; ++view) {
+      const int before = cache.builds();
+      const RenderLayers a = renderFromBake(bake, m, sun, Sky{}, cam, cached);
+      const RenderLayers b = renderFromBake(bake, m, sun, Sky{}, cam, own);
+      EXPECT_EQ(a.beauty.data, b.beauty.data) << "bake " << k << ", view " << view;
+      EXPECT_EQ(a.multiple.data, b.multiple.data) << "bake " << k << ", view " << view;
+      if (view == 0) first_builds[k] = cache.builds() - before;
+      if (view == 1) {
+        EXPECT_EQ(cache.builds(), before) << "a further view builds nothing";
+      }
+    }
+  }
+  // The bakes' blocks and packs are alike; the first and third also build their peak's light.
+  EXPECT_GE(first_builds[1], 1) << "a new bake's blocks";
+  EXPECT_EQ(first_builds[0], first_builds[1] + 1) << "the first bake builds the peak's light";
+  EXPECT_EQ(first_builds[2], first_builds[1] + 1) << "another albedo builds its own";
 }
 
 // The white furnace of WhiteFurnaceSeesTheSky, seen by a view large enough to read the tallies
