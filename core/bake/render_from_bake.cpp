@@ -115,6 +115,7 @@
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
 #include "core/format.h"
+#include "core/math/branchless.h"
 #include "core/math/large_array.h"
 #include "core/math/parallel.h"
 #include "core/math/rng.h"
@@ -1222,7 +1223,7 @@ class BakeMarcher {
 
   static Rgb shSum(const float* v, size_t n, const Rgb* w) {
     const Rgb sum = weightedSum(v, n, w);
-    return Rgb(std::max(0.0, sum.x), std::max(0.0, sum.y), std::max(0.0, sum.z));
+    return Rgb(positivePart(sum.x), positivePart(sum.y), positivePart(sum.z));
   }
 
   /// The densest voxel of each 8^3 block, from the cache where it holds this density's.
@@ -1463,8 +1464,10 @@ class BakeMarcher {
       s->sky_res_unit = s->sky_res;
       return;
     }
-    for (int c = 0; c < 3; ++c)
-      s->sky_res[c] = (1 - sky_split_[size_t(c)].f) * w.residual(c, vis, b);
+    // Each channel's value into one Rgb, not channel by channel into memory that the march
+    // then reads as a vector (core/math/branchless.h).
+    auto residual = [&](int c) { return (1 - sky_split_[size_t(c)].f) * w.residual(c, vis, b); };
+    s->sky_res = Rgb(residual(0), residual(1), residual(2));
     if (!csky_) return;
     // The shaped multiple term's complement is that of a uniform sky, which Co_sky is baked for.
     if (sky_uniform_) {
@@ -1476,10 +1479,11 @@ class BakeMarcher {
       s->sky_res_unit = Rgb((1 - split.f) * p1SkyScatter(vis, b, rs.d, split.g_residual, 1));
       return;
     }
-    for (int c = 0; c < 3; ++c) {
+    auto unit = [&](int c) {
       const DeltaSplit& split = sky_split_[size_t(c)];
-      s->sky_res_unit[c] = (1 - split.f) * p1SkyScatter(vis, b, rs.d, split.g_residual, 1);
-    }
+      return (1 - split.f) * p1SkyScatter(vis, b, rs.d, split.g_residual, 1);
+    };
+    s->sky_res_unit = Rgb(unit(0), unit(1), unit(2));
   }
 
   void source(Cell& c, RayState* rs, Source* s) const {
@@ -1531,9 +1535,11 @@ class BakeMarcher {
         // Interpolated directions are shorter than unit; only the direction is meaningful.
         const double cs = -dot(l, d) / len;
         if (p1_ && phase_grey_) {
-          phase = Rgb(kInv4Pi * std::max(0.0, 1 + 3 * g_[0] * r * cs));
+          phase = Rgb(kInv4Pi * positivePart(1 + 3 * g_[0] * r * cs));
         } else if (p1_) {
-          for (int c = 0; c < 3; ++c) phase[c] = kInv4Pi * std::max(0.0, 1 + 3 * g_[c] * r * cs);
+          phase = Rgb(kInv4Pi * positivePart(1 + 3 * g_[0] * r * cs),
+                      kInv4Pi * positivePart(1 + 3 * g_[1] * r * cs),
+                      kInv4Pi * positivePart(1 + 3 * g_[2] * r * cs));
         } else {
           phase = lut_.eval(cs) * r + Rgb((1 - r) * kInv4Pi);
         }

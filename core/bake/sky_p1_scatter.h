@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 
+#include "core/math/branchless.h"
 #include "core/math/vec3.h"
 #include "core/transport/sky.h"
 
@@ -36,7 +37,7 @@ DeltaSplit deltaSplit(double lambda1, double lambda2);
 /// p1RayWeights).
 inline double p1SkyScatter(double v, const Vec3& b, const Vec3& d, double g_residual,
                            double upper) {
-  return std::clamp(v + 3 * g_residual * dot(b, d), 0.0, std::max(upper, 0.0));
+  return clampValue(v + 3 * g_residual * dot(b, d), 0.0, std::max(upper, 0.0));
 }
 
 /// The sky radiance's first moment per channel, (1 / 4 pi) integral L_sky(w) w dw, so that
@@ -58,7 +59,7 @@ struct P1RayWeights {
   /// The residual's sky scattering per unit mean sky radiance at a voxel of visibility v and
   /// vector b, channel c (before the (1 - f) weight).
   double residual(int c, double v, const Vec3& b) const {
-    return std::clamp(alpha[c] * v + dot(beta[c], b), 0.0, upper[c]);
+    return clampValue(alpha[c] * v + dot(beta[c], b), 0.0, upper[c]);
   }
 };
 /// l[c] = L1 / L_mean of channel c (0 where the mean is 0), g_residual[c] its split's.
