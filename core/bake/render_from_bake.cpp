@@ -532,6 +532,7 @@ struct BakeViewCache::Impl {
     int nx = 0, ny = 0, nz = 0;
     std::vector<float> max;  // per 8^3 block, dilated by a voxel (BakeMarcher::buildBlockMax)
     double max_density = 0;
+    std::vector<uint8_t> occupied;  // per cell: any of its 8 voxels' density is not 0
   };
   struct Pack {
     std::vector<PackedChannel> layout;
@@ -1235,6 +1236,7 @@ class BakeMarcher {
     if (b.density != density_ || b.nx != nx_ || b.ny != ny_ || b.nz != nz_) {
       b.density = nullptr;  // no key while it is built: a bad voxel throws
       b.max = blockMaxima();
+      b.occupied = occupiedCells();
       b.max_density = 0;
       for (float v : b.max) b.max_density = std::max(b.max_density, double(v));
       b.density = density_;
@@ -1244,6 +1246,7 @@ class BakeMarcher {
       ++cache_.builds;
     }
     block_max_ = b.max.data();
+    occupied_ = b.occupied.data();
     if (!std::isfinite(extinction_ * b.max_density)) {
       throw InputError("medium.extinction: extinction * max density overflows");
     }
@@ -1293,6 +1296,29 @@ class BakeMarcher {
       }
     }
     return block_max;
+  }
+
+  /// Per cell of the lattice (indexed as Cell::base, the voxel at its lower corner), 1 where
+  /// any of the eight voxels a lookup in it reads has a density other than 0. The empty-space
+  /// blocks are 8 voxels wide, and within those that hold density many samples lie in cells
+  /// that hold none: their read of eight densities is skipped (the same value, +0). `single`'s
+  /// views of bench/speed/view_mie.json 0.089-0.092 -> 0.083-0.085 s, `pointcloud`'s 2-3 %.
+  std::vector<uint8_t> occupiedCells() const {
+    const size_t sy = size_t(nx_), sz = sy * size_t(ny_);
+    std::vector<uint8_t> occupied(sz * size_t(nz_), 0);
+    parallelFor(0, std::max(nz_ - 1, 0), [&](int k) {
+      std::vector<uint8_t> row(static_cast<size_t>(nx_));
+      for (int j = 0; j + 1 < ny_; ++j) {
+        const float* d = density_ + size_t(k) * sz + size_t(j) * sy;
+        // The four rows of voxels the cells of this row read, each voxel or its next in x.
+        for (int i = 0; i < nx_; ++i) {
+          row[size_t(i)] = d[i] != 0 || d[i + sy] != 0 || d[i + sz] != 0 || d[i + sy + sz] != 0;
+        }
+        uint8_t* out = occupied.data() + size_t(k) * sz + size_t(j) * sy;
+        for (int i = 0; i + 1 < nx_; ++i) out[i] = row[size_t(i)] | row[size_t(i) + 1];
+      }
+    });
+    return occupied;
   }
 
   /// Finds the cell of block-space point w on the bake's lattice.
@@ -1783,7 +1809,8 @@ class BakeMarcher {
   void sample(const RayState* s, double t, Cell* c) const {
     locate(s->w0 + s->dw * t, c);
     c->t = t;
-    c->sigma = extinction_ * density(*c);
+    // A cell whose voxels are all 0 interpolates to +0 whatever the weights: the read's value.
+    c->sigma = c->interior && !occupied_[c->base] ? 0.0 : extinction_ * density(*c);
   }
 
   const BakeGrid& grid_;
@@ -1835,8 +1862,9 @@ class BakeMarcher {
   double inv_h_ = 1;
   Rgb scale_ss_, scale_ms_, scale_sky_;
   int nbx_ = 0, nby_ = 0, nbz_ = 0;
-  const float* block_max_ = nullptr;  // the densest voxel per block (buildBlockMax)
-  const float* pack_ = nullptr;       // the grids a sample reads, per voxel (buildPack; null: none)
+  const float* block_max_ = nullptr;   // the densest voxel per block (buildBlockMax)
+  const uint8_t* occupied_ = nullptr;  // per cell, whether it holds density (occupiedCells)
+  const float* pack_ = nullptr;  // the grids a sample reads, per voxel (buildPack; null: none)
   size_t stride_ = 4;
   // Photon tallies per voxel of their lattice (buildTallyPack): radiance, then the sky's.
   static constexpr int kMaxTallyFloats = 3 * (3 * shCount(kMaxShDegree) + kMaxZonalDegree) + 4;
