@@ -308,6 +308,12 @@ CLOUDBAKE_VECTOR_CLONES void lerpRecord8(const float* __restrict p, size_t sy, s
   lerpRecordFixed<8>(p, sy, sz, fx, fy, fz, out);
 }
 
+/// photon's view field (BakeMarcher::readField).
+CLOUDBAKE_VECTOR_CLONES void lerpRecord9(const float* __restrict p, size_t sy, size_t sz, float fx,
+                                         float fy, float fz, float* __restrict out) {
+  lerpRecordFixed<9>(p, sy, sz, fx, fy, fz, out);
+}
+
 /// pointcloud's record.
 CLOUDBAKE_VECTOR_CLONES void lerpRecord16(const float* __restrict p, size_t sy, size_t sz, float fx,
                                           float fy, float fz, float* __restrict out) {
@@ -380,6 +386,8 @@ class LatticeReader {
     switch (stride) {
       case 8:
         return lerpRecord8(base, sy, sz, c.fx, c.fy, c.fz, out);
+      case 9:
+        return lerpRecord9(base, sy, sz, c.fx, c.fy, c.fz, out);
       case 16:
         return lerpRecord16(base, sy, sz, c.fx, c.fy, c.fz, out);
       case 32:
@@ -1106,7 +1114,7 @@ class BakeMarcher {
 
   void readField(const Cell& c, Rgb* ms, Rgb* ssky, Rgb* csky) const {
     float v[kFieldFloats];
-    (tally_ ? *tally_ : lattice_).readPacked(field_.data(), kFieldFloats, c, 0, kFieldFloats, v);
+    (tally_ ? *tally_ : lattice_).readRecord(field_.data(), kFieldFloats, c, v);
     auto clamped = [&](int q) {
       return Rgb(std::max(0.f, v[q]), std::max(0.f, v[q + 1]), std::max(0.f, v[q + 2]));
     };
