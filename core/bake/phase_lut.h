@@ -43,8 +43,8 @@ class PhaseLut {
   double nodeCosine(int i) const;
   int nodes() const { return 2 * bins_ + 1; }
 
-  /// The same table, value for value (what a table's users compute from it depends on nothing
-  /// else).
+  /// The same table: equal bin counts and == values (what a table's users compute from it
+  /// depends on nothing else; +0 and -0 compare equal and give the same results).
   bool operator==(const PhaseLut& o) const { return bins_ == o.bins_ && table_ == o.table_; }
 
  private:

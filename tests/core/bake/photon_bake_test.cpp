@@ -586,8 +586,8 @@ TEST(PhotonBake, AViewCacheKeepsTheTallyPack) {
 
 // A phase whose peak photon splits off: the views' light scattered through the peak
 // (PhotonPeakLight, four convolutions of the phase) is built once per cache and kept for every
-// view of the same phase, cut and albedo, even of another bake; another albedo builds its own.
-// The images are those of views without a cache.
+// view of the same phase, cut and albedo, even of another bake; another albedo or phase builds
+// its own. The images are those of views without a cache.
 TEST(PhotonBake, AViewCacheKeepsThePeaksLight) {
   Sun sun;
   sun.direction = normalize(Vec3(0.3, -0.2, 1));
@@ -596,11 +596,12 @@ TEST(PhotonBake, AViewCacheKeepsThePeaksLight) {
   BakeViewCache cache;
   BakeRenderOptions cached, own;
   cached.cache = &cache;
-  const Rgb albedos[3] = {Rgb(0.9, 0.95, 1.0), Rgb(0.9, 0.95, 1.0), Rgb(0.8)};
+  const Rgb albedos[4] = {Rgb(0.9, 0.95, 1.0), Rgb(0.9, 0.95, 1.0), Rgb(0.8), Rgb(0.8)};
+  const double g[4] = {0.95, 0.95, 0.95, 0.97};
   std::list<BakedLight> bakes;  // kept: a freed bake's grids may lie at the next one's addresses
-  int first_builds[3] = {};
-  for (int k = 0; k < 3; ++k) {
-    const Medium m = sphere(4, albedos[k], std::make_shared<HenyeyGreensteinPhase>(0.95));
+  int first_builds[4] = {};
+  for (int k = 0; k < 4; ++k) {
+    const Medium m = sphere(4, albedos[k], std::make_shared<HenyeyGreensteinPhase>(g[k]));
     const BakedLight& bake = bakes.emplace_back(bakePhoton(m, sun.direction, small(20000)));
     ASSERT_GT(std::stod(bake.metadata.at("cloudbake:peak_cut_deg")), 0);
     for (int view = 0; view < 2; ++view) {
@@ -619,6 +620,7 @@ TEST(PhotonBake, AViewCacheKeepsThePeaksLight) {
   EXPECT_GE(first_builds[1], 1) << "a new bake's blocks";
   EXPECT_EQ(first_builds[0], first_builds[1] + 1) << "the first bake builds the peak's light";
   EXPECT_EQ(first_builds[2], first_builds[1] + 1) << "another albedo builds its own";
+  EXPECT_EQ(first_builds[3], first_builds[1] + 1) << "another phase builds its own";
 }
 
 // The white furnace of WhiteFurnaceSeesTheSky, seen by a view large enough to read the tallies
