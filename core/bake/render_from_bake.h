@@ -21,8 +21,9 @@ class SkyLight;
 constexpr double kMaxStepVoxels = 4;
 
 /// What the views of one bake share whatever their camera, built by the first view that reads
-/// it and reused by the rest (render_from_bake.cpp): the empty-space blocks' densest voxels and
-/// the grids a sample reads, packed per voxel. Building them is a fifth of a 640x480 view of a
+/// it and reused by the rest (render_from_bake.cpp): the empty-space blocks' densest voxels, a
+/// byte per lattice cell saying whether it holds density, and the grids a sample reads, packed
+/// per voxel. Building them is a fifth of a 640x480 view of a
 /// 128-voxel cloud's bake (docs/methods.md, "A further view reuses its bake's blocks and
 /// packs"); they stay allocated while the cache lives. It holds the grids' addresses as its key and
 /// rebuilds what a render's grids or their layout (a black sky reads fewer) do not match; so
