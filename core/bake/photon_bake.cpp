@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -9,6 +10,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <thread>
 
 #include "core/bake/bake_lattice.h"
 #include "core/bake/render_from_bake.h"
@@ -150,7 +152,7 @@ class PhotonTally {
     // One lock per voxel's record, not one atomic add per value: the locked adds were three
     // quarters of a sky photon's tracing (`perf annotate`, issue 18). The sums are the same.
     int64_t* out = &counts_[v * size_t(width)];
-    std::lock_guard<std::mutex> hold(locks_[v % kLocks]);
+    std::lock_guard<SpinLock> hold(locks_[v % kLocks]);
     for (int k = 0; k < width; ++k) out[k] += q[k];
   }
 
@@ -228,10 +230,23 @@ class PhotonTally {
   Vec3 axis_;
   double photon_weight_;
   std::vector<int64_t> counts_;
+  // A lock held for a few dozen additions: std::mutex's calls into pthreads were 5 % of a
+  // photon bake (`perf`), where threads rarely meet. One per cache line, so that two threads
+  // taking neighbouring locks do not fight over a line; it yields while another holds it, so a
+  // holder descheduled on a shared machine is not spun against.
+  struct alignas(64) SpinLock {
+    std::atomic<bool> held{false};
+    void lock() {
+      while (held.exchange(true, std::memory_order_acquire)) {
+        while (held.load(std::memory_order_relaxed)) std::this_thread::yield();
+      }
+    }
+    void unlock() { held.store(false, std::memory_order_release); }
+  };
   // Voxel v's record is written under locks_[v % kLocks]: enough locks that threads rarely meet.
   static constexpr size_t kLocks = 1024;
   static constexpr int kMaxWidth = (shCount(kMaxShDegree) + kMaxZonalDegree) * 3;
-  std::unique_ptr<std::mutex[]> locks_{new std::mutex[kLocks]};
+  std::unique_ptr<SpinLock[]> locks_{new SpinLock[kLocks]};
 };
 
 /// One photon's segments added to a PhotonTally: summed in doubles per voxel, a few voxels at a
