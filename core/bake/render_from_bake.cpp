@@ -282,13 +282,6 @@ inline float lerp3(const float* p, size_t sx, size_t sy, size_t sz, float fx, fl
   return c0 + fz * (c1 - c0);
 }
 
-/// lerp3 of each of a record's `stride` floats (a multiple of 4) into out.
-CLOUDBAKE_VECTOR_CLONES void lerpRecordWide(const float* __restrict p, size_t stride, size_t sy,
-                                            size_t sz, float fx, float fy, float fz,
-                                            float* __restrict out) {
-  for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
-}
-
 /// lerp3 of each float of a record of N floats: a loop of a known length the compiler
 /// vectorises, where the loop over a record's stride it is not told stays scalar or pays for its
 /// run-time length (callgrind: two 640x480 views of bench/speed/view_mie.json took 5.64e9
@@ -302,28 +295,31 @@ inline void lerpRecordFixed(const float* __restrict p, size_t sy, size_t sz, flo
   for (size_t k = 0; k < N; ++k) out[k] = lerp3(p + k, N, sy, sz, fx, fy, fz);
 }
 
-/// Method single's record under a sky.
-CLOUDBAKE_VECTOR_CLONES void lerpRecord8(const float* __restrict p, size_t sy, size_t sz, float fx,
-                                         float fy, float fz, float* __restrict out) {
-  lerpRecordFixed<8>(p, sy, sz, fx, fy, fz, out);
-}
-
-/// photon's view field (BakeMarcher::readField).
-CLOUDBAKE_VECTOR_CLONES void lerpRecord9(const float* __restrict p, size_t sy, size_t sz, float fx,
-                                         float fy, float fz, float* __restrict out) {
-  lerpRecordFixed<9>(p, sy, sz, fx, fy, fz, out);
-}
-
-/// pointcloud's record.
-CLOUDBAKE_VECTOR_CLONES void lerpRecord16(const float* __restrict p, size_t sy, size_t sz, float fx,
-                                          float fy, float fz, float* __restrict out) {
-  lerpRecordFixed<16>(p, sy, sz, fx, fy, fz, out);
-}
-
-/// precomputed's record.
-CLOUDBAKE_VECTOR_CLONES void lerpRecord32(const float* __restrict p, size_t sy, size_t sz, float fx,
-                                          float fy, float fz, float* __restrict out) {
-  lerpRecordFixed<32>(p, sy, sz, fx, fy, fz, out);
+/// lerp3 of each of a record's `stride` floats into out, 8 floats an instruction where the CPU
+/// has AVX2: the records the views read (single's 8 floats under a sky, photon's view field of
+/// 9, pointcloud's 16, precomputed's 32) by loops of their own length, any other of 16 or more
+/// by the loop over the stride. False, with nothing read, for a shorter record of another length.
+CLOUDBAKE_VECTOR_CLONES bool lerpRecordWide(const float* __restrict p, size_t stride, size_t sy,
+                                            size_t sz, float fx, float fy, float fz,
+                                            float* __restrict out) {
+  switch (stride) {
+    case 8:
+      lerpRecordFixed<8>(p, sy, sz, fx, fy, fz, out);
+      return true;
+    case 9:
+      lerpRecordFixed<9>(p, sy, sz, fx, fy, fz, out);
+      return true;
+    case 16:
+      lerpRecordFixed<16>(p, sy, sz, fx, fy, fz, out);
+      return true;
+    case 32:
+      lerpRecordFixed<32>(p, sy, sz, fx, fy, fz, out);
+      return true;
+    default:
+      if (stride < 16) return false;
+      for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
+      return true;
+  }
 }
 
 /// Trilinear lookups on one lattice by index coordinates (voxel centres at integers); voxels
@@ -381,25 +377,7 @@ class LatticeReader {
       return;
     }
     const size_t sy = stride * stride_y_, sz = stride * stride_z_;
-    // Records of 8, 9, 16 or 32 floats, and any of 16 or more, are read 8 floats an instruction
-    // where the CPU has AVX2.
-    const float* base = pack + c.base * stride;
-    switch (stride) {
-      case 8:
-        return lerpRecord8(base, sy, sz, c.fx, c.fy, c.fz, out);
-      case 9:
-        return lerpRecord9(base, sy, sz, c.fx, c.fy, c.fz, out);
-      case 16:
-        return lerpRecord16(base, sy, sz, c.fx, c.fy, c.fz, out);
-      case 32:
-        return lerpRecord32(base, sy, sz, c.fx, c.fy, c.fz, out);
-      default:
-        break;
-    }
-    if (stride >= 16) {
-      lerpRecordWide(base, stride, sy, sz, c.fx, c.fy, c.fz, out);
-      return;
-    }
+    if (lerpRecordWide(pack + c.base * stride, stride, sy, sz, c.fx, c.fy, c.fz, out)) return;
     const float* __restrict p = pack + c.base * stride;
     const float fx = c.fx, fy = c.fy, fz = c.fz;
     for (size_t k = 0; k < stride; ++k) out[k] = lerp3(p + k, stride, sy, sz, fx, fy, fz);
