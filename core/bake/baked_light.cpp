@@ -91,7 +91,7 @@ BakeChannel& BakedLight::addOnTallyGrid(const std::string& name, int components)
 void BakedLight::addMeanRadiance() {
   const BakeChannel* sun = find(bake_grids::kSunTransmittance);
   const BakeChannel* co = find(bake_grids::kMultipleFluence);
-  std::vector<float>& cd = add(bake_grids::kCd, 3).data;
+  FirstTouchFloats& cd = add(bake_grids::kCd, 3).data;
   parallelFor(0, int64_t(grid.voxelCount()),
               [&](size_t v) {
                 const double s = sun ? double(sun->data[v]) : 0.0;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/bake/bake_grid.h"
+#include "core/math/first_touch_allocator.h"
 #include "core/math/vec3.h"
 
 namespace cloudbake {
@@ -73,7 +74,8 @@ struct BakeChannel {
   int components = 1;
   /// On BakedLight::tally_grid rather than BakedLight::grid (method photon's tallies).
   bool on_tally_grid = false;
-  std::vector<float> data;
+  /// Its pages first touched by the worker threads (first_touch_allocator.h).
+  FirstTouchFloats data;
 };
 
 /// A bake: the lattice, the density and the light grids, and where they came from.

@@ -202,7 +202,7 @@ const openvdb::math::Transform& readLatticePlacement(const std::string& path,
 void readGridVoxels(const std::string& path, const openvdb::GridBase::Ptr& grid, BakedLight* bake,
                     bool on_tally_grid) {
   const BakeGrid& g = on_tally_grid ? bake->tally_grid : bake->grid;
-  auto add = [&](int components) -> std::vector<float>& {
+  auto add = [&](int components) -> FirstTouchFloats& {
     return (on_tally_grid ? bake->addOnTallyGrid(grid->getName(), components)
                           : bake->add(grid->getName(), components))
         .data;
@@ -220,15 +220,15 @@ void readGridVoxels(const std::string& path, const openvdb::GridBase::Ptr& grid,
     }
   };
   if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(grid)) {
-    std::vector<float>* out = &bake->density;
-    if (name != bake_grids::kDensity) out = &add(1);
+    float* out = bake->density.data();
+    if (name != bake_grids::kDensity) out = add(1).data();
     for (auto it = f->cbeginValueOn(); it; ++it) {
       noTiles(it);
-      (*out)[place(it.getCoord())] = *it;
+      out[place(it.getCoord())] = *it;
     }
   } else if (auto v = openvdb::GridBase::grid<openvdb::Vec3SGrid>(grid)) {
     if (name == bake_grids::kDensity) throw InputError(path + ": grid 'density' is not float");
-    std::vector<float>& out = add(3);
+    FirstTouchFloats& out = add(3);
     for (auto it = v->cbeginValueOn(); it; ++it) {
       noTiles(it);
       const size_t i = place(it.getCoord());

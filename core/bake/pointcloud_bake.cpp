@@ -126,13 +126,13 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
   const bool normalised = options.rule == PointcloudOptions::Rule::kNormalized;
   const bool need_sky = options.sky || normalised;
   const double pass_ext = passExtinction(medium, options);
-  std::vector<float> pass_vis;
+  FirstTouchFloats pass_vis;
   if (need_sky) {
     report(kSun, "sky visibility");
     std::vector<double> ext{medium.extinction};
     if (normalised && pass_ext != medium.extinction) ext.push_back(pass_ext);
-    std::vector<float> vector;
-    std::vector<std::vector<float>> v =
+    FirstTouchFloats vector;
+    std::vector<FirstTouchFloats> v =
         skyVisibilities(bake.grid, bake.density.data(), ext, subRange(progress, kSun, kSky),
                         options.sky ? &vector : nullptr);
     bake.add(bake_grids::kSkyVisibility, 1).data = std::move(v[0]);
@@ -143,8 +143,8 @@ BakedLight bakePointcloud(const Medium& medium, const Vec3& sun_dir_in,
 
   const BakeChannel* vis = bake.find(bake_grids::kSkyVisibility);
   const PointCloudResult result =
-      runPointcloud(bake.grid, bake.density, vis ? vis->data : std::vector<float>(), medium,
-                    sun_dir, options, options.tail, subRange(progress, kSky, kPoints), pass_vis);
+      runPointcloud(bake.grid, bake.density, vis ? vis->data : FirstTouchFloats(), medium, sun_dir,
+                    options, options.tail, subRange(progress, kSky, kPoints), pass_vis);
   if (!options.sky) bake.channels.erase(bake_grids::kSkyVisibility);
 
   t0 = Clock::now();

@@ -164,10 +164,10 @@ void checkPointcloudInput(const Medium& medium, const PointcloudOptions& options
 /// it differs: `pass_sky_visibility`, when the caller computed it alongside the true one
 /// (skyVisibilities, one sweep for both), else computed here.
 PointCloudResult runPointcloud(const BakeGrid& grid, const std::vector<float>& density,
-                               const std::vector<float>& sky_visibility, const Medium& medium,
+                               const FirstTouchFloats& sky_visibility, const Medium& medium,
                                const Vec3& sun_dir, const PointcloudOptions& options,
                                bool geometric_tail = true, const BakeProgressFn& progress = {},
-                               const std::vector<float>& pass_sky_visibility = {});
+                               const FirstTouchFloats& pass_sky_visibility = {});
 
 /// The extinction of the medium the passes run on, per unit density: s sigma_t for the
 /// normalised rule (s = 1 - lum(albedo x g), the similarity reduction), sigma_t for the paper

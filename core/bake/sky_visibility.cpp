@@ -194,24 +194,24 @@ void sweepDirection(const BakeGrid& g, const LatticeDirection& d, const float* e
 
 }  // namespace
 
-std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* rho,
-                                                const std::vector<double>& extinctions,
-                                                const BakeProgressFn& progress,
-                                                std::vector<float>* vector) {
+std::vector<FirstTouchFloats> skyVisibilities(const BakeGrid& g, const float* rho,
+                                              const std::vector<double>& extinctions,
+                                              const BakeProgressFn& progress,
+                                              FirstTouchFloats* vector) {
   if (extinctions.empty() || extinctions.size() > 2) {
     throw InternalError("skyVisibilities: one or two extinctions, got " +
                         std::to_string(extinctions.size()));
   }
   const size_t n = g.voxelCount(), k = extinctions.size();
-  std::vector<double> sum(n);
-  std::vector<float> t(n), e(n);
+  std::vector<double, FirstTouchAllocator<double>> sum(n);
+  FirstTouchFloats t(n), e(n);
   // The vector's components while the first extinction's directions are swept.
-  std::vector<float> b_sums[3];
+  FirstTouchFloats b_sums[3];
   if (vector) {
     for (auto& b : b_sums) b.assign(n, 0.f);
   }
   float* const b_ptrs[3] = {b_sums[0].data(), b_sums[1].data(), b_sums[2].data()};
-  std::vector<std::vector<float>> out(k, std::vector<float>(n));
+  std::vector<FirstTouchFloats> out(k, FirstTouchFloats(n));
   const LatticeDirection* dirs = latticeDirections();
   int done = 0;
   for (size_t x = 0; x < k; ++x) {
@@ -228,7 +228,10 @@ std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* 
         }
       }
     }
-    for (size_t v = 0; v < n; ++v) out[x][v] = float(std::min(1.0, std::max(0.0, sum[v])));
+    float* const o = out[x].data();
+    parallelFor(0, int64_t(n),
+                [&](int64_t v) { o[v] = float(std::min(1.0, std::max(0.0, sum[size_t(v)]))); },
+                {kCheapIterationGrain});
   }
   if (vector) {
     vector->resize(3 * n);
@@ -247,9 +250,9 @@ std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* 
 
 void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgressFn& progress,
                           bool with_vector) {
-  std::vector<float> vector;
-  std::vector<std::vector<float>> v = skyVisibilities(bake.grid, bake.density.data(), {extinction},
-                                                      progress, with_vector ? &vector : nullptr);
+  FirstTouchFloats vector;
+  std::vector<FirstTouchFloats> v = skyVisibilities(bake.grid, bake.density.data(), {extinction},
+                                                    progress, with_vector ? &vector : nullptr);
   bake.add(bake_grids::kSkyVisibility, 1).data = std::move(v[0]);
   if (with_vector) bake.add(bake_grids::kSkyVisibilityVector, 3).data = std::move(vector);
 }

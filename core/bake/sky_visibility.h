@@ -24,10 +24,10 @@ void computeSkyVisibility(BakedLight& bake, double extinction, const BakeProgres
 /// sweep multiplies precomputed half-segment transmittances, exp(-extinction x half the segment
 /// x density) of each voxel, in rows along x that the compiler vectorises. A non-null `vector`
 /// receives the first extinction's sky_visibility_vector (3 floats a voxel, interleaved).
-std::vector<std::vector<float>> skyVisibilities(const BakeGrid& g, const float* rho,
-                                                const std::vector<double>& extinctions,
-                                                const BakeProgressFn& progress = {},
-                                                std::vector<float>* vector = nullptr);
+std::vector<FirstTouchFloats> skyVisibilities(const BakeGrid& g, const float* rho,
+                                              const std::vector<double>& extinctions,
+                                              const BakeProgressFn& progress = {},
+                                              FirstTouchFloats* vector = nullptr);
 
 /// The 26 lattice directions (unit) and their solid-angle weights (summing to 1), for tests.
 struct LatticeDirection {

@@ -51,7 +51,7 @@ std::string shortNumber(double v) {
 // grid by its luminance).
 struct Slice {
   const BakedLight& bake;
-  const std::vector<float>* data = nullptr;
+  const float* data = nullptr;  // the grid's values on the bake's lattice
   std::shared_ptr<std::vector<float>> resampled = nullptr;  // a tally on the bake's lattice
   int components = 1;
   int a = 1, u = 0, v = 2;  // slice normal, image right and up
@@ -66,7 +66,7 @@ struct Slice {
     return bake.grid.index(ijk[0], ijk[1], ijk[2]);
   }
   double value(size_t voxel) const {
-    const float* x = data->data() + voxel * size_t(components);
+    const float* x = data + voxel * size_t(components);
     return components == 3 ? luminance(Rgb(x[0], x[1], x[2])) : double(x[0]);
   }
 };
@@ -75,7 +75,7 @@ struct Slice {
 // such grid or the coordinate is outside it.
 Slice findSlice(const BakedLight& bake, const SliceOptions& opt) {
   Slice s{bake};
-  s.data = &bake.density;
+  s.data = bake.density.data();
   if (opt.grid != "density") {
     const BakeChannel* c = bake.find(opt.grid);
     if (!c) {
@@ -84,14 +84,14 @@ Slice findSlice(const BakedLight& bake, const SliceOptions& opt) {
       throw InputError("--grid: '" + opt.grid + "' is not in " + opt.bake + " (it has " + known +
                        ")");
     }
-    s.data = &c->data;
+    s.data = c->data.data();
     s.components = c->components;
     if (c->on_tally_grid) {
       // Photon's tallies lie on their own lattice: shown as views read them, interpolated at
       // the voxel centres of the bake's lattice.
       s.resampled = std::make_shared<std::vector<float>>(
           resampleTrilinear(bake.tally_grid, c->data.data(), c->components, bake.grid));
-      s.data = s.resampled.get();
+      s.data = s.resampled->data();
     }
   }
   const BakeGrid& g = bake.grid;

@@ -355,8 +355,8 @@ TEST(Precomputed, SkySpacingTwoInterpolatesWhatEveryVoxelWouldEvaluate) {
   // Fewer evaluations; on a lattice this coarse most voxels are near the surface or where the
   // transmittance falls steeply, and those are evaluated.
   EXPECT_LT(sb.sky_evaluations, sa.sky_evaluations);
-  const std::vector<float>& ta = a.find(bake_grids::skyTransmittanceSh(0))->data;
-  const std::vector<float>& tb = b.find(bake_grids::skyTransmittanceSh(0))->data;
+  const auto& ta = a.find(bake_grids::skyTransmittanceSh(0))->data;
+  const auto& tb = b.find(bake_grids::skyTransmittanceSh(0))->data;
   double worst = 0;
   int nodes = 0;
   for (int k = 0; k < g.nz; ++k) {

@@ -141,9 +141,9 @@ TEST(BakedLight, ValidateChecksEveryRuleOnEveryValue) {
   b.grid.nz = 50;  // 80000 voxels, 240000 values of a 3-component grid: several chunks
   b.sun_direction = Vec3(0, 0, 1);
   b.density.assign(b.grid.voxelCount(), 0.f);
-  std::vector<float>& t = b.add(bake_grids::kSunTransmittance, 1).data;
-  std::vector<float>& co = b.add(bake_grids::kMultipleFluence, 3).data;
-  std::vector<float>& sh = b.add(bake_grids::skyTransmittanceSh(1), 1).data;
+  auto& t = b.add(bake_grids::kSunTransmittance, 1).data;
+  auto& co = b.add(bake_grids::kMultipleFluence, 3).data;
+  auto& sh = b.add(bake_grids::skyTransmittanceSh(1), 1).data;
   std::fill(t.begin(), t.end(), 1.f);
   t[7] = 0.f;
   t[8] = -0.f;
@@ -176,7 +176,7 @@ TEST(BakedLight, ValidateNamesTheFirstBadVoxelOfALargeGrid) {
   b.grid.nz = 48;  // 196608 voxels: six chunks of the scan
   b.sun_direction = Vec3(0, 0, 1);
   b.density.assign(b.grid.voxelCount(), 0.5f);
-  std::vector<float>& t = b.add(bake_grids::kSunTransmittance, 1).data;
+  auto& t = b.add(bake_grids::kSunTransmittance, 1).data;
   std::fill(t.begin(), t.end(), 0.5f);
   t[b.grid.index(3, 2, 40)] = -2.f;  // in a later chunk
   t[b.grid.index(5, 9, 20)] = 7.f;   // the first in order
@@ -191,7 +191,7 @@ TEST(BakedLight, ValidateNamesTheFirstBadVoxelOfALargeGrid) {
   BakedLight a = smallBake(), c = smallBake();
   for (BakedLight* x : {&a, &c}) {
     for (const char* name : {bake_grids::kSunTransmittance, bake_grids::kMultipleFluence}) {
-      std::vector<float>& d = x->channels[name].data;
+      auto& d = x->channels[name].data;
       std::fill(d.begin(), d.end(), 0.25f);
     }
   }

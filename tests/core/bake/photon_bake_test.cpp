@@ -144,7 +144,7 @@ TEST(PhotonBake, GreyTallyIsEveryChannelOfTheColourTally) {
   int compared = 0;
   for (const auto& [name, ch] : grey.channels) {
     if (name.rfind("ms_", 0) != 0 && name.rfind("ss_", 0) != 0) continue;
-    const std::vector<float>& c = colour.channels.at(name).data;
+    const auto& c = colour.channels.at(name).data;
     ASSERT_EQ(ch.data.size(), c.size()) << name;
     bool nonzero = false;
     for (size_t v = 0; v < c.size(); v += 3) {
@@ -315,8 +315,8 @@ TEST(PhotonBake, TallyNoiseEstimateMatchesTheMeasuredNoise) {
     const BakedLight a = bakePhoton(m, sun, o);
     o.seed = 8;
     const BakedLight b = bakePhoton(m, sun, o);
-    const std::vector<float>& fa = a.find(bake_grids::photonSh(0))->data;
-    const std::vector<float>& fb = b.find(bake_grids::photonSh(0))->data;
+    const auto& fa = a.find(bake_grids::photonSh(0))->data;
+    const auto& fb = b.find(bake_grids::photonSh(0))->data;
     const BakeGrid& t = a.tally_grid;
     double diff = 0, mean = 0;
     for (int k = 0; k < t.nz; ++k)

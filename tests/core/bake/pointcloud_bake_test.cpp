@@ -260,8 +260,8 @@ TEST(PointSplat, IsTheShepardAverageOfThePointsWithinTheRadius) {
   r.cloud.spacing = 0.04;
   const double rs = splatPoints(b, r);
   EXPECT_DOUBLE_EQ(rs, 0.08);
-  const std::vector<float>& co = b.find(bake_grids::kMultipleFluence)->data;
-  const std::vector<float>& mr = b.find(bake_grids::kMieRatio)->data;
+  const auto& co = b.find(bake_grids::kMultipleFluence)->data;
+  const auto& mr = b.find(bake_grids::kMieRatio)->data;
   const std::vector<uint8_t> support = densitySupport(g, b.density);
   int averaged = 0, copied = 0, empty = 0;
   for (int k = 0; k < g.nz; k += 3)
@@ -562,7 +562,7 @@ TEST(NormalisedRule, SunAndSkyPassesTogetherMatchThemApart) {
   vis.grid = l.grid;
   vis.density = l.density;
   computeSkyVisibility(vis, ext);
-  const std::vector<float>& v = vis.channels.at(bake_grids::kSkyVisibility).data;
+  const auto& v = vis.channels.at(bake_grids::kSkyVisibility).data;
   PointcloudOptions o;
   o.points = 3000;
   o.passes = 6;
@@ -571,7 +571,7 @@ TEST(NormalisedRule, SunAndSkyPassesTogetherMatchThemApart) {
   auto run = [&](std::shared_ptr<const PhaseFunction> phase, bool sky) {
     PointcloudOptions oo = o;
     oo.sky = sky;
-    return runPointcloud(l.grid, l.density, sky ? v : std::vector<float>(),
+    return runPointcloud(l.grid, l.density, sky ? v : FirstTouchFloats(),
                          sphereMedium(1, ext, Rgb(0.9), phase), Vec3(0, 0, 1), oo);
   };
   const auto hg = std::make_shared<HenyeyGreensteinPhase>(1e-4);

@@ -69,7 +69,7 @@ BakedLight boxBake(const Vec3& box_min, const Vec3& box_max, double h, int pad, 
   }
   fillChannel(&bake, bake_grids::kSunTransmittance, {1.f});
   if (march_sun) {
-    std::vector<float>& tsun = bake.channels[bake_grids::kSunTransmittance].data;
+    auto& tsun = bake.channels[bake_grids::kSunTransmittance].data;
     tbb::parallel_for(0, g.nz, [&](int k) {
       for (int j = 0; j < g.ny; ++j) {
         for (int i = 0; i < g.nx; ++i) {
@@ -253,7 +253,7 @@ BakedLight twoBoxBake(const Vec3& origin, int n, double h, const Vec3& sun_dir, 
     }
   }
   fillChannel(&bake, bake_grids::kSunTransmittance, {0.f});
-  std::vector<float>& tsun = bake.channels[bake_grids::kSunTransmittance].data;
+  auto& tsun = bake.channels[bake_grids::kSunTransmittance].data;
   tbb::parallel_for(0, n, [&](int k) {
     for (int j = 0; j < n; ++j) {
       for (int i = 0; i < n; ++i) {
@@ -567,7 +567,7 @@ BakedLight lumpyBake() {
   BakedLight bake =
       boxBake(Vec3(-0.75), Vec3(0.75), 1.0 / 16, 0, 0.0, Vec3(0.4, -0.3, 1), 6.0, false);
   const BakeGrid& g = bake.grid;
-  std::vector<float>& co = bake.channels[bake_grids::kMultipleFluence].data;
+  auto& co = bake.channels[bake_grids::kMultipleFluence].data;
   fillChannel(&bake, bake_grids::kMultipleFluence, {0.f, 0.f, 0.f});
   fillChannel(&bake, bake_grids::kSkyVisibility, {0.5f});
   for (int k = 0; k < g.nz; ++k) {
@@ -583,7 +583,7 @@ BakedLight lumpyBake() {
       }
     }
   }
-  std::vector<float>& tsun = bake.channels[bake_grids::kSunTransmittance].data;
+  auto& tsun = bake.channels[bake_grids::kSunTransmittance].data;
   for (size_t v = 0; v < g.voxelCount(); ++v) {
     const int i = int(v % size_t(g.nx)), j = int(v / size_t(g.nx) % size_t(g.ny)),
               k = int(v / (size_t(g.nx) * size_t(g.ny)));
@@ -1001,7 +1001,7 @@ TEST(BakeRender, SingleScatteringOfACoarseSlab) {
                             extinction, false);
   // The lattice's own column optical depth above each centre (exact for its trilinear density).
   const BakeGrid& g = bake.grid;
-  std::vector<float>& tsun = bake.channels[bake_grids::kSunTransmittance].data;
+  auto& tsun = bake.channels[bake_grids::kSunTransmittance].data;
   double tau_total = 0;
   for (int j = 0; j < g.ny; ++j) {
     for (int i = 0; i < g.nx; ++i) {
@@ -1215,7 +1215,7 @@ TEST(BakeRender, DISABLED_Timing) {
   const BakeGrid& g = bake.grid;
   bake.density.assign(g.voxelCount(), 0.f);
   fillChannel(&bake, bake_grids::kSunTransmittance, {0.f});
-  std::vector<float>& tsun = bake.channels[bake_grids::kSunTransmittance].data;
+  auto& tsun = bake.channels[bake_grids::kSunTransmittance].data;
   for (int k = 0; k < n; ++k) {
     for (int j = 0; j < n; ++j) {
       for (int i = 0; i < n; ++i) {
@@ -1265,7 +1265,7 @@ TEST(BakeRender, DISABLED_Timing) {
     });
     const double ext = 2.0 / cg.voxel_size / cg.nx;  // optical depth ~ 2 per unit density
     fillChannel(&cb, bake_grids::kSunTransmittance, {0.f});
-    std::vector<float>& ct = cb.channels[bake_grids::kSunTransmittance].data;
+    auto& ct = cb.channels[bake_grids::kSunTransmittance].data;
     tbb::parallel_for(0, cg.nz, [&](int k) {
       for (int j = 0; j < cg.ny; ++j) {
         for (int i = 0; i < cg.nx; ++i) {

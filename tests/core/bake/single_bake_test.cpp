@@ -215,11 +215,11 @@ TEST(SkyVisibility, TwoExtinctionsInOneSweepEqualTwoSweeps) {
   BakedLight thick = thin;
   computeSkyVisibility(thin, 2.0);
   computeSkyVisibility(thick, 7.0);
-  const std::vector<std::vector<float>> both =
+  const std::vector<FirstTouchFloats> both =
       skyVisibilities(thin.grid, thin.density.data(), {2.0, 7.0});
   ASSERT_EQ(both.size(), 2u);
-  const std::vector<float>& a = thin.find(bake_grids::kSkyVisibility)->data;
-  const std::vector<float>& b = thick.find(bake_grids::kSkyVisibility)->data;
+  const auto& a = thin.find(bake_grids::kSkyVisibility)->data;
+  const auto& b = thick.find(bake_grids::kSkyVisibility)->data;
   ASSERT_EQ(both[0].size(), a.size());
   ASSERT_EQ(both[1].size(), b.size());
   EXPECT_EQ(std::memcmp(both[0].data(), a.data(), a.size() * sizeof(float)), 0);
@@ -246,7 +246,7 @@ TEST(SkyVisibility, TheVectorPointsToTheOpenSky) {
   ASSERT_NE(vec, nullptr);
   ASSERT_EQ(vec->components, 3);
   EXPECT_NO_THROW(b.validate("bake"));
-  const std::vector<float>& vis = b.find(bake_grids::kSkyVisibility)->data;
+  const auto& vis = b.find(bake_grids::kSkyVisibility)->data;
   const BakeGrid& g = b.grid;
   for (size_t v = 0; v < g.voxelCount(); ++v) {
     const Vec3 bv(vec->data[3 * v], vec->data[3 * v + 1], vec->data[3 * v + 2]);
@@ -270,7 +270,7 @@ TEST(SkyVisibility, TheVectorPointsToTheOpenSky) {
   BakedLight empty = b;
   std::fill(empty.density.begin(), empty.density.end(), 0.f);
   computeSkyVisibility(empty, ext, {}, true);
-  const std::vector<float>& ev = empty.find(bake_grids::kSkyVisibilityVector)->data;
+  const auto& ev = empty.find(bake_grids::kSkyVisibilityVector)->data;
   for (float x : ev) ASSERT_NEAR(x, 0.f, 1e-6);
   // Without the vector, the visibility is the same, bit for bit.
   BakedLight plain = makeBakeLattice(*m.density, 33);
