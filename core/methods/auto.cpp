@@ -1,6 +1,9 @@
 #include "core/methods/auto.h"
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <vector>
 
 #include "core/error.h"
 #include "core/format.h"
@@ -31,7 +34,8 @@ class AutoMethod final : public BakeMethod {
     // 14: its choice `single` scatters the sky with the phase function (single 7).
     // 15 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells).
     // 16: its choice `single` is version 9.
-    info_.version = 16;
+    // 17: before a photon rung is chosen, small bakes measure its angular truncation.
+    info_.version = 17;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {
@@ -88,6 +92,46 @@ bool withinLimits(const ShotSpec& shot, const AutoOptions& o) {
   }
 }
 
+// The model's candidates for `choice`'s traits and pilot that pass their checks and the
+// server's limits, best first.
+std::vector<AutoCandidate> consideredCandidates(const ShotSpec& shot, const AutoChoice& choice,
+                                                const AutoOptions& o) {
+  std::vector<AutoCandidate> out;
+  for (const AutoCandidate& c :
+       autoCandidates(choice.traits, choice.pilot, choice.tolerance, o.max_samples)) {
+    if (withinLimits(resolvedShot(shot, c), o)) out.push_back(c);
+  }
+  return out;
+}
+
+// photon's bound rests on the bench scenes: before a photon rung is chosen, small bakes measure
+// its angular truncation at each order the rungs use (measurePhotonTruncation), and the
+// candidates are predicted again with it. A small bake the scene refuses rules photon out.
+void checkPhotonChoice(const ShotSpec& shot, const Scene& scene, const PilotOptions& po,
+                       const AutoOptions& o, AutoChoice* choice) {
+  const std::vector<AutoCandidate>& c = choice->considered;
+  if (c.empty() || c.front().method != "photon" || !(c.front().error <= choice->tolerance) ||
+      !choice->pilot.photon_check.empty()) {
+    return;
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<int> orders;
+  for (const PhotonRung& r : photonRungs()) {
+    if (std::find(orders.begin(), orders.end(), r.order) == orders.end()) {
+      orders.push_back(r.order);
+    }
+  }
+  try {
+    choice->pilot.photon_check = measurePhotonTruncation(shot, scene, po, choice->pilot, orders);
+  } catch (const InputError& e) {
+    for (int order : orders) choice->pilot.photon_check[order] = 1.0;
+    choice->notes.push_back(std::string("photon's check bake failed, so photon is not chosen: ") +
+                            e.what());
+  }
+  choice->pilot.photon_check_seconds = secondsSince(t0);
+  choice->considered = consideredCandidates(shot, *choice, o);
+}
+
 std::string percent(double x) { return fixed(100 * x, x < 0.1 ? 1 : 0) + " %"; }
 
 std::string describe(const AutoCandidate& c) {
@@ -116,6 +160,13 @@ AutoChoice chooseSequence(const ShotSpec& shot, double tolerance, const AutoOpti
   choice.shot.bake.knobs = KnobValues(precomputedMethod().info().knobs);
   choice.shot.bake.samples = precomputedMethod().info().default_samples;
   return choice;
+}
+
+// {"3": 0.51, "4": 0.27}: JSON objects' keys are strings.
+nlohmann::json photonCheckJson(const std::map<int, double>& bias) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [order, b] : bias) j[std::to_string(order)] = b;
+  return j;
 }
 
 // "0.00, 2.15" per view, or "not measured".
@@ -161,10 +212,8 @@ AutoChoice chooseAuto(const ShotSpec& shot, const Scene& scene, const AutoOption
     // measured there.
     choice.pilot.aureole = {kAureoleWorst};
   }
-  for (const AutoCandidate& c :
-       autoCandidates(choice.traits, choice.pilot, tolerance, o.max_samples)) {
-    if (withinLimits(resolvedShot(shot, c), o)) choice.considered.push_back(c);
-  }
+  choice.considered = consideredCandidates(shot, choice, o);
+  checkPhotonChoice(shot, scene, po, o, &choice);
   if (choice.considered.empty() || !(choice.considered.front().error <= tolerance)) {
     std::string best = "none within this server's limits";
     if (!choice.considered.empty()) {
@@ -208,6 +257,17 @@ std::vector<std::string> AutoChoice::planLines() const {
                     ", " + fixed(traits.thinnest_voxels_128, 1) +
                     " such voxels across the cloud's thinnest side" +
                     ", the views' aureole brightness " + aureoleList(pilot.aureole));
+  }
+  if (!pilot.photon_check.empty()) {
+    std::string s;
+    for (const auto& [order, bias] : pilot.photon_check) {
+      s += (s.empty() ? "" : ", ") + std::string("order ") + std::to_string(order) + " " +
+           percent(bias);
+    }
+    lines.push_back(std::string("auto: photon's angular truncation, small bakes at each order ") +
+                    "and the next (relative RMS on tiles of " + std::to_string(kPilotTile) +
+                    " pixels): " + s + ", measured in " + fixed(pilot.photon_check_seconds, 2) +
+                    " s");
   }
   for (const std::string& note : notes) lines.push_back("auto: " + note);
   for (size_t i = 1; i < considered.size() && i < 4; ++i) {
@@ -257,7 +317,9 @@ nlohmann::json AutoChoice::toJson() const {
             {"aureole", pilot.aureole},
             {"samples", pilot.samples},
             {"pixels", pilot.pixels},
-            {"seconds", pilot.seconds}}}};
+            {"seconds", pilot.seconds},
+            {"photon_check", photonCheckJson(pilot.photon_check)},
+            {"photon_check_seconds", pilot.photon_check_seconds}}}};
 }
 
 std::string autoSummary(const AutoChoice& c) {

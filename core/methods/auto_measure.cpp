@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/bake/photon_bake.h"
+#include "core/bake/render_from_bake.h"
 #include "core/error.h"
 #include "core/format.h"
 #include "core/math/rng.h"
@@ -38,6 +39,22 @@ double denseSigmaT(const Medium& medium) {
   const size_t k = std::min(inside.size() - 1, size_t(0.9 * double(inside.size())));
   std::nth_element(inside.begin(), inside.begin() + long(k), inside.end());
   return inside[k];
+}
+
+// A view's cloud light summed over each tile of kPilotTile pixels (the edge tiles smaller) and
+// the channels, row by row: the sun and sky layers hold the cloud's scattered light alone, so
+// no alpha mask is needed and the sums compare between renders whose alphas differ.
+std::vector<double> tileLight(const RenderLayers& r) {
+  const int w = r.sun.width, h = r.sun.height;
+  const int tx = (w + kPilotTile - 1) / kPilotTile, ty = (h + kPilotTile - 1) / kPilotTile;
+  std::vector<double> tiles(size_t(tx) * size_t(ty), 0.0);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      double& t = tiles[size_t(y / kPilotTile) * size_t(tx) + size_t(x / kPilotTile)];
+      for (int c = 0; c < 3; ++c) t += double(r.sun.at(x, y)[c]) + r.sky.at(x, y)[c];
+    }
+  }
+  return tiles;
 }
 
 Camera pilotCamera(const Camera& c, int longest) {
@@ -193,6 +210,16 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
     }
     PairNoise view_noise;
     view_noise.add(pair[0], pair[1]);
+    std::vector<double> mean_tiles, a = tileLight(pair[0]), b = tileLight(pair[1]);
+    double noise2 = 0;
+    if (view_noise.values > 0) {
+      for (size_t t = 0; t < a.size(); ++t) {
+        mean_tiles.push_back(0.5 * (a[t] + b[t]));
+        noise2 += 0.25 * (a[t] - b[t]) * (a[t] - b[t]);
+      }
+    }
+    pm.view_tiles.push_back(std::move(mean_tiles));
+    pm.view_tile_noise.push_back(noise2);
     noise.merge(view_noise);
     if (view_noise.values > 0 && view_noise.sum_mean > 0) {
       noise_sum += view_noise.relativeNoise();
@@ -220,6 +247,80 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   pm.seconds_per_sample =
       noise.pixels > 0 ? pm.seconds / (2.0 * double(o.samples) * double(noise.pixels)) : 0;
   return pm;
+}
+
+double photonTileError(const std::vector<double>& photon, const std::vector<double>& pilot,
+                       double pilot_noise2) {
+  if (photon.size() != pilot.size() || pilot.empty()) return 0;
+  double sq = 0, sum = 0;
+  for (size_t t = 0; t < pilot.size(); ++t) {
+    sq += (photon[t] - pilot[t]) * (photon[t] - pilot[t]);
+    sum += pilot[t];
+  }
+  if (!(sum > 0)) return 0;
+  const double n = double(pilot.size());
+  return std::sqrt(std::max(0.0, sq - pilot_noise2) / n) / (sum / n);
+}
+
+double tileMean(const std::vector<double>& t) {
+  double sum = 0;
+  for (double x : t) sum += x;
+  return t.empty() ? 0.0 : sum / double(t.size());
+}
+
+std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene& scene,
+                                              const PilotOptions& o, const PilotMeasure& pilot,
+                                              const std::vector<int>& orders) {
+  std::map<int, double> truncation;
+  const int n = int(scene.cameras.size());
+  if (pilot.view_tiles.size() != size_t(n)) return truncation;  // no pilot: no views to check
+  const int side = pilotSide(o, n);
+  PhotonBakeOptions po;
+  po.photons = kCheckPhotons;
+  po.light_resolution = kCheckLattice;
+  po.tally_resolution = kCheckTally;
+  po.sky = needsSky(shot);
+  po.sun = needsSun(shot);
+  po.seed = shot.bake.seed;
+  if (po.sky && shot.lighting.sky.type != Sky::Type::kConstant) po.sky_shape = &scene.sky;
+  BakeRenderOptions ro;
+  ro.samples_per_pixel = kCheckRays;
+  ro.seed = shot.bake.seed;
+  ro.threads = o.threads;
+  auto cancelled = [&] { return o.progress && !o.progress(1.0); };
+  // Each order's views' tiles (the same photons at every order: one seed).
+  std::map<int, std::vector<std::vector<double>>> tiles;
+  auto tilesAt = [&](int order) -> const std::vector<std::vector<double>>& {
+    auto it = tiles.find(order);
+    if (it != tiles.end()) return it->second;
+    po.order = order;
+    const BakedLight bake = bakePhoton(scene.medium, sunDirection(shot), po,
+                                       [&](double, const std::string&) { return !cancelled(); });
+    std::vector<std::vector<double>> views(static_cast<size_t>(n));
+    for (int v = 0; v < n; ++v) {
+      if (pilot.view_tiles[size_t(v)].empty()) continue;  // no cloud here: nothing to be wrong
+      const Camera cam = pilotCamera(scene.cameras[size_t(v)], side);
+      views[size_t(v)] = tileLight(renderFromBake(bake, scene.medium, scene.sun, scene.sky, cam, ro,
+                                                  [&](double) { return !cancelled(); }));
+    }
+    return tiles.emplace(order, std::move(views)).first->second;
+  };
+  for (int order : orders) {
+    if (order >= kMaxShDegree) continue;  // nothing above it to compare with
+    const auto& lo = tilesAt(order);
+    const auto& hi = tilesAt(order + 1);
+    double sum = 0;
+    int views = 0;
+    for (int v = 0; v < n; ++v) {
+      const std::vector<double>& reference = pilot.view_tiles[size_t(v)];
+      if (reference.empty()) continue;
+      sum += photonTileError(lo[size_t(v)], hi[size_t(v)], 0.0) * tileMean(hi[size_t(v)]) /
+             std::max(tileMean(reference), 1e-300);
+      ++views;
+    }
+    if (views > 0) truncation[order] = sum / views;
+  }
+  return truncation;
 }
 
 }  // namespace cloudbake

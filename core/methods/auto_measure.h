@@ -5,6 +5,8 @@
 #pragma once
 
 #include <functional>
+#include <map>
+#include <vector>
 
 #include "core/methods/auto_model.h"
 #include "core/shot/shot.h"
@@ -35,6 +37,33 @@ int pilotSide(const PilotOptions& options, int views);
 /// Renders the pilot and measures it. A scene whose cloud covers no pixel of any view measures
 /// noise and multiple fraction 0 (there is no cloud light to be wrong about).
 PilotMeasure runPilot(const Scene& scene, const PilotOptions& options);
+
+/// The small photon bake measurePhotonError renders: photons (from the sun, and as many from a
+/// sky), its light and tally lattices, and rays per pixel of its views.
+constexpr int64_t kCheckPhotons = 65536;
+constexpr int kCheckLattice = 64;
+constexpr int kCheckTally = 32;
+constexpr int kCheckRays = 4;
+
+/// The relative RMS error of `photon`'s tiles (PilotMeasure::view_tiles) against the pilot's,
+/// with the pilot's own noise (`pilot_noise2`: PilotMeasure::view_tile_noise) taken out of the
+/// squares; 0 for an empty view.
+double photonTileError(const std::vector<double>& photon, const std::vector<double>& pilot,
+                       double pilot_noise2);
+
+/// What photon's angular truncation at each of `orders` (spherical-harmonic degrees of its
+/// tallies) leaves out on this scene: small photon bakes (kCheckPhotons, one seed, so the same
+/// photons) at the order and the next, their views rendered at the pilot's size, and the
+/// relative RMS of their tiles' difference (PilotMeasure::view_tiles; relative to the pilot's
+/// light), averaged over the views: the next degree's share of the light, which the order
+/// misses. photon's bound (auto_model.cpp) was measured on the bench scenes, whose light the
+/// expansion holds; where it does not (a thin layer under a low sun, seen from above: 0.49x the
+/// path tracer's light at order 3, 1.27x at order 4, in an outside probe) the bound fails at any
+/// photon count. Empty where the pilot rendered no views. Cancelled when options.progress asks.
+std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene& scene,
+                                              const PilotOptions& options,
+                                              const PilotMeasure& pilot,
+                                              const std::vector<int>& orders);
 
 /// The relative noise and mean of the cloud's own light (sun + sky layers over the pixels with
 /// alpha >= 0.05 in both) between two renders of different seeds: RMS difference / sqrt 2 /

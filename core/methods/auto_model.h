@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -66,7 +67,23 @@ struct PilotMeasure {
   double seconds = 0;  ///< what the pilot itself took
   int samples = 0;     ///< paths per pixel of each pilot render
   int64_t pixels = 0;  ///< pixels of each pilot render, over the views
+  /// Per piloted view, its cloud's own light (sun + sky layers) summed over each tile of
+  /// kPilotTile x kPilotTile pixels and the channels, row by row: the mean of the two renders,
+  /// and the sum over the tiles of their squared difference / 4, the noise of that mean. Empty
+  /// tiles where the cloud covers no pixel of the view.
+  std::vector<std::vector<double>> view_tiles;
+  std::vector<double> view_tile_noise;
+  /// photon's error by spherical-harmonic order as a small bake measured it against the pilot
+  /// (measurePhotonError): the relative RMS error of the tiles' light, the pilot's noise
+  /// removed, averaged over the views. Empty: not measured.
+  std::map<int, double> photon_check;
+  double photon_check_seconds = 0;  ///< what measuring photon_check took
 };
+
+/// The side in pixels of the pilot's tiles (PilotMeasure::view_tiles): large enough that a
+/// tile's light is far less noisy than a pixel's at the pilot's paths, small enough that a
+/// pattern of bright and dark regions does not cancel within one.
+constexpr int kPilotTile = 8;
 
 /// One method and its knobs as the model sees it.
 struct AutoCandidate {
@@ -105,6 +122,9 @@ const std::vector<PhotonRung>& photonRungs();
 /// the worst of the five bench scenes (the rungs' errors across scenes keep their ratios within
 /// about 20 %, but no trait of the scene predicted the ratio on held-out scenes; auto_model.cpp).
 double photonSceneFactor(const SceneTraits& traits, const PilotMeasure& pilot);
+
+/// photon's measured error at `order` (PilotMeasure::photon_check), 0 where not measured.
+double photonCheckedError(const PilotMeasure& pilot, int order);
 
 /// What a view's aureole (the light within kAureoleDegrees of the sun) of brightness A adds to
 /// photon's error where its phase's forward peak was split off: min(1, A / kAureoleFull)
