@@ -111,7 +111,7 @@ void checkPhotonChoice(const ShotSpec& shot, const Scene& scene, const PilotOpti
                        const AutoOptions& o, AutoChoice* choice) {
   const std::vector<AutoCandidate>& c = choice->considered;
   if (c.empty() || c.front().method != "photon" || !(c.front().error <= choice->tolerance) ||
-      !choice->pilot.photon_check.empty()) {
+      !choice->pilot.photon_check.empty() || choice->pilot.photon_check_failed) {
     return;
   }
   const auto t0 = std::chrono::steady_clock::now();
@@ -123,8 +123,15 @@ void checkPhotonChoice(const ShotSpec& shot, const Scene& scene, const PilotOpti
   }
   try {
     choice->pilot.photon_check = measurePhotonTruncation(shot, scene, po, choice->pilot, orders);
+    for (const auto& [order, value] : choice->pilot.photon_check) {
+      if (!std::isfinite(value)) {
+        choice->pilot.photon_check_failed = true;
+        choice->notes.push_back("photon's check measured no finite truncation at order " +
+                                std::to_string(order) + ", so photon is not chosen");
+      }
+    }
   } catch (const InputError& e) {
-    for (int order : orders) choice->pilot.photon_check[order] = 1.0;
+    choice->pilot.photon_check_failed = true;
     choice->notes.push_back(std::string("photon's check bake failed, so photon is not chosen: ") +
                             e.what());
   }
@@ -265,9 +272,9 @@ std::vector<std::string> AutoChoice::planLines() const {
            percent(bias);
     }
     lines.push_back(std::string("auto: photon's angular truncation, small bakes at each order ") +
-                    "and the next (relative RMS on tiles of " + std::to_string(kPilotTile) +
-                    " pixels): " + s + ", measured in " + fixed(pilot.photon_check_seconds, 2) +
-                    " s");
+                    "and the next (relative RMS on tiles of " + std::to_string(kPilotTile) + "x" +
+                    std::to_string(kPilotTile) + " pixels): " + s + ", measured in " +
+                    fixed(pilot.photon_check_seconds, 2) + " s");
   }
   for (const std::string& note : notes) lines.push_back("auto: " + note);
   for (size_t i = 1; i < considered.size() && i < 4; ++i) {
@@ -319,6 +326,7 @@ nlohmann::json AutoChoice::toJson() const {
             {"pixels", pilot.pixels},
             {"seconds", pilot.seconds},
             {"photon_check", photonCheckJson(pilot.photon_check)},
+            {"photon_check_failed", pilot.photon_check_failed},
             {"photon_check_seconds", pilot.photon_check_seconds}}}};
 }
 

@@ -210,16 +210,12 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
     }
     PairNoise view_noise;
     view_noise.add(pair[0], pair[1]);
-    std::vector<double> mean_tiles, a = tileLight(pair[0]), b = tileLight(pair[1]);
-    double noise2 = 0;
+    std::vector<double> mean_tiles;
     if (view_noise.values > 0) {
-      for (size_t t = 0; t < a.size(); ++t) {
-        mean_tiles.push_back(0.5 * (a[t] + b[t]));
-        noise2 += 0.25 * (a[t] - b[t]) * (a[t] - b[t]);
-      }
+      const std::vector<double> a = tileLight(pair[0]), b = tileLight(pair[1]);
+      for (size_t t = 0; t < a.size(); ++t) mean_tiles.push_back(0.5 * (a[t] + b[t]));
     }
     pm.view_tiles.push_back(std::move(mean_tiles));
-    pm.view_tile_noise.push_back(noise2);
     noise.merge(view_noise);
     if (view_noise.values > 0 && view_noise.sum_mean > 0) {
       noise_sum += view_noise.relativeNoise();
@@ -249,23 +245,19 @@ PilotMeasure runPilot(const Scene& scene, const PilotOptions& o) {
   return pm;
 }
 
-double photonTileError(const std::vector<double>& photon, const std::vector<double>& pilot,
-                       double pilot_noise2) {
-  if (photon.size() != pilot.size() || pilot.empty()) return 0;
+double tileDifference(const std::vector<double>& a, const std::vector<double>& b,
+                      const std::vector<double>& reference) {
+  if (a.size() != reference.size() || b.size() != reference.size()) return 0;
   double sq = 0, sum = 0;
-  for (size_t t = 0; t < pilot.size(); ++t) {
-    sq += (photon[t] - pilot[t]) * (photon[t] - pilot[t]);
-    sum += pilot[t];
+  int64_t lit = 0;
+  for (size_t t = 0; t < reference.size(); ++t) {
+    if (!(reference[t] > 0)) continue;  // background: no cloud light to be wrong about
+    sq += (a[t] - b[t]) * (a[t] - b[t]);
+    sum += reference[t];
+    ++lit;
   }
-  if (!(sum > 0)) return 0;
-  const double n = double(pilot.size());
-  return std::sqrt(std::max(0.0, sq - pilot_noise2) / n) / (sum / n);
-}
-
-double tileMean(const std::vector<double>& t) {
-  double sum = 0;
-  for (double x : t) sum += x;
-  return t.empty() ? 0.0 : sum / double(t.size());
+  if (lit == 0 || !(sum > 0)) return 0;
+  return std::sqrt(sq / double(lit)) / (sum / double(lit));
 }
 
 std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene& scene,
@@ -273,7 +265,12 @@ std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene&
                                               const std::vector<int>& orders) {
   std::map<int, double> truncation;
   const int n = int(scene.cameras.size());
-  if (pilot.view_tiles.size() != size_t(n)) return truncation;  // no pilot: no views to check
+  // No pilot, or no view with cloud light: nothing to check.
+  if (pilot.view_tiles.size() != size_t(n) ||
+      std::all_of(pilot.view_tiles.begin(), pilot.view_tiles.end(),
+                  [](const std::vector<double>& t) { return t.empty(); })) {
+    return truncation;
+  }
   const int side = pilotSide(o, n);
   PhotonBakeOptions po;
   po.photons = kCheckPhotons;
@@ -314,8 +311,7 @@ std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene&
     for (int v = 0; v < n; ++v) {
       const std::vector<double>& reference = pilot.view_tiles[size_t(v)];
       if (reference.empty()) continue;
-      sum += photonTileError(lo[size_t(v)], hi[size_t(v)], 0.0) * tileMean(hi[size_t(v)]) /
-             std::max(tileMean(reference), 1e-300);
+      sum += tileDifference(lo[size_t(v)], hi[size_t(v)], reference);
       ++views;
     }
     if (views > 0) truncation[order] = sum / views;

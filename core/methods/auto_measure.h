@@ -38,18 +38,18 @@ int pilotSide(const PilotOptions& options, int views);
 /// noise and multiple fraction 0 (there is no cloud light to be wrong about).
 PilotMeasure runPilot(const Scene& scene, const PilotOptions& options);
 
-/// The small photon bake measurePhotonError renders: photons (from the sun, and as many from a
-/// sky), its light and tally lattices, and rays per pixel of its views.
+/// The small photon bakes measurePhotonTruncation renders: photons (from the sun, and as many
+/// from a sky), their light and tally lattices, and rays per pixel of their views.
 constexpr int64_t kCheckPhotons = 65536;
 constexpr int kCheckLattice = 64;
 constexpr int kCheckTally = 32;
 constexpr int kCheckRays = 4;
 
-/// The relative RMS error of `photon`'s tiles (PilotMeasure::view_tiles) against the pilot's,
-/// with the pilot's own noise (`pilot_noise2`: PilotMeasure::view_tile_noise) taken out of the
-/// squares; 0 for an empty view.
-double photonTileError(const std::vector<double>& photon, const std::vector<double>& pilot,
-                       double pilot_noise2);
+/// The relative RMS difference of two renders' tiles `a` and `b` (PilotMeasure::view_tiles) over
+/// the tiles where `reference` holds light, relative to the reference's mean there, as a shot's
+/// error is taken over the cloud's pixels only; 0 where the sizes differ or no tile holds light.
+double tileDifference(const std::vector<double>& a, const std::vector<double>& b,
+                      const std::vector<double>& reference);
 
 /// What photon's angular truncation at each of `orders` (spherical-harmonic degrees of its
 /// tallies) leaves out on this scene: small photon bakes (kCheckPhotons, one seed, so the same

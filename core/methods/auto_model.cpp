@@ -48,8 +48,8 @@ constexpr double kAureoleSlope = 0.03;
 // where the truncation is what errs: an outside probe's thin layers under a sun 10 and 20
 // degrees high, seen from above (80x60, 16384-path references), measured 0.35 and 0.42-0.43 at
 // the order-3 rungs and 0.21-0.22 and 0.28-0.31 at the order-4 rungs, against truncations of
-// 35 % and 49 % (order 3) and 25 % and 30 % (order 4): 0.86-1.04x. The five bench scenes read
-// 2.7-5.2 %, under the bound at every rung.
+// 33 % and 45 % (order 3) and 23 % and 28 % (order 4): 0.91-1.11x. The five bench scenes read
+// 1.7-3.3 %, under the bound at every rung.
 constexpr double kPhotonCheckToError = 1.25;
 // The zonal terms of the photon candidates: photon's default, which auto leaves as it is.
 const int kZonalOrder = PhotonBakeOptions{}.zonal_order;
@@ -113,8 +113,8 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
              {"tally_resolution", rung.tally_resolution}};
   const double aureole = photonAureoleError(traits, pilot);
   c.samples = bakeViewSamples(traits);
-  // The bound rests on the bench scenes, whose own errors it covers; a scene whose light a small
-  // bake at this order misses by more (measurePhotonError) is predicted from that instead.
+  // The bound rests on the bench scenes, whose own errors it covers; a scene whose light this
+  // order's truncation misses by more (measurePhotonTruncation) is predicted from that instead.
   const double checked = photonCheckedError(pilot, rung.order);
   c.error = kPhotonMargin * std::max(photonViewsError(traits, pilot, rung.bunny_error * factor),
                                      kPhotonCheckToError * checked);
@@ -131,8 +131,8 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
           " % on the bunny scene and at most " + fixed(factor, 2) +
           " times that on the five bench scenes";
   if (pilot.photon_check.count(rung.order) > 0) {
-    c.why += "; a small bake at order " + std::to_string(rung.order) + " measured " +
-             fixed(100 * checked, 1) + " % against the pilot";
+    c.why += "; small bakes put this order's angular truncation at " + fixed(100 * checked, 1) +
+             " % of the light";
   }
   if (traits.peak_split) {
     c.why += "; the droplet's aureole adds " + fixed(100 * aureole, 1) +
@@ -288,7 +288,7 @@ std::vector<AutoCandidate> autoCandidates(const SceneTraits& traits, const Pilot
     }
   }
   const double factor = photonSceneFactor(traits, pilot);
-  if (!traits.photon_refuses &&
+  if (!traits.photon_refuses && !pilot.photon_check_failed &&
       (traits.phase_spikiness <= kPhotonMaxSpikiness || traits.peak_split)) {
     for (const PhotonRung& rung : photonRungs()) {
       if (latticeResolves(traits, rung.light_resolution) && photonTallyResolves(traits, rung)) {

@@ -68,15 +68,16 @@ struct PilotMeasure {
   int samples = 0;     ///< paths per pixel of each pilot render
   int64_t pixels = 0;  ///< pixels of each pilot render, over the views
   /// Per piloted view, its cloud's own light (sun + sky layers) summed over each tile of
-  /// kPilotTile x kPilotTile pixels and the channels, row by row: the mean of the two renders,
-  /// and the sum over the tiles of their squared difference / 4, the noise of that mean. Empty
-  /// tiles where the cloud covers no pixel of the view.
+  /// kPilotTile x kPilotTile pixels and the channels, row by row, the mean of the two renders;
+  /// no tiles where the cloud covers no pixel of the view.
   std::vector<std::vector<double>> view_tiles;
-  std::vector<double> view_tile_noise;
-  /// photon's error by spherical-harmonic order as a small bake measured it against the pilot
-  /// (measurePhotonError): the relative RMS error of the tiles' light, the pilot's noise
-  /// removed, averaged over the views. Empty: not measured.
+  /// photon's angular truncation by spherical-harmonic order L (measurePhotonTruncation): the
+  /// relative RMS difference of small bakes at L and L + 1 over the tiles holding cloud light,
+  /// averaged over the views. Empty: not measured.
   std::map<int, double> photon_check;
+  /// The small bakes failed (the scene refuses them) or measured no finite value: photon is
+  /// not a candidate.
+  bool photon_check_failed = false;
   double photon_check_seconds = 0;  ///< what measuring photon_check took
 };
 

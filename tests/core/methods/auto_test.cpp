@@ -365,7 +365,7 @@ TEST(AutoModel, APhotonTruncationTheBakesMeasuredRaisesItsPrediction) {
         // What the probe measured at these rungs: 0.42-0.43 at order 3, 0.28-0.31 at order 4.
         EXPECT_GE(it->error, order == 3 ? 0.43 : 0.31) << order;
         EXPECT_GE(it->error, b.error);
-        EXPECT_NE(it->why.find("a small bake at order"), std::string::npos) << it->why;
+        EXPECT_NE(it->why.find("angular truncation at"), std::string::npos) << it->why;
       }
     }
   }
@@ -375,17 +375,37 @@ TEST(AutoModel, APhotonTruncationTheBakesMeasuredRaisesItsPrediction) {
   EXPECT_NE(with_large.front().method, "photon");
 }
 
-TEST(AutoPilot, TileErrorTakesThePilotsNoiseOut) {
-  const std::vector<double> pilot{1, 2, 3, 2}, same = pilot;
-  EXPECT_EQ(photonTileError(same, pilot, 0.0), 0.0);
-  const std::vector<double> bright{1.2, 2.4, 3.6, 2.4};
+// The truncation check compares two bakes' tiles where the pilot saw cloud light, relative to
+// the pilot's mean there: background tiles count for nothing, as a shot's error is taken over
+// the cloud's pixels.
+TEST(AutoPilot, TileDifferenceCountsTheCloudsTilesOnly) {
+  const std::vector<double> pilot{1, 2, 3, 2}, a = pilot;
+  EXPECT_EQ(tileDifference(a, pilot, pilot), 0.0);
+  const std::vector<double> b{1.2, 2.4, 3.6, 2.4};
   // RMS of 0.2 x (1, 2, 3, 2) over the mean 2: sqrt(0.04 x 18 / 4) / 2.
-  EXPECT_NEAR(photonTileError(bright, pilot, 0.0), std::sqrt(0.04 * 18 / 4) / 2, 1e-12);
-  // The pilot's noise comes out of the squares, and never below zero.
-  EXPECT_NEAR(photonTileError(bright, pilot, 0.36), std::sqrt((0.72 - 0.36) / 4) / 2, 1e-12);
-  EXPECT_EQ(photonTileError(bright, pilot, 5.0), 0.0);
-  EXPECT_EQ(photonTileError({}, {}, 0.0), 0.0);
-  EXPECT_EQ(photonTileError({1, 2}, pilot, 0.0), 0.0);  // mismatched views: nothing to say
+  EXPECT_NEAR(tileDifference(a, b, pilot), std::sqrt(0.04 * 18 / 4) / 2, 1e-12);
+  EXPECT_NEAR(tileDifference(b, a, pilot), tileDifference(a, b, pilot), 1e-15);
+  // The same cloud in a frame four times as large, the rest background: the same value.
+  std::vector<double> wide = pilot, wide_a = a, wide_b = b;
+  for (int k = 0; k < 12; ++k) {
+    wide.push_back(0);
+    wide_a.push_back(0);
+    wide_b.push_back(0.5);  // light where the pilot saw none is not counted either
+  }
+  EXPECT_NEAR(tileDifference(wide_a, wide_b, wide), tileDifference(a, b, pilot), 1e-15);
+  EXPECT_EQ(tileDifference({}, {}, {}), 0.0);
+  EXPECT_EQ(tileDifference({1, 2}, a, pilot), 0.0);  // mismatched views: nothing to say
+  EXPECT_EQ(tileDifference(a, b, std::vector<double>(4, 0.0)), 0.0);  // no cloud light
+}
+
+// Small bakes the scene refuses, or that measure no finite value, rule photon out.
+TEST(AutoModel, AFailedPhotonCheckRulesPhotonOut) {
+  PilotMeasure p = pilotOf(2, 0.6);
+  EXPECT_EQ(autoCandidates(traitsOf(0.1), p, 0.3, 0).front().method, "photon");
+  p.photon_check_failed = true;
+  for (const AutoCandidate& c : autoCandidates(traitsOf(0.1), p, 0.3, 0)) {
+    EXPECT_NE(c.method, "photon");
+  }
 }
 
 // A thin layer under a sun 20 degrees high, seen from above: photon's expansion at orders 3 and
