@@ -6,6 +6,7 @@
 // under such fills, time that a second thread could not share.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -18,6 +19,7 @@ namespace cloudbake {
 
 template <class T>
 struct FirstTouchAllocator {
+  static_assert(alignof(T) <= alignof(std::max_align_t), "malloc's alignment must serve T");
   using value_type = T;
 
   FirstTouchAllocator() = default;
@@ -47,13 +49,15 @@ using FirstTouchFloats = std::vector<float, FirstTouchAllocator<float>>;
 /// scheduling.
 constexpr size_t kFirstTouchBytes = size_t(1) << 20;
 
-/// Writes one byte of every 4 KiB page of [p, p + bytes), spread over the calling thread's task
-/// arena, so the page faults happen there.
+/// Writes one byte of every 4 KiB page of [p, p + bytes) (bytes > 0), spread over the calling
+/// thread's task arena, so the page faults happen there: a byte every 4 KiB from p, and the
+/// last, as p need not start a page.
 inline void touchPagesInParallel(void* p, size_t bytes) {
   constexpr int64_t kPage = 4096;
   volatile char* const c = static_cast<char*>(p);
-  const int64_t pages = int64_t((bytes + size_t(kPage) - 1) / size_t(kPage));
-  parallelFor(0, pages, [&](int64_t i) { c[i * kPage] = 0; }, {/*grain=*/64});
+  const int64_t last = int64_t(bytes) - 1;
+  parallelFor(0, last / kPage + 2, [&](int64_t i) { c[std::min(i * kPage, last)] = 0; },
+              {/*grain=*/64});
 }
 
 template <class T>
