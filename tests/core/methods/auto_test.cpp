@@ -334,7 +334,7 @@ TEST(AutoChoice, ABakeForAShotWithoutViews) {
 
 // What photon's small bakes measured of its angular truncation (PilotMeasure::photon_check)
 // raises a rung's prediction where it exceeds the bench scenes' bound, by its order, and leaves
-// it alone where the bound covers it (the bench scenes read 2.7-5.2 %).
+// it alone where the bound covers it (the bench scenes read 1.7-3.3 %).
 TEST(AutoModel, APhotonTruncationTheBakesMeasuredRaisesItsPrediction) {
   const SceneTraits t = traitsOf(0.1);
   const PilotMeasure plain = pilotOf(2, 0.6);
