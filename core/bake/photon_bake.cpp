@@ -14,6 +14,7 @@
 
 #include "core/bake/bake_lattice.h"
 #include "core/bake/render_from_bake.h"
+#include "core/bake/sky_p1_scatter.h"
 #include "core/bake/sky_visibility.h"
 #include "core/bake/sun_transmittance.h"
 #include "core/error.h"
@@ -34,6 +35,7 @@ namespace bake_grids {
 std::string photonSh(int i) { return "ms_sh_" + std::to_string(i); }
 std::string photonSkySh(int i) { return "ms_sky_sh_" + std::to_string(i); }
 std::string photonSkyDirectSh(int i) { return "ss_sky_sh_" + std::to_string(i); }
+std::string photonSkySingleScale() { return "sky_single_scale"; }
 std::string photonZonal(int l) { return "ms_zonal_" + std::to_string(l); }
 }  // namespace bake_grids
 
@@ -563,6 +565,50 @@ void addPhotonMeanRadiance(BakedLight* bake, const Rgb* peak_exponent) {
   }
 }
 
+// photonSkySingleScale: the lattice's visibility of the sky at each voxel centre over the one
+// the unscattered sky tally (photonSkyDirectSh(0), read there) holds. The tally is a mean over a
+// coarser voxel that reaches out of the cloud, where the sky shines unattenuated, and over a
+// dense cloud's lit skin and the dark below it alike: an outside probe measured photon 11's
+// single-scattering layer at 1.3-1.95x the path tracer's on a box of extinction 40 under a sky,
+// against 1.04x for `single`, which reads the lattice. Summed over the channels: the factor
+// corrects where the light is, the same for every colour.
+void addSkySingleScale(BakedLight* bake, const FirstTouchFloats& vector, const Sky* shape) {
+  const BakeChannel* tally0 = bake->find(bake_grids::photonSkyDirectSh(0));
+  const BakeChannel* vis = bake->find(bake_grids::kSkyVisibility);
+  const size_t voxels = bake->grid.voxelCount();
+  if (!tally0 || !vis || vector.size() != 3 * voxels) {
+    throw InternalError("photon: the sky's single-scattering scale needs its tally and lattice");
+  }
+  // The sky's P1 shape over its mean per channel (0 for a uniform sky): a point's visibility of
+  // a sky of that shape is V + 3 l . B, as the tally's photons weight their directions.
+  std::array<Vec3, 3> l{Vec3(0.0), Vec3(0.0), Vec3(0.0)};
+  if (shape) {
+    const SkyLight light(*shape);
+    const Rgb mean = meanSkyRadiance(*shape, light);
+    const std::array<Vec3, 3> first = skyFirstMoment(light);
+    for (int c = 0; c < 3; ++c) {
+      l[size_t(c)] = mean[c] > 0 ? first[size_t(c)] / mean[c] : Vec3(0.0);
+    }
+  }
+  const std::vector<float> tally =
+      resampleTrilinear(bake->gridOf(*tally0), tally0->data.data(), 3, bake->grid);
+  BakeChannel& out = bake->add(bake_grids::photonSkySingleScale(), 1);
+  parallelFor(0, int64_t(voxels),
+              [&](int64_t i) {
+                const size_t v = size_t(i);
+                const Vec3 b(vector[3 * v], vector[3 * v + 1], vector[3 * v + 2]);
+                double lattice = 0, mean = 0;
+                for (int c = 0; c < 3; ++c) {
+                  lattice += std::max(0.0, vis->data[v] + 3 * dot(l[size_t(c)], b));
+                  mean += std::max(0.0, double(tally[3 * v + size_t(c)])) / kSqrt4Pi;
+                }
+                out.data[v] = lattice > 0
+                                  ? float(lattice / std::max(mean, lattice / kMaxSkySingleScale))
+                                  : 0.f;
+              },
+              {kCheapIterationGrain});
+}
+
 }  // namespace
 
 std::vector<Rgb> phaseLegendreCoefficients(const PhaseFunction& phase, int degree) {
@@ -746,10 +792,13 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   computeSunTransmittance(bake, sun_dir, medium.extinction, [&](double f, const std::string& s) {
     return !progress || progress(0.05 + 0.1 * f, s);
   });
+  FirstTouchFloats sky_vector;  // the visibility's first moment, for addSkySingleScale
   if (options.sky) {
-    computeSkyVisibility(bake, medium.extinction, [&](double f, const std::string& s) {
-      return !progress || progress(0.15 + 0.1 * f, s);
-    });
+    std::vector<FirstTouchFloats> v = skyVisibilities(
+        bake.grid, bake.density.data(), {medium.extinction},
+        [&](double f, const std::string& s) { return !progress || progress(0.15 + 0.1 * f, s); },
+        &sky_vector);
+    bake.add(bake_grids::kSkyVisibility, 1).data = std::move(v[0]);
   }
   bake.metadata["cloudbake:seconds_lattice"] = str(secondsSince(t0));
   t0 = std::chrono::steady_clock::now();
@@ -767,7 +816,10 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   const PhotonRun run{medium, *grid, options, bake.grid.bounds(), channels, p_l, &bake};
   const double sky_share = !options.sky ? 0.0 : options.sun ? 0.35 : 0.75;
   bakeSunPhotons(run, sun_dir, split, stage(0.25, 0.75 - sky_share, "sun photons"));
-  if (options.sky) bakeSkyPhotons(run, stage(1.0 - sky_share, sky_share, "sky photons"));
+  if (options.sky) {
+    bakeSkyPhotons(run, stage(1.0 - sky_share, sky_share, "sky photons"));
+    addSkySingleScale(&bake, sky_vector, options.sky_shape);
+  }
   bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
   recordKnobs(options, split, tally_resolution, medium.extinction, &bake.metadata);
   const Rgb peak_exponent = Rgb(1.0) - medium.albedo * split.fraction;

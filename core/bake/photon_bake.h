@@ -28,6 +28,12 @@ std::string photonSkySh(int i);
 /// Vec3 (RGB): the same for sky light not yet scattered (the sky seen through the cloud): its
 /// convolution with the phase is the sky's single scattering, view-dependent for any phase.
 std::string photonSkyDirectSh(int i);
+/// float, on the bake's lattice: the factor by which a view scales the sky's single scattering
+/// from photonSkyDirectSh at that point (since photon 14): the lattice's visibility of the sky
+/// there (sky_visibility and its first moment, weighted by the sky's own P1 shape) over the one
+/// the tally holds (its coefficient 0, read there). The tally gives the light's angular shape,
+/// the finer lattice its amount. In [0, kMaxSkySingleScale].
+std::string photonSkySingleScale();
 /// Vec3 (RGB): the zonal coefficient of degree l (order < l <= zonal_order) of the radiance of
 /// sunlight scattered at least once, about the axis along which sunlight travels (-sun
 /// direction): integral of L(w) sqrt((2l + 1) / (4 pi)) P_l(w . axis) over directions of travel,
@@ -65,6 +71,10 @@ struct PhotonBakeOptions {
   /// bake is of its shape (the light key holds it).
   const Sky* sky_shape = nullptr;
 };
+
+/// The largest photonSkySingleScale: where the tally saw (almost) no unscattered sky light, few
+/// photons crossed the voxel, and a larger factor would multiply their noise.
+constexpr double kMaxSkySingleScale = 4;
 
 /// A bake's own estimates of its error in the multiply scattered sunlight (the sky's light under
 /// a black sun; relative, over the voxels weighted by density), written to its metadata as

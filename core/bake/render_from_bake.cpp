@@ -40,7 +40,10 @@
 //                       to the eye where a view builds its field: BakeMarcher::buildViewField);
 //                       the sky's tallies
 //                       ms_sky_sh_* (scattered) and ss_sky_sh_* (unscattered: the sky's single
-//                       scattering, replacing the ambient term) likewise, per unit sky radiance;
+//                       scattering, replacing the ambient term) likewise, per unit sky radiance,
+//                       the unscattered one split by delta-M (weights p_l - f, f = p_(order+1),
+//                       and f albedo L_sky(d) T(x, d) for the delta: addSkyPeak) and scaled by
+//                       sky_single_scale (photonSkySingleScale) where the bake has it;
 //                       where the bake split the phase's forward peak off
 //                       (cloudbake:peak_cut_deg > 0), plus the sunlight scattered through that
 //                       peak only, E p_peak(cos_s) (Tsun^e - Tsun) per channel
@@ -693,6 +696,7 @@ class BakeMarcher {
   struct Scratch {
     // Photon tallies: p_l Y_lm(-d) per coefficient, then the zonal terms'.
     Rgb shw[shCount(kMaxShDegree) + kMaxZonalDegree];
+    Rgb shw_ss[shCount(kMaxShDegree)];  // the sky single scattering's (phaseWeights)
   };
 
   /// Marches `ray` (unit direction) and adds its layers to `sum`.
@@ -701,6 +705,7 @@ class BakeMarcher {
     s.d = ray.d;
     if (svec_) s.p1w = p1RayWeights(sky_l_, sky_g_res_, ray.d);
     s.shw = scratch->shw;
+    s.shw_ss = ssky_sh_.empty() ? nullptr : scratch->shw_ss;
     // Block space: w = index + 1, so the support of the trilinear field, index in (-1, n),
     // is w in (0, n + 1).
     s.w0 = (ray.o - grid_.origin) * inv_h_ + Vec3(1.0);
@@ -719,6 +724,7 @@ class BakeMarcher {
       sum->sky += scale_sky_ * s.sky;
     }
     sum->sky += scale_sky_ * s.sky_ss;
+    if (ssky_delta_) addSkyPeak(ray.d, s, sum);
     addSkyShTerms(ray.d, &s, sum);
     sum->sky_multiple += scale_sky_ * s.sky_ms;
     sum->multiple += s.ms;
@@ -754,6 +760,7 @@ class BakeMarcher {
     // sums run over i in vector registers
     double sky_ms_sh[3][kShCoefficients] = {};
     Rgb* shw = nullptr;          // photon: the per-ray weights, in the caller's Scratch
+    Rgb* shw_ss = nullptr;       // and the sky single scattering's
     bool weights_ready = false;  // shw (rayWeights)
     Rgb peak_phase;              // photon: PhotonPeakLight::scattered towards the camera
     bool peak_ready = false;     // peak_phase (peakPhase)
@@ -804,6 +811,15 @@ class BakeMarcher {
           split.backward ? t_back * s->sky_peak_behind[c] : t_end * s->sky_peak_ahead[c];
       s->sky_ms[c] = std::max(0.0, s->sky_ms[c] - split.f * peak_ms);
     }
+  }
+
+  // photon's delta-M peak of the sky's single scattering (loadPhotonTallies): the sky straight
+  // behind each sample, L(d) T(x, d), scattered on with weight f. Along the ray T_v(t) T(x, d)
+  // is the ray's whole transmittance, so the integral of T_v sigma_s f L(d) T(x, d) is
+  // f albedo L(d) T_v(end) tau (as addSkyP1's forward peak).
+  void addSkyPeak(const Vec3& d, const RayState& s, PixelSum* sum) const {
+    if (!(s.tau > 0)) return;
+    sum->sky += ssky_peak_ * sky_.radiance(d) * (s.transmittance * s.tau);
   }
 
   // Seed 002's Eq. 5 terms of the sky (precomputed's bakes): its single scattering and the
@@ -872,6 +888,8 @@ class BakeMarcher {
       for (int i = 0; i < shCount(order); ++i) {
         ssky_sh_.push_back(tally(bake_grids::photonSkyDirectSh(i)));
       }
+      // Its amount at the point, from the finer lattice (photonSkySingleScale; since photon 14).
+      sscale_ = channel(bake, bake_grids::photonSkySingleScale().c_str(), 1, false, "");
     }
     zonal_order_ = photonZonalOrder(bake, order);
     zonal_sinc_.assign(size_t(zonal_order_) + 1, 0.0);
@@ -884,7 +902,19 @@ class BakeMarcher {
     }
     const double cut_deg = peakCutDegrees(bake);
     if (cut_deg > 0) peak_ = &cache_.peakLight(lut_, cut_deg, medium.albedo);
-    phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order, zonal_order_));
+    phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order + 1, zonal_order_));
+    if (!ssky_sh_.empty()) {
+      // delta-M (Wiscombe 1977) for the sky's single scattering: the phase's degrees above the
+      // order are taken as a forward delta of weight f = p_(order+1), which scatters the sky
+      // straight behind each sample on (addSkyPeak), and the tally's degrees are convolved with
+      // p_l - f. Truncated without it, a forward-peaked phase scatters a dense cloud's lit
+      // hemisphere back towards a camera in front of it.
+      for (int c = 0; c < 3; ++c) {
+        ssky_f_[c] = std::clamp(phase_l_[size_t(order + 1)][c], 0.0, 1.0);
+      }
+      ssky_delta_ = maxComponent(ssky_f_) > 0;
+      ssky_peak_ = ssky_f_ * medium.albedo;
+    }
   }
 
   // The photon tallies' coefficients packed per voxel of their lattice: the radiance first, then
@@ -926,17 +956,26 @@ class BakeMarcher {
   /// of every anchor and sample that reads the view's field instead.
   [[gnu::noinline]] void rayWeights(RayState* s) const {
     s->weights_ready = true;
-    if (sh_order_ > 0) phaseWeights(s->d, s->shw);
+    if (sh_order_ > 0) phaseWeights(s->d, s->shw, s->shw_ss);
   }
 
   /// The weights w_i of the tallies' coefficients for light leaving towards the camera along -d
   /// (d the direction of travel of the view's ray). Funk-Hecke: the light travelling along w'
   /// scatters towards the camera with p(w' . -d), so J(-d) = sum over l, m of p_l L_lm Y_lm(-d).
-  void phaseWeights(const Vec3& d, Rgb* w) const {
+  /// `w_ss` (shCount(order) entries, or null) receives the sky single scattering's, split by
+  /// delta-M: (p_l - f) Y_lm(-d).
+  void phaseWeights(const Vec3& d, Rgb* w, Rgb* w_ss) const {
     double y[shCount(kMaxShDegree)];
     shBasisUpTo(sh_order_, -d, y);
     for (int l = 0; l <= sh_order_; ++l) {
       for (int i = l * l; i < (l + 1) * (l + 1); ++i) w[i] = phase_l_[size_t(l)] * y[i];
+    }
+    if (w_ss) {
+      for (int l = 0; l <= sh_order_; ++l) {
+        for (int i = l * l; i < (l + 1) * (l + 1); ++i) {
+          w_ss[i] = (phase_l_[size_t(l)] - ssky_f_) * y[i];
+        }
+      }
     }
     if (zonal_order_ > sh_order_) {
       // The zonal terms about the axis of travel of sunlight, -sun: Y_l0 there at -d is
@@ -990,7 +1029,7 @@ class BakeMarcher {
     parallelFor(
         0, g.nz,
         [&](int64_t k) {
-          FieldRow row(size_t(g.nx), msh_.size());
+          FieldRow row(size_t(g.nx), msh_.size(), ssky_sh_.size());
           for (int j = 0; j < g.ny; ++j) buildFieldRow(g, view, skip, j, int(k), &row);
         },
         slices);
@@ -1000,11 +1039,17 @@ class BakeMarcher {
   // along the row (the tallies are stored one grid per coefficient), and every voxel's sums run
   // over the coefficients in the order weightedSum takes them.
   struct FieldRow {
-    FieldRow(size_t nx, size_t coefficients)
-        : n(coefficients), active(nx), w(nx * coefficients), sum(3 * nx) {}
-    size_t n;                     // weights per voxel
+    FieldRow(size_t nx, size_t coefficients, size_t sky_coefficients)
+        : n(coefficients),
+          n_ss(sky_coefficients),
+          active(nx),
+          w(nx * coefficients),
+          w_ss(nx * sky_coefficients),
+          sum(3 * nx) {}
+    size_t n, n_ss;               // weights per voxel, and the sky single scattering's
     std::vector<uint8_t> active;  // holds a tally and is read from the field
     std::vector<Rgb> w;           // [i * nx + x]: coefficient i's weight at voxel x
+    std::vector<Rgb> w_ss;        // the same for the sky single scattering (phaseWeights)
     std::vector<Rgb> sum;         // [q * nx + x]: ms, ssky, csky
   };
 
@@ -1025,6 +1070,7 @@ class BakeMarcher {
       }
     }
     Rgb w[shCount(kMaxShDegree) + kMaxZonalDegree];
+    Rgb w_ss[shCount(kMaxShDegree)];
     for (size_t x = 0; x < nx; ++x) {
       if (!r->active[x]) continue;
       Vec3 d = view.forward;
@@ -1037,15 +1083,16 @@ class BakeMarcher {
         }
         if (dist > 0) d = to / dist;
       }
-      phaseWeights(d, w);
+      phaseWeights(d, w, r->n_ss > 0 ? w_ss : nullptr);
       for (size_t i = 0; i < r->n; ++i) r->w[i * nx + x] = w[i];
+      for (size_t i = 0; i < r->n_ss; ++i) r->w_ss[i * nx + x] = w_ss[i];
     }
     std::fill(r->sum.begin(), r->sum.end(), Rgb(0.0));
     for (int q = 0; q < 3; ++q) {
       Rgb* sum = r->sum.data() + size_t(q) * nx;
       for (size_t i = 0; i < lists[q]->size(); ++i) {
         const float* p = (*lists[q])[i] + 3 * v0;
-        const Rgb* wi = r->w.data() + i * nx;
+        const Rgb* wi = (q == 1 ? r->w_ss.data() : r->w.data()) + i * nx;
         for (size_t x = 0; x < nx; ++x) {
           if (r->active[x]) sum[x] += wi[x] * Rgb(p[3 * x], p[3 * x + 1], p[3 * x + 2]);
         }
@@ -1137,7 +1184,7 @@ class BakeMarcher {
       readField(tc, &slot->ms, &slot->ssky, &slot->csky);
     } else {
       if (!rs->weights_ready) rayWeights(rs);
-      shSources(tc, rs->shw, &slot->ms, &slot->ssky, &slot->csky);
+      shSources(tc, rs->shw, rs->shw_ss, &slot->ms, &slot->ssky, &slot->csky);
     }
     return slot;
   }
@@ -1194,12 +1241,12 @@ class BakeMarcher {
   // channel, clamped at 0 (a truncated expansion can dip below zero where the true
   // in-scattered radiance is small). Its read of up to 207 floats is a vector loop, so it is
   // compiled for wider vectors too (7 % of a photon view).
-  CLOUDBAKE_VECTOR_CLONES void shSources(const Cell& c, const Rgb* w, Rgb* ms, Rgb* ssky,
-                                         Rgb* csky) const {
+  CLOUDBAKE_VECTOR_CLONES void shSources(const Cell& c, const Rgb* w, const Rgb* w_ss, Rgb* ms,
+                                         Rgb* ssky, Rgb* csky) const {
     float v[kMaxTallyFloats];
     (tally_ ? *tally_ : lattice_).readPacked(tally_pack_, tally_stride_, c, 0, tally_floats_, v);
     *ms = shSum(v, msh_.size(), w);
-    *ssky = ssky_sh_.empty() ? Rgb(0.0) : shSum(v + ssky_slot_, ssky_sh_.size(), w);
+    *ssky = ssky_sh_.empty() ? Rgb(0.0) : shSum(v + ssky_slot_, ssky_sh_.size(), w_ss);
     *csky = msky_sh_.empty() ? Rgb(0.0) : shSum(v + msky_slot_, msky_sh_.size(), w);
   }
 
@@ -1323,6 +1370,7 @@ class BakeMarcher {
     // Photon's sky light comes from its tallies: its views do not read the visibility.
     if (vsky_ && ssky_sh_.empty()) c.record[kVsky] = lattice_.read(vsky_, c);
     if (mie_) c.record[kMie] = lattice_.read(mie_, c);
+    if (sscale_) c.record[sscale_slot_] = lattice_.read(sscale_, c);
   }
 
   // Slots of the march's packed record (packChannels): every grid a sample reads.
@@ -1355,10 +1403,17 @@ class BakeMarcher {
       ch.push_back({svec_, 3, used});
       used += 3;
     }
-    stride_ = size_t((used + 3) / 4 * 4);
     // A record of 4 floats (method single) is read faster grid by grid (measured: 0.34 against
-    // 0.37 s a view): pack only where a sample reads more.
-    if (used > kCo) pack_ = cache_.pack(&cache_.march, ch, grid_.voxelCount(), stride_);
+    // 0.37 s a view): pack only where a sample reads more. photon's sky_single_scale does not
+    // count: packing a 192^3 lattice for it cost a small view more than its reads save.
+    const bool packs = used > kCo;
+    if (sscale_) {  // photon's: never with sky_sh_ either
+      sscale_slot_ = used;
+      ch.push_back({sscale_, 1, used});
+      used += 1;
+    }
+    stride_ = size_t((used + 3) / 4 * 4);
+    if (packs) pack_ = cache_.pack(&cache_.march, ch, grid_.voxelCount(), stride_);
   }
 
   /// Precomputed's scattered sky light has the angular shape of the sky light the medium
@@ -1516,8 +1571,9 @@ class BakeMarcher {
       readField(c, &s->ms, &s->ssky, &s->csky);
     } else if (!msh_.empty()) {
       if (!rs->weights_ready) rayWeights(rs);
-      shSources(c, rs->shw, &s->ms, &s->ssky, &s->csky);
+      shSources(c, rs->shw, rs->shw_ss, &s->ms, &s->ssky, &s->csky);
     }
+    if (sscale_) s->ssky *= double(v[sscale_slot_]);
     if (peak_) s->ms += peakPhase(rs) * peak_->fluence(s->tsun);
     if (sky_sh_) {
       for (int i = 0; i < kShCoefficients; ++i) s->tsh[i] = v[kSh + i];
@@ -1814,8 +1870,13 @@ class BakeMarcher {
   // Densities above which a voxel is optically thicker than kThinVoxelDepth (thickBlock).
   double thick_density_ = 0;
   const float* vsky_ = nullptr;
-  const float* svec_ = nullptr;                        // sky_visibility_vector (sky_p1_scatter.h)
-  int svec_slot_ = 0;                                  // its first slot in the packed record
+  const float* svec_ = nullptr;    // sky_visibility_vector (sky_p1_scatter.h)
+  int svec_slot_ = 0;              // its first slot in the packed record
+  const float* sscale_ = nullptr;  // photon's sky_single_scale (photonSkySingleScale)
+  int sscale_slot_ = 0;            // its slot in the packed record
+  Rgb ssky_f_{0.0};                // the sky single scattering's delta-M weight, p_(order+1)
+  Rgb ssky_peak_{0.0};             // f x albedo
+  bool ssky_delta_ = false;        // f > 0 in some channel
   std::array<DeltaSplit, 3> sky_split_{};              // the phase per channel, split for it
   bool forward_peak_ = false, backward_peak_ = false;  // any channel's split has one
   std::array<Vec3, 3> sky_l_{};  // the sky's first moment over its mean, per channel

@@ -35,7 +35,8 @@ class AutoMethod final : public BakeMethod {
     // 15 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells).
     // 16: its choice `single` is version 9.
     // 17: before a photon rung is chosen, small bakes measure its angular truncation.
-    info_.version = 17;
+    // 18: its choice `photon` is version 14 (the check's small bakes too).
+    info_.version = 18;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {

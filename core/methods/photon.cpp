@@ -58,9 +58,11 @@ class PhotonMethod final : public BakeMethod {
         "\"The delta-M method\" (J. Atmos. Sci. 34), and Iwabuchi and Suzuki 2009, truncation "
         "approximation (JQSRT), for a droplet's forward peak split off";
     // 12 was taken by a commit that was reverted (dc011db: the sky's single scattering from the
-    // lattice) and 13 by two (bd0ae60, c0838b0: a sparse film refining its cells); the next
-    // change is 14, so no cache holds two physics under one number.
-    info_.version = 11;
+    // lattice) and 13 by two (bd0ae60, c0838b0: a sparse film refining its cells), so no cache
+    // holds two physics under one number.
+    // 14: tallies weighted by density and read so; the sky's single scattering scaled by the
+    // lattice's visibility and split by delta-M.
+    info_.version = 14;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
     info_.bakes_light = true;
@@ -136,11 +138,13 @@ class PhotonMethod final : public BakeMethod {
     // per coefficient and per tally, plus the lattice's own grids.
     const double sky_tallies = o.sky ? 2 : 0;  // sky scattered and unscattered
     const double zonal = std::max(0, o.zonal_order - o.order);
-    // The bake's lattice: density, transmittance to the sun, sky visibility, Cd (RGB).
-    checkLatticeVoxels(o.light_resolution, 6, "a photon bake lattice", limits, source);
+    // The bake's lattice: density, transmittance to the sun, Cd (RGB) and, under a sky, its
+    // visibility, the visibility's first moment while the bake runs (RGB) and the sky's single
+    // scattering's scale.
+    checkLatticeVoxels(o.light_resolution, o.sky ? 10 : 6, "a photon bake lattice", limits, source);
     checkLatticeVoxels(
         o.tally_resolution > 0 ? o.tally_resolution : o.light_resolution,
-        ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3,
+        ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3 + 1,  // + its density
         "a photon tally lattice of " + std::to_string(shCount(o.order)) +
             " spherical-harmonic coefficients (/bake/order " + std::to_string(o.order) + ")",
         limits, source,

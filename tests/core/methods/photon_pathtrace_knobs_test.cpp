@@ -84,7 +84,7 @@ TEST(PhotonKnobs, ABackwardPeakIsRefusedAtParse) {
 
 TEST(PhotonKnobs, LimitsNameTheLatticeAndTheOrder) {
   MethodLimits limits;
-  limits.max_voxels = 20000000;  // the bake's lattice at 128 fits, order 8's tallies do not
+  limits.max_voxels = 25000000;  // the bake's lattice at 128 fits, order 8's tallies do not
   for (const char* knobs : {R"("order": 8)", R"("order": 8, "tally_resolution": 0)"}) {
     const ShotSpec s = parseShot(shot(std::string(R"({"method": "photon", )") + knobs + "}"), "");
     const bool own = photonBakeOptions(s).tally_resolution > 0;
@@ -100,7 +100,7 @@ TEST(PhotonKnobs, LimitsNameTheLatticeAndTheOrder) {
     }
     limits.max_voxels = 0;  // no limit
     EXPECT_NO_THROW(photonMethod().checkLimits(s, limits, "shot.json"));
-    limits.max_voxels = 20000000;
+    limits.max_voxels = 25000000;
   }
   // (A sphere at 1024 is refused as it is parsed: its lattice is over kMaxBakeVoxels.)
   const ShotSpec big =
