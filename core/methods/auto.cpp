@@ -35,7 +35,8 @@ class AutoMethod final : public BakeMethod {
     // 15 was taken by the reverted bd0ae60 and c0838b0 (a sparse film refining its cells).
     // 16: its choice `single` is version 9.
     // 17: before a photon rung is chosen, small bakes measure its angular truncation.
-    // 18: its choice `photon` is version 14 (the check's small bakes too).
+    // 18: its choice `photon` is version 14 (the check's small bakes too), and photon's
+    // seconds are those the check's small bakes took.
     info_.version = 18;
     info_.default_samples = 1;
     info_.animates = true;
@@ -123,7 +124,8 @@ void checkPhotonChoice(const ShotSpec& shot, const Scene& scene, const PilotOpti
     }
   }
   try {
-    choice->pilot.photon_check = measurePhotonTruncation(shot, scene, po, choice->pilot, orders);
+    choice->pilot.photon_check = measurePhotonTruncation(shot, scene, po, choice->pilot, orders,
+                                                         &choice->pilot.photon_seconds);
     for (const auto& [order, value] : choice->pilot.photon_check) {
       if (!std::isfinite(value)) {
         choice->pilot.photon_check_failed = true;
@@ -170,10 +172,10 @@ AutoChoice chooseSequence(const ShotSpec& shot, double tolerance, const AutoOpti
   return choice;
 }
 
-// {"3": 0.51, "4": 0.27}: JSON objects' keys are strings.
-nlohmann::json photonCheckJson(const std::map<int, double>& bias) {
+// {"3": 0.51, "4": 0.27}, by order: JSON objects' keys are strings.
+nlohmann::json byOrderJson(const std::map<int, double>& by_order) {
   nlohmann::json j = nlohmann::json::object();
-  for (const auto& [order, b] : bias) j[std::to_string(order)] = b;
+  for (const auto& [order, value] : by_order) j[std::to_string(order)] = value;
   return j;
 }
 
@@ -326,9 +328,10 @@ nlohmann::json AutoChoice::toJson() const {
             {"samples", pilot.samples},
             {"pixels", pilot.pixels},
             {"seconds", pilot.seconds},
-            {"photon_check", photonCheckJson(pilot.photon_check)},
+            {"photon_check", byOrderJson(pilot.photon_check)},
             {"photon_check_failed", pilot.photon_check_failed},
-            {"photon_check_seconds", pilot.photon_check_seconds}}}};
+            {"photon_check_seconds", pilot.photon_check_seconds},
+            {"photon_seconds_per_photon", byOrderJson(pilot.photon_seconds)}}}};
 }
 
 std::string autoSummary(const AutoChoice& c) {

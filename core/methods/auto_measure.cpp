@@ -262,7 +262,8 @@ double tileDifference(const std::vector<double>& a, const std::vector<double>& b
 
 std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene& scene,
                                               const PilotOptions& o, const PilotMeasure& pilot,
-                                              const std::vector<int>& orders) {
+                                              const std::vector<int>& orders,
+                                              std::map<int, double>* seconds_per_photon) {
   std::map<int, double> truncation;
   const int n = int(scene.cameras.size());
   // No pilot, or no view with cloud light: nothing to check.
@@ -293,6 +294,11 @@ std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene&
     po.order = order;
     const BakedLight bake = bakePhoton(scene.medium, sunDirection(shot), po,
                                        [&](double, const std::string&) { return !cancelled(); });
+    const auto spent = bake.metadata.find("cloudbake:seconds_photons");
+    const int lights = (po.sun ? 1 : 0) + (po.sky ? 1 : 0);
+    if (seconds_per_photon && spent != bake.metadata.end() && lights > 0) {
+      (*seconds_per_photon)[order] = std::stod(spent->second) / double(po.photons * lights);
+    }
     std::vector<std::vector<double>> views(static_cast<size_t>(n));
     for (int v = 0; v < n; ++v) {
       if (pilot.view_tiles[size_t(v)].empty()) continue;  // no cloud here: nothing to be wrong

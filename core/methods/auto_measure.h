@@ -60,10 +60,13 @@ double tileDifference(const std::vector<double>& a, const std::vector<double>& b
 /// expansion holds; where it does not (a thin layer under a low sun, seen from above: 0.49x the
 /// path tracer's light at order 3, 1.27x at order 4, in an outside probe) the bound fails at any
 /// photon count. Empty where the pilot rendered no views. Cancelled when options.progress asks.
+/// `seconds_per_photon` (if not null) receives each baked order's seconds per photon and light
+/// (PilotMeasure::photon_seconds).
 std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene& scene,
                                               const PilotOptions& options,
                                               const PilotMeasure& pilot,
-                                              const std::vector<int>& orders);
+                                              const std::vector<int>& orders,
+                                              std::map<int, double>* seconds_per_photon = nullptr);
 
 /// The relative noise and mean of the cloud's own light (sun + sky layers over the pixels with
 /// alpha >= 0.05 in both) between two renders of different seeds: RMS difference / sqrt 2 /

@@ -8,6 +8,7 @@
 #include "core/format.h"
 #include "core/io/exr_compression.h"
 #include "core/math/sh_basis.h"
+#include "core/methods/auto_measure.h"
 #include "core/methods/common.h"
 #include "core/methods/photon.h"
 
@@ -51,6 +52,16 @@ constexpr double kAureoleSlope = 0.03;
 // 33 % and 45 % (order 3) and 23 % and 28 % (order 4): 0.91-1.11x. The five bench scenes read
 // 1.7-3.3 %, under the bound at every rung.
 constexpr double kPhotonCheckToError = 1.25;
+// A rung's seconds per photon over those of the small bakes of measurePhotonTruncation at its
+// order (PilotMeasure::photon_seconds), where its tally lattice is finer than theirs (32
+// voxels): the larger tallies miss the cache more. Measured on an outside probe's side-lit box
+// and two Perlin clouds (a rust albedo, coloured albedos), 2 threads, each bake's seconds with
+// its lattice: 65536 photons at 64 / 32 took 3.5-4.0 us a photon and light at order 3 and
+// 4.0-5.0 at order 4; 131072 at 64 / 32, order 3, 3.2-3.6 us; 524288 at 128 / 48, order 3,
+// 4.0-4.5 us; 2M at 192 / 48, order 4, 4.9-5.8 us: 1.07-1.47x where the tally is 48. Where they
+// were not measured the pilot's paths stand in (kPhotonPerPath), which read 0.5-0.9x what the
+// bakes took on those scenes.
+constexpr double kFinerTallyPhotonSeconds = 1.3;
 // The zonal terms of the photon candidates: photon's default, which auto leaves as it is.
 const int kZonalOrder = PhotonBakeOptions{}.zonal_order;
 
@@ -119,9 +130,15 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   c.error = kPhotonMargin * std::max(photonViewsError(traits, pilot, rung.bunny_error * factor),
                                      kPhotonCheckToError * checked);
   // A photon's walk costs about what a camera path through the cloud does: both random-walk
-  // the same medium with a next event per collision (fitted in docs/methods.md).
+  // the same medium with a next event per collision (fitted in docs/methods.md); where small
+  // bakes measured it, what they took.
   const double path_seconds = pilot.seconds_per_sample / std::max(pilot.cloud_fraction, 0.02);
-  const double photon_seconds = kPhotonPerPath * path_seconds;
+  const auto measured = pilot.photon_seconds.find(rung.order);
+  const double photon_seconds =
+      measured != pilot.photon_seconds.end()
+          ? (rung.tally_resolution > kCheckTally ? kFinerTallyPhotonSeconds : 1.0) *
+                measured->second
+          : kPhotonPerPath * path_seconds;
   c.seconds = latticeSeconds(rung.light_resolution) * (traits.sky ? 2.0 : 1.0) +
               photon_seconds * double(rung.photons) *
                   ((traits.sky ? 1.0 : 0.0) + (traits.sun ? 1.0 : 0.0)) +
@@ -133,6 +150,9 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   if (pilot.photon_check.count(rung.order) > 0) {
     c.why += "; small bakes put this order's angular truncation at " + fixed(100 * checked, 1) +
              " % of the light";
+  }
+  if (measured != pilot.photon_seconds.end()) {
+    c.why += " and took " + fixed(1e6 * measured->second, 2) + " us a photon";
   }
   if (traits.peak_split) {
     c.why += "; the droplet's aureole adds " + fixed(100 * aureole, 1) +

@@ -79,6 +79,10 @@ struct PilotMeasure {
   /// not a candidate.
   bool photon_check_failed = false;
   double photon_check_seconds = 0;  ///< what measuring photon_check took
+  /// What a photon of those small bakes took to trace and tally, by order, seconds per photon
+  /// and light (the bakes' cloudbake:seconds_photons over their photons from each light that
+  /// shines), at the shot's threads. Empty: not measured.
+  std::map<int, double> photon_seconds;
 };
 
 /// The side in pixels of the pilot's tiles (PilotMeasure::view_tiles): large enough that a
