@@ -565,46 +565,105 @@ void addPhotonMeanRadiance(BakedLight* bake, const Rgb* peak_exponent) {
   }
 }
 
-// photonSkySingleScale: the lattice's visibility of the sky at each voxel centre over the one
-// the unscattered sky tally (photonSkyDirectSh(0), read there) holds. The tally is a mean over a
-// coarser voxel that reaches out of the cloud, where the sky shines unattenuated, and over a
-// dense cloud's lit skin and the dark below it alike: an outside probe measured photon 11's
-// single-scattering layer at 1.3-1.95x the path tracer's on a box of extinction 40 under a sky,
-// against 1.04x for `single`, which reads the lattice. Summed over the channels: the factor
-// corrects where the light is, the same for every colour.
+// The lattice voxels along one axis that overlap each voxel of a coarser lattice over the same
+// bounds, with the share of the coarse voxel's width each covers.
+std::vector<std::vector<std::pair<int, double>>> axisOverlaps(double origin, double h, int n,
+                                                              double coarse_origin, double coarse_h,
+                                                              int coarse_n) {
+  std::vector<std::vector<std::pair<int, double>>> out(static_cast<size_t>(coarse_n));
+  for (int t = 0; t < coarse_n; ++t) {
+    const double lo = coarse_origin + (t - 0.5) * coarse_h, hi = lo + coarse_h;
+    const int first = std::max(0, int(std::floor((lo - origin) / h + 0.5)));
+    const int last = std::min(n - 1, int(std::floor((hi - origin) / h + 0.5)));
+    for (int i = first; i <= last; ++i) {
+      const double a = origin + (i - 0.5) * h, b = a + h;
+      const double overlap = std::min(hi, b) - std::max(lo, a);
+      if (overlap > 0) out[size_t(t)].push_back({i, overlap / coarse_h});
+    }
+  }
+  return out;
+}
+
+// The mean of `values` (one per voxel of `fine`, constant over each voxel) over every voxel of
+// `coarse` (the same bounds), as a track-length tally on `coarse` means its light.
+std::vector<float> boxMean(const BakeGrid& fine, const std::vector<float>& values,
+                           const BakeGrid& coarse) {
+  const auto ox = axisOverlaps(fine.origin.x, fine.voxel_size, fine.nx, coarse.origin.x,
+                               coarse.voxel_size, coarse.nx);
+  const auto oy = axisOverlaps(fine.origin.y, fine.voxel_size, fine.ny, coarse.origin.y,
+                               coarse.voxel_size, coarse.ny);
+  const auto oz = axisOverlaps(fine.origin.z, fine.voxel_size, fine.nz, coarse.origin.z,
+                               coarse.voxel_size, coarse.nz);
+  std::vector<float> out(coarse.voxelCount(), 0.f);
+  parallelFor(0, coarse.nz, [&](int64_t k) {
+    for (int j = 0; j < coarse.ny; ++j) {
+      for (int i = 0; i < coarse.nx; ++i) {
+        double sum = 0;
+        for (const auto& [z, wz] : oz[size_t(k)]) {
+          for (const auto& [y, wy] : oy[size_t(j)]) {
+            for (const auto& [x, wx] : ox[size_t(i)]) {
+              sum += wx * wy * wz * values[fine.index(x, y, z)];
+            }
+          }
+        }
+        out[coarse.index(i, j, int(k))] = float(sum);
+      }
+    }
+  });
+  return out;
+}
+
+// photonSkySingleScale: the lattice's visibility of the sky at each voxel centre over its mean
+// over the tally voxel there (read as the tally is read). The unscattered sky tally is a mean
+// over a coarser voxel that reaches out of the cloud, where the sky shines unattenuated, and
+// spans a dense cloud's lit skin and the dark below it: an outside probe measured photon 11's
+// single layer at 1.3-1.95x the path tracer's on a box of extinction 40 under a sky, against
+// 1.04x for `single`, which reads the lattice. The ratio moves the tally's amount to the point,
+// and the lattice's own angular error (26 directions, the sky's shape to P1) cancels between
+// the point and the mean, so the tally's amount still converges: on the tally's own lattice the
+// scale is 1. Summed over the channels the sky lights: it corrects where the light is, the same
+// for every colour.
 void addSkySingleScale(BakedLight* bake, const FirstTouchFloats& vector, const Sky* shape) {
-  const BakeChannel* tally0 = bake->find(bake_grids::photonSkyDirectSh(0));
   const BakeChannel* vis = bake->find(bake_grids::kSkyVisibility);
   const size_t voxels = bake->grid.voxelCount();
-  if (!tally0 || !vis || vector.size() != 3 * voxels) {
-    throw InternalError("photon: the sky's single-scattering scale needs its tally and lattice");
+  if (!vis || vector.size() != 3 * voxels) {
+    throw InternalError("photon: the sky's single-scattering scale needs the sky's visibility");
   }
   // The sky's P1 shape over its mean per channel (0 for a uniform sky): a point's visibility of
   // a sky of that shape is V + 3 l . B, as the tally's photons weight their directions.
   std::array<Vec3, 3> l{Vec3(0.0), Vec3(0.0), Vec3(0.0)};
+  std::array<bool, 3> lit{true, true, true};
   if (shape) {
     const SkyLight light(*shape);
     const Rgb mean = meanSkyRadiance(*shape, light);
     const std::array<Vec3, 3> first = skyFirstMoment(light);
     for (int c = 0; c < 3; ++c) {
-      l[size_t(c)] = mean[c] > 0 ? first[size_t(c)] / mean[c] : Vec3(0.0);
+      lit[size_t(c)] = mean[c] > 0;
+      l[size_t(c)] = lit[size_t(c)] ? first[size_t(c)] / mean[c] : Vec3(0.0);
     }
   }
-  const std::vector<float> tally =
-      resampleTrilinear(bake->gridOf(*tally0), tally0->data.data(), 3, bake->grid);
-  BakeChannel& out = bake->add(bake_grids::photonSkySingleScale(), 1);
+  std::vector<float> point(voxels);
   parallelFor(0, int64_t(voxels),
               [&](int64_t i) {
                 const size_t v = size_t(i);
                 const Vec3 b(vector[3 * v], vector[3 * v + 1], vector[3 * v + 2]);
-                double lattice = 0, mean = 0;
+                double sum = 0;
                 for (int c = 0; c < 3; ++c) {
-                  lattice += std::max(0.0, vis->data[v] + 3 * dot(l[size_t(c)], b));
-                  mean += std::max(0.0, double(tally[3 * v + size_t(c)])) / kSqrt4Pi;
+                  if (lit[size_t(c)]) sum += std::max(0.0, vis->data[v] + 3 * dot(l[size_t(c)], b));
                 }
-                out.data[v] = lattice > 0
-                                  ? float(lattice / std::max(mean, lattice / kMaxSkySingleScale))
-                                  : 0.f;
+                point[v] = float(sum);
+              },
+              {kCheapIterationGrain});
+  const std::vector<float> tally_mean = boxMean(bake->grid, point, bake->tally_grid);
+  const std::vector<float> mean =
+      resampleTrilinear(bake->tally_grid, tally_mean.data(), 1, bake->grid);
+  BakeChannel& out = bake->add(bake_grids::photonSkySingleScale(), 1);
+  parallelFor(0, int64_t(voxels),
+              [&](int64_t i) {
+                const size_t v = size_t(i);
+                const double p = point[v];
+                out.data[v] =
+                    p > 0 ? float(p / std::max(double(mean[v]), p / kMaxSkySingleScale)) : 0.f;
               },
               {kCheapIterationGrain});
 }
@@ -819,6 +878,7 @@ BakedLight bakePhoton(const Medium& medium, const Vec3& sun_dir, const PhotonBak
   if (options.sky) {
     bakeSkyPhotons(run, stage(1.0 - sky_share, sky_share, "sky photons"));
     addSkySingleScale(&bake, sky_vector, options.sky_shape);
+    FirstTouchFloats().swap(sky_vector);  // freed before Cd: the peak checkLimits counts
   }
   bake.metadata["cloudbake:seconds_photons"] = str(secondsSince(t0));
   recordKnobs(options, split, tally_resolution, medium.extinction, &bake.metadata);

@@ -30,9 +30,10 @@ std::string photonSkySh(int i);
 std::string photonSkyDirectSh(int i);
 /// float, on the bake's lattice: the factor by which a view scales the sky's single scattering
 /// from photonSkyDirectSh at that point (since photon 14): the lattice's visibility of the sky
-/// there (sky_visibility and its first moment, weighted by the sky's own P1 shape) over the one
-/// the tally holds (its coefficient 0, read there). The tally gives the light's angular shape,
-/// the finer lattice its amount. In [0, kMaxSkySingleScale].
+/// there (sky_visibility and its first moment, weighted by the sky's own P1 shape) over its
+/// mean over the tally voxel, read as the tally is read. It moves the tally's amount, a mean
+/// over the coarser voxel, to the point; 1 where the tally is on the bake's lattice. In
+/// [0, kMaxSkySingleScale].
 std::string photonSkySingleScale();
 /// Vec3 (RGB): the zonal coefficient of degree l (order < l <= zonal_order) of the radiance of
 /// sunlight scattered at least once, about the axis along which sunlight travels (-sun
@@ -72,8 +73,8 @@ struct PhotonBakeOptions {
   const Sky* sky_shape = nullptr;
 };
 
-/// The largest photonSkySingleScale: where the tally saw (almost) no unscattered sky light, few
-/// photons crossed the voxel, and a larger factor would multiply their noise.
+/// The largest photonSkySingleScale: a point that sees far more sky than its tally voxel's mean
+/// lies at a dense voxel's lit corner, where a larger factor would multiply the tally's noise.
 constexpr double kMaxSkySingleScale = 4;
 
 /// A bake's own estimates of its error in the multiply scattered sunlight (the sky's light under

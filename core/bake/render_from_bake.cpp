@@ -41,9 +41,10 @@
 //                       the sky's tallies
 //                       ms_sky_sh_* (scattered) and ss_sky_sh_* (unscattered: the sky's single
 //                       scattering, replacing the ambient term) likewise, per unit sky radiance,
-//                       the unscattered one split by delta-M (weights p_l - f, f = p_(order+1),
-//                       and f albedo L_sky(d) T(x, d) for the delta: addSkyPeak) and scaled by
-//                       sky_single_scale (photonSkySingleScale) where the bake has it;
+//                       the unscattered one split by delta-M along the phase's peak (weights
+//                       p_l - f, f = p_(order+1), and f albedo L_sky(d) T(x, d) for the delta;
+//                       a backward peak's mirror: addSkyPeak) and scaled by sky_single_scale
+//                       (photonSkySingleScale) where the bake has it;
 //                       where the bake split the phase's forward peak off
 //                       (cloudbake:peak_cut_deg > 0), plus the sunlight scattered through that
 //                       peak only, E p_peak(cos_s) (Tsun^e - Tsun) per channel
@@ -724,7 +725,7 @@ class BakeMarcher {
       sum->sky += scale_sky_ * s.sky;
     }
     sum->sky += scale_sky_ * s.sky_ss;
-    if (ssky_delta_) addSkyPeak(ray.d, s, sum);
+    if (ssky_delta_) addSkyPeak(ray, s, sum);
     addSkyShTerms(ray.d, &s, sum);
     sum->sky_multiple += scale_sky_ * s.sky_ms;
     sum->multiple += s.ms;
@@ -813,13 +814,21 @@ class BakeMarcher {
     }
   }
 
-  // photon's delta-M peak of the sky's single scattering (loadPhotonTallies): the sky straight
-  // behind each sample, L(d) T(x, d), scattered on with weight f. Along the ray T_v(t) T(x, d)
-  // is the ray's whole transmittance, so the integral of T_v sigma_s f L(d) T(x, d) is
-  // f albedo L(d) T_v(end) tau (as addSkyP1's forward peak).
-  void addSkyPeak(const Vec3& d, const RayState& s, PixelSum* sum) const {
+  // photon's delta-M peak of the sky's single scattering (loadPhotonTallies), as addSkyP1's:
+  // a forward peak scatters the sky straight behind each sample on, L(d) T(x, d), and along the
+  // ray T_v(t) T(x, d) is the ray's whole transmittance, so its integral of T_v sigma_s f L(d)
+  // T(x, d) is f albedo L(d) T_v(end) tau; a backward one returns the sky in front, L(-d)
+  // T(x, -d) = L(-d) T_v t_back (t_back: transmittanceBehind), whose integral is f albedo L(-d)
+  // t_back (1 - T_v(end)^2) / 2.
+  void addSkyPeak(const Ray& ray, const RayState& s, PixelSum* sum) const {
     if (!(s.tau > 0)) return;
-    sum->sky += ssky_peak_ * sky_.radiance(d) * (s.transmittance * s.tau);
+    const double t_end = s.transmittance;
+    if (!ssky_backward_) {
+      sum->sky += ssky_peak_ * sky_.radiance(ray.d) * (t_end * s.tau);
+      return;
+    }
+    const double t_back = transmittanceBehind(ray, s);
+    sum->sky += ssky_peak_ * sky_.radiance(-ray.d) * (t_back * 0.5 * (1 - t_end * t_end));
   }
 
   // Seed 002's Eq. 5 terms of the sky (precomputed's bakes): its single scattering and the
@@ -905,12 +914,21 @@ class BakeMarcher {
     phase_l_ = phaseLegendreCoefficients(*medium.phase, std::max(order + 1, zonal_order_));
     if (!ssky_sh_.empty()) {
       // delta-M (Wiscombe 1977) for the sky's single scattering: the phase's degrees above the
-      // order are taken as a forward delta of weight f = p_(order+1), which scatters the sky
-      // straight behind each sample on (addSkyPeak), and the tally's degrees are convolved with
-      // p_l - f. Truncated without it, a forward-peaked phase scatters a dense cloud's lit
-      // hemisphere back towards a camera in front of it.
+      // order are taken as a delta of weight f along its peak, which scatters the sky straight
+      // behind (a forward peak) or in front of (a backward one) each sample on (addSkyPeak),
+      // and the tally's degrees are convolved with p_l - f (forward) or p_l - (-1)^l f
+      // (backward: the delta's Legendre coefficients), f = |p_(order+1)| where its sign is the
+      // peak's. Truncated without it, a forward-peaked phase scatters a dense cloud's lit
+      // hemisphere back towards a camera in front of it; a backward split taken as a forward one
+      // made a sphere of HG -0.8 seen from below against a bright zenith 17x too bright.
+      ssky_backward_ = phase_l_[1].x < 0 && phase_l_[1].y < 0 && phase_l_[1].z < 0;
+      const bool forward = phase_l_[1].x > 0 && phase_l_[1].y > 0 && phase_l_[1].z > 0;
+      const double sign = (order + 1) % 2 == 0 ? 1.0 : -1.0;  // the backward delta's p_(order+1)
       for (int c = 0; c < 3; ++c) {
-        ssky_f_[c] = std::clamp(phase_l_[size_t(order + 1)][c], 0.0, 1.0);
+        const double p = phase_l_[size_t(order + 1)][c];
+        ssky_f_[c] = forward          ? std::clamp(p, 0.0, 1.0)
+                     : ssky_backward_ ? std::clamp(sign * p, 0.0, 1.0)
+                                      : 0.0;
       }
       ssky_delta_ = maxComponent(ssky_f_) > 0;
       ssky_peak_ = ssky_f_ * medium.albedo;
@@ -973,7 +991,7 @@ class BakeMarcher {
     if (w_ss) {
       for (int l = 0; l <= sh_order_; ++l) {
         for (int i = l * l; i < (l + 1) * (l + 1); ++i) {
-          w_ss[i] = (phase_l_[size_t(l)] - ssky_f_) * y[i];
+          w_ss[i] = (phase_l_[size_t(l)] - (ssky_backward_ && l % 2 ? -1.0 : 1.0) * ssky_f_) * y[i];
         }
       }
     }
@@ -1877,6 +1895,7 @@ class BakeMarcher {
   Rgb ssky_f_{0.0};                // the sky single scattering's delta-M weight, p_(order+1)
   Rgb ssky_peak_{0.0};             // f x albedo
   bool ssky_delta_ = false;        // f > 0 in some channel
+  bool ssky_backward_ = false;     // the phase's peak is backward in every channel (p_1 < 0)
   std::array<DeltaSplit, 3> sky_split_{};              // the phase per channel, split for it
   bool forward_peak_ = false, backward_peak_ = false;  // any channel's split has one
   std::array<Vec3, 3> sky_l_{};  // the sky's first moment over its mean, per channel

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 
 #include "core/bake/photon_bake.h"
 #include "core/bake/render_from_bake.h"
@@ -294,10 +295,18 @@ std::map<int, double> measurePhotonTruncation(const ShotSpec& shot, const Scene&
     po.order = order;
     const BakedLight bake = bakePhoton(scene.medium, sunDirection(shot), po,
                                        [&](double, const std::string&) { return !cancelled(); });
+    // Its seconds per photon and light, for the orders the rungs use (not the next orders
+    // the check compares them with); a value that does not read as a positive time is left
+    // out, and the pilot's paths price that order instead.
     const auto spent = bake.metadata.find("cloudbake:seconds_photons");
     const int lights = (po.sun ? 1 : 0) + (po.sky ? 1 : 0);
-    if (seconds_per_photon && spent != bake.metadata.end() && lights > 0) {
-      (*seconds_per_photon)[order] = std::stod(spent->second) / double(po.photons * lights);
+    const bool rung_order = std::find(orders.begin(), orders.end(), order) != orders.end();
+    if (seconds_per_photon && rung_order && spent != bake.metadata.end() && lights > 0) {
+      char* end = nullptr;
+      const double s = std::strtod(spent->second.c_str(), &end) / double(po.photons * lights);
+      if (end != spent->second.c_str() && std::isfinite(s) && s > 0) {
+        (*seconds_per_photon)[order] = s;
+      }
     }
     std::vector<std::vector<double>> views(static_cast<size_t>(n));
     for (int v = 0; v < n; ++v) {

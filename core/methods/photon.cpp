@@ -60,8 +60,8 @@ class PhotonMethod final : public BakeMethod {
     // 12 was taken by a commit that was reverted (dc011db: the sky's single scattering from the
     // lattice) and 13 by two (bd0ae60, c0838b0: a sparse film refining its cells), so no cache
     // holds two physics under one number.
-    // 14: tallies weighted by density and read so; the sky's single scattering scaled by the
-    // lattice's visibility and split by delta-M.
+    // 14: the sky's single scattering scaled to each point by the lattice's visibility, and
+    // split by delta-M.
     info_.version = 14;
     info_.default_samples = 1;
     info_.max_samples = kMaxViewSamples;
@@ -144,7 +144,7 @@ class PhotonMethod final : public BakeMethod {
     checkLatticeVoxels(o.light_resolution, o.sky ? 10 : 6, "a photon bake lattice", limits, source);
     checkLatticeVoxels(
         o.tally_resolution > 0 ? o.tally_resolution : o.light_resolution,
-        ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3 + 1,  // + its density
+        ((1 + sky_tallies) * shCount(o.order) + zonal) * 3 * 3 + 1,  // + recordErrors' density
         "a photon tally lattice of " + std::to_string(shCount(o.order)) +
             " spherical-harmonic coefficients (/bake/order " + std::to_string(o.order) + ")",
         limits, source,

@@ -229,12 +229,21 @@ TEST(PhotonBake, SkyPhotonsCarryTheSkysShape) {
   EXPECT_LT(uniform_ratio, 0.8 * ref_top / ref_bottom) << "a uniform sky's photons";
 }
 
+// The path tracer's light scattered once (max_depth 1), 512 paths a pixel.
+RenderLayers singleScatteringReference(const Medium& m, const Sun& sun, const Sky& sky,
+                                       const Camera& cam) {
+  PathTracerOptions pt;
+  pt.samples_per_pixel = 512;
+  pt.max_depth = 1;
+  return renderPathTraced(m, sun, sky, cam, pt);
+}
+
 // The sky's single scattering of a dense sphere (optical radius 12, HG 0.8) under a sky alone.
 // The tally of the unscattered sky light is a mean over a tally voxel (the sky outside the
 // cloud, its lit skin and the dark below), and its order scatters the lit hemisphere backwards
 // through the truncated phase: photon 11 measured 1.26x what `single` (which reads only the
 // lattice) gives here, 1.45x at lattices 48 / 24. The lattice's visibility
-// (photonSkySingleScale) and the delta-M split bring it to the lattice's own error: 1.10x
+// (photonSkySingleScale) and the delta-M split bring it near the lattice's own error: 1.13x
 // `single`, which is itself 1.5x the path tracer here (1.18x at 32x32 pixels, 1.05x at a lattice
 // of 192: the lit skin is thinner than a voxel).
 TEST(PhotonBake, TheSkysSingleScatteringHoldsAtADenseEdge) {
@@ -244,10 +253,7 @@ TEST(PhotonBake, TheSkysSingleScatteringHoldsAtADenseEdge) {
   Sky sky;
   sky.radiance = Rgb(1.0);
   const Camera cam = perspectiveCamera(16);
-  PathTracerOptions pt;
-  pt.samples_per_pixel = 512;
-  pt.max_depth = 1;
-  const RenderLayers ref = renderPathTraced(m, sun, sky, cam, pt);
+  const RenderLayers ref = singleScatteringReference(m, sun, sky, cam);
   PhotonBakeOptions o = small(400000, 3);
   o.light_resolution = 96;
   o.tally_resolution = 48;
@@ -268,6 +274,53 @@ TEST(PhotonBake, TheSkysSingleScatteringHoldsAtADenseEdge) {
   EXPECT_NEAR(got / lattice, 1.0, 0.15) << "photon " << got << ", single " << lattice;
   EXPECT_LT(got / r, 1.8) << "photon " << got << ", path tracer " << r;
   EXPECT_GT(got / r, 0.9) << "photon " << got << ", path tracer " << r;
+}
+
+// On the tally's own lattice the sky's single-scattering scale is 1: it moves a tally voxel's
+// mean light to a point within it, and the lattice's angular error (26 directions) cancels
+// between the point and the mean, so the tally's amount still converges.
+TEST(PhotonBake, TheSkysSingleScaleIsOneOnTheTallysOwnLattice) {
+  const Medium m = sphere(6, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(0.8));
+  PhotonBakeOptions o = small(20000, 2);  // tally_resolution 0: the bake's lattice
+  const BakedLight bake = bakePhoton(m, Vec3(0, 0, 1), o);
+  const BakeChannel* scale = bake.find(bake_grids::photonSkySingleScale());
+  ASSERT_NE(scale, nullptr);
+  const BakeChannel* vis = bake.find(bake_grids::kSkyVisibility);
+  int checked = 0;
+  for (size_t v = 0; v < scale->data.size(); ++v) {
+    if (!(vis->data[v] > 0) || !(bake.density[v] > 0)) continue;
+    EXPECT_NEAR(scale->data[v], 1.f, 1e-5f) << v;
+    ++checked;
+  }
+  EXPECT_GT(checked, 100);
+}
+
+// A backward phase's peak is split backwards: HG -0.8 at order 3 has p_4 = +0.41, which a
+// forward split took as a forward delta (17x the path tracer's single layer here, a sphere seen
+// from below against a bright zenith), and the truncated sum unsplit scattered that zenith
+// towards the camera (2.6x); a backward delta returns the dark ground instead (1.14x).
+TEST(PhotonBake, ABackwardPhaseSplitsItsSkySingleScatteringBackwards) {
+  const Medium m = sphere(2, Rgb(0.9), std::make_shared<HenyeyGreensteinPhase>(-0.8));
+  Sun sun;
+  sun.irradiance = Rgb(0.0);
+  Sky sky;  // bright overhead only, seen through the cloud from below
+  sky.type = Sky::Type::kGradient;
+  sky.zenith = Rgb(2.0);
+  sky.horizon = Rgb(0.05);
+  sky.ground = Rgb(0.0);
+  Camera cam = perspectiveCamera(16);
+  cam.position = Vec3(0.1, 0.2, -3.5);
+  cam.look_at = Vec3(0, 0, 0.5);
+  cam.up = Vec3(0, 1, 0);
+  const RenderLayers ref = singleScatteringReference(m, sun, sky, cam);
+  PhotonBakeOptions o = small(200000, 3);
+  o.light_resolution = 48;
+  o.tally_resolution = 24;
+  o.sky_shape = &sky;
+  const RenderLayers l = renderFromBake(bakePhoton(m, Vec3(0, 0, 1), o), m, sun, sky, cam, {});
+  const double r = cloudMean(ref, ref.single), got = cloudMean(l, l.single);
+  ASSERT_GT(r, 0.01);
+  EXPECT_NEAR(got / r, 1.0, 0.15) << "photon " << got << ", path tracer " << r;
 }
 
 // The photons' multiply scattered sunlight against the path tracer's, same scene.

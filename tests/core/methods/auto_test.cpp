@@ -500,6 +500,14 @@ TEST(AutoChoice, PhotonsTruncationIsCheckedBeforeItIsChosen) {
   ASSERT_EQ(p.pilot.photon_check.size(), 2u);
   EXPECT_LT(photonCheckedError(p.pilot, 3), 0.1);
   EXPECT_LT(photonCheckedError(p.pilot, 4), 0.1);
+  // The small bakes' seconds per photon, at the orders the rungs use, price the rungs.
+  ASSERT_EQ(p.pilot.photon_seconds.size(), 2u);
+  for (int order : {3, 4}) {
+    ASSERT_EQ(p.pilot.photon_seconds.count(order), 1u) << order;
+    EXPECT_GT(p.pilot.photon_seconds.at(order), 1e-8) << order;  // 3-5 us measured
+    EXPECT_LT(p.pilot.photon_seconds.at(order), 1e-3) << order;
+  }
+  EXPECT_NE(p.chosen.why.find("us a photon"), std::string::npos) << p.chosen.why;
 }
 
 TEST(AutoChoice, ToleranceNoMethodMeetsIsAClearError) {
