@@ -54,6 +54,55 @@ float sampleTrilinear(const BakeGrid& grid, const float* data, const Vec3& p) {
   return v;
 }
 
+namespace {
+
+// The lattice voxels along one axis that overlap each voxel of a coarser lattice over the same
+// bounds, with the share of the coarse voxel's width each covers.
+std::vector<std::vector<std::pair<int, double>>> axisOverlaps(double origin, double h, int n,
+                                                              double coarse_origin, double coarse_h,
+                                                              int coarse_n) {
+  std::vector<std::vector<std::pair<int, double>>> out(static_cast<size_t>(coarse_n));
+  for (int t = 0; t < coarse_n; ++t) {
+    const double lo = coarse_origin + (t - 0.5) * coarse_h, hi = lo + coarse_h;
+    const int first = std::max(0, int(std::floor((lo - origin) / h + 0.5)));
+    const int last = std::min(n - 1, int(std::floor((hi - origin) / h + 0.5)));
+    for (int i = first; i <= last; ++i) {
+      const double a = origin + (i - 0.5) * h, b = a + h;
+      const double overlap = std::min(hi, b) - std::max(lo, a);
+      if (overlap > 0) out[size_t(t)].push_back({i, overlap / coarse_h});
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<float> boxMean(const BakeGrid& fine, const float* values, const BakeGrid& coarse) {
+  const auto ox = axisOverlaps(fine.origin.x, fine.voxel_size, fine.nx, coarse.origin.x,
+                               coarse.voxel_size, coarse.nx);
+  const auto oy = axisOverlaps(fine.origin.y, fine.voxel_size, fine.ny, coarse.origin.y,
+                               coarse.voxel_size, coarse.ny);
+  const auto oz = axisOverlaps(fine.origin.z, fine.voxel_size, fine.nz, coarse.origin.z,
+                               coarse.voxel_size, coarse.nz);
+  std::vector<float> out(coarse.voxelCount(), 0.f);
+  parallelFor(0, coarse.nz, [&](int64_t k) {
+    for (int j = 0; j < coarse.ny; ++j) {
+      for (int i = 0; i < coarse.nx; ++i) {
+        double sum = 0;
+        for (const auto& [z, wz] : oz[size_t(k)]) {
+          for (const auto& [y, wy] : oy[size_t(j)]) {
+            for (const auto& [x, wx] : ox[size_t(i)]) {
+              sum += wx * wy * wz * values[fine.index(x, y, z)];
+            }
+          }
+        }
+        out[coarse.index(i, j, int(k))] = float(sum);
+      }
+    }
+  });
+  return out;
+}
+
 std::vector<float> resampleTrilinear(const BakeGrid& from, const float* data, int components,
                                      const BakeGrid& to) {
   std::vector<float> out(to.voxelCount() * size_t(components));

@@ -55,6 +55,12 @@ float sampleTrilinear(const BakeGrid& grid, const float* data, const Vec3& p);
 std::vector<float> resampleTrilinear(const BakeGrid& from, const float* data, int components,
                                      const BakeGrid& to);
 
+/// The mean of `values` (one float per voxel of `fine`, taken as constant over each voxel) over
+/// every voxel of `coarse`, a lattice over the same bounds, by the voxels' overlaps (a mean over
+/// a coarse voxel's volume, as a track-length tally holds): coarse.voxelCount() values; parts
+/// of a coarse voxel outside `fine` count as 0. Parallel, deterministic.
+std::vector<float> boxMean(const BakeGrid& fine, const float* values, const BakeGrid& coarse);
+
 /// Transmittance exp(-extinction * integral of density) from `p` along unit direction `dir` to
 /// where the ray leaves the lattice, by ray marching the trilinear density with steps of at most
 /// `step` world units and trapezoidal integration of the optical depth (seed 004's

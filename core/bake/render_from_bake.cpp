@@ -792,16 +792,13 @@ class BakeMarcher {
   // The sky's single scattering of bakes with sky_visibility_vector (sky_p1_scatter.h): per
   // channel, the phase's residual weights the transmittance's P1 expansion (mean sky
   // radiance), and its peak scatters the sky straight behind (forward) or in front (backward)
-  // of each sample. Along the ray T_v(t) T(x(t), d) is the ray's whole transmittance, so the
-  // forward peak's integral of T_v sigma_t L(d) T(x, d) is L(d) T_v(end) tau; towards the
-  // camera T(x, -d) is T_v(t) t_back (t_back: transmittanceBehind), and the integral of
-  // T_v^2 sigma_t is (1 - T_v(end)^2) / 2.
+  // of each sample, in closed form along the ray (peakSky).
   void addSkyP1(const Vec3& d, double t_back, RayState* s, PixelSum* sum) const {
     if (!(s->tau > 0)) return;
     const double t_end = s->transmittance;
     Rgb ahead, behind;  // what the forward and the backward peak scatter
-    if (forward_peak_) ahead = sky_.radiance(d) * (t_end * s->tau);
-    if (backward_peak_) behind = sky_.radiance(-d) * (t_back * 0.5 * (1 - t_end * t_end));
+    if (forward_peak_) ahead = peakSky(d, t_back, *s, false);
+    if (backward_peak_) behind = peakSky(d, t_back, *s, true);
     for (int c = 0; c < 3; ++c) {
       const DeltaSplit& split = sky_split_[size_t(c)];
       const double peak = split.backward ? behind[c] : ahead[c];
@@ -814,21 +811,24 @@ class BakeMarcher {
     }
   }
 
-  // photon's delta-M peak of the sky's single scattering (loadPhotonTallies), as addSkyP1's:
-  // a forward peak scatters the sky straight behind each sample on, L(d) T(x, d), and along the
-  // ray T_v(t) T(x, d) is the ray's whole transmittance, so its integral of T_v sigma_s f L(d)
-  // T(x, d) is f albedo L(d) T_v(end) tau; a backward one returns the sky in front, L(-d)
-  // T(x, -d) = L(-d) T_v t_back (t_back: transmittanceBehind), whose integral is f albedo L(-d)
-  // t_back (1 - T_v(end)^2) / 2.
+  // The integral along the ray of T_v sigma_t L T of the sky a phase's peak scatters on
+  // (addSkyP1's and addSkyPeak's): a forward peak the sky straight behind each sample,
+  // L(d) T(x, d), and along the ray T_v(t) T(x, d) is the ray's whole transmittance, so the
+  // integral is L(d) T_v(end) tau; a backward one the sky in front, L(-d) T(x, -d) =
+  // L(-d) T_v t_back (t_back: transmittanceBehind), whose integral is
+  // L(-d) t_back (1 - T_v(end)^2) / 2.
+  Rgb peakSky(const Vec3& d, double t_back, const RayState& s, bool backward) const {
+    const double t_end = s.transmittance;
+    return backward ? sky_.radiance(-d) * (t_back * 0.5 * (1 - t_end * t_end))
+                    : sky_.radiance(d) * (t_end * s.tau);
+  }
+
+  // photon's delta-M peak of the sky's single scattering (loadPhotonTallies): f albedo times
+  // peakSky.
   void addSkyPeak(const Ray& ray, const RayState& s, PixelSum* sum) const {
     if (!(s.tau > 0)) return;
-    const double t_end = s.transmittance;
-    if (!ssky_backward_) {
-      sum->sky += ssky_peak_ * sky_.radiance(ray.d) * (t_end * s.tau);
-      return;
-    }
-    const double t_back = transmittanceBehind(ray, s);
-    sum->sky += ssky_peak_ * sky_.radiance(-ray.d) * (t_back * 0.5 * (1 - t_end * t_end));
+    const double t_back = ssky_backward_ ? transmittanceBehind(ray, s) : 1.0;
+    sum->sky += ssky_peak_ * peakSky(ray.d, t_back, s, ssky_backward_);
   }
 
   // Seed 002's Eq. 5 terms of the sky (precomputed's bakes): its single scattering and the
@@ -924,14 +924,18 @@ class BakeMarcher {
       ssky_backward_ = phase_l_[1].x < 0 && phase_l_[1].y < 0 && phase_l_[1].z < 0;
       const bool forward = phase_l_[1].x > 0 && phase_l_[1].y > 0 && phase_l_[1].z > 0;
       const double sign = (order + 1) % 2 == 0 ? 1.0 : -1.0;  // the backward delta's p_(order+1)
+      Rgb f(0.0);                                             // the delta's weight per channel
       for (int c = 0; c < 3; ++c) {
         const double p = phase_l_[size_t(order + 1)][c];
-        ssky_f_[c] = forward          ? std::clamp(p, 0.0, 1.0)
-                     : ssky_backward_ ? std::clamp(sign * p, 0.0, 1.0)
-                                      : 0.0;
+        f[c] = forward          ? std::clamp(p, 0.0, 1.0)
+               : ssky_backward_ ? std::clamp(sign * p, 0.0, 1.0)
+                                : 0.0;
       }
-      ssky_delta_ = maxComponent(ssky_f_) > 0;
-      ssky_peak_ = ssky_f_ * medium.albedo;
+      ssky_delta_ = maxComponent(f) > 0;
+      ssky_peak_ = f * medium.albedo;
+      for (int l = 0; l <= order; ++l) {
+        ssky_p_l_.push_back(phase_l_[size_t(l)] - (ssky_backward_ && l % 2 ? -1.0 : 1.0) * f);
+      }
     }
   }
 
@@ -991,7 +995,7 @@ class BakeMarcher {
     if (w_ss) {
       for (int l = 0; l <= sh_order_; ++l) {
         for (int i = l * l; i < (l + 1) * (l + 1); ++i) {
-          w_ss[i] = (phase_l_[size_t(l)] - (ssky_backward_ && l % 2 ? -1.0 : 1.0) * ssky_f_) * y[i];
+          w_ss[i] = ssky_p_l_[size_t(l)] * y[i];
         }
       }
     }
@@ -1892,10 +1896,10 @@ class BakeMarcher {
   int svec_slot_ = 0;              // its first slot in the packed record
   const float* sscale_ = nullptr;  // photon's sky_single_scale (photonSkySingleScale)
   int sscale_slot_ = 0;            // its slot in the packed record
-  Rgb ssky_f_{0.0};                // the sky single scattering's delta-M weight, p_(order+1)
   Rgb ssky_peak_{0.0};             // f x albedo
   bool ssky_delta_ = false;        // f > 0 in some channel
   bool ssky_backward_ = false;     // the phase's peak is backward in every channel (p_1 < 0)
+  std::vector<Rgb> ssky_p_l_;      // the residual's Legendre coefficients, p_l -/+ f, to order
   std::array<DeltaSplit, 3> sky_split_{};              // the phase per channel, split for it
   bool forward_peak_ = false, backward_peak_ = false;  // any channel's split has one
   std::array<Vec3, 3> sky_l_{};  // the sky's first moment over its mean, per channel

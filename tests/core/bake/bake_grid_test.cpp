@@ -38,6 +38,37 @@ TEST(BakeGrid, TrilinearReproducesALinearField) {
   EXPECT_NEAR(sampleTrilinear(g, v.data(), Vec3(-0.25, 0, 0)), 0.5 * 1.0, 1e-6);
 }
 
+// A coarse voxel's mean of a fine lattice's voxels is their mean weighted by overlap: a ramp
+// along x averages to its value at the coarse voxel's centre, wherever the voxels' edges fall,
+// and a coarse voxel reaching past the fine lattice counts what lies outside as 0.
+TEST(BakeGrid, BoxMeanWeightsTheFineVoxelsByTheirOverlap) {
+  BakeGrid fine;
+  fine.origin = Vec3(0.05, 0.05, 0.05);
+  fine.voxel_size = 0.1;
+  fine.nx = fine.ny = fine.nz = 12;  // [0, 1.2]^3
+  std::vector<float> ramp(fine.voxelCount());
+  for (int k = 0; k < 12; ++k)
+    for (int j = 0; j < 12; ++j)
+      for (int i = 0; i < 12; ++i) ramp[fine.index(i, j, k)] = float(fine.center(i, j, k).x);
+  BakeGrid coarse;
+  coarse.origin = Vec3(0.2, 0.2, 0.2);
+  coarse.voxel_size = 0.4;
+  coarse.nx = coarse.ny = coarse.nz = 3;  // [0, 1.2]^3: edges between fine voxels
+  std::vector<float> m = boxMean(fine, ramp.data(), coarse);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(m[coarse.index(i, 1, 2)], coarse.center(i, 1, 2).x, 1e-6);
+  coarse.origin = Vec3(0.15, 0.15, 0.15);
+  coarse.voxel_size = 0.3;
+  coarse.nx = coarse.ny = coarse.nz = 4;  // [0, 1.2]^3: edges through the middle of fine voxels
+  m = boxMean(fine, ramp.data(), coarse);
+  for (int i = 0; i < 4; ++i) EXPECT_NEAR(m[coarse.index(i, 2, 1)], coarse.center(i, 2, 1).x, 1e-6);
+  const std::vector<float> ones(fine.voxelCount(), 1.f);
+  coarse.origin = Vec3(1.2, 0.2, 0.2);  // [1.0, 1.4] along x: half outside
+  coarse.voxel_size = 0.4;
+  coarse.nx = 1;
+  coarse.ny = coarse.nz = 1;
+  EXPECT_NEAR(boxMean(fine, ones.data(), coarse)[0], 0.5, 1e-6);
+}
+
 TEST(BakeGrid, MarchedTransmittanceOfAHomogeneousBlock) {
   const BakeGrid g = lattice(20, 0.1);
   std::vector<float> d(g.voxelCount(), 0.f);
