@@ -37,7 +37,8 @@ class AutoMethod final : public BakeMethod {
     // 17: before a photon rung is chosen, small bakes measure its angular truncation.
     // 18: its choice `photon` is version 14 (the check's small bakes too), and photon's
     // seconds are those the check's small bakes took.
-    info_.version = 18;
+    // 19: a hard surface's rim on the lattice is part of single's and photon's predictions.
+    info_.version = 19;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {
@@ -264,7 +265,8 @@ std::vector<std::string> AutoChoice::planLines() const {
                     fixed(traits.phase_spikiness, 1) +
                     (traits.peak_split ? " (photon splits its forward peak off)" : "") +
                     ", optical thickness of a 1/128 voxel " + fixed(traits.tau_voxel_128, 3) +
-                    ", " + fixed(traits.thinnest_voxels_128, 1) +
+                    ", " + fixed(100 * traits.hard_surface, 0) + " % of its surface hard" + ", " +
+                    fixed(traits.thinnest_voxels_128, 1) +
                     " such voxels across the cloud's thinnest side" +
                     ", the views' aureole brightness " + aureoleList(pilot.aureole));
   }
@@ -313,6 +315,7 @@ nlohmann::json AutoChoice::toJson() const {
             {"sun", traits.sun},
             {"sky", traits.sky},
             {"tau_voxel_128", traits.tau_voxel_128},
+            {"hard_surface", traits.hard_surface},
             {"thinnest_voxels_128", traits.thinnest_voxels_128},
             {"views", traits.views},
             {"pixels", traits.pixels},

@@ -27,6 +27,14 @@ constexpr double kHeavyTailMargin = 1.75;
 // voxel's optical thickness; photon's on the worst factor measured (photonSceneFactor).
 constexpr double kModelMargin = 1.25;
 constexpr double kPhotonMargin = 1.1;
+// The rim's error at a hard surface per voxel of a 128-voxel lattice and per unit of the
+// single-scattering share (latticeRimError): the worst view measured, 1.7.
+constexpr double kRimPerVoxel = 1.7;
+// A 1/128 voxel's optical thickness from which a hard surface's rim is full (the sphere of
+// extinction 15: 0.164).
+constexpr double kRimFullDepth = 0.15;
+// The rim's share below which a plan does not mention it (a soft cloud's: 0.1-2 %).
+constexpr double kRimWorthSaying = 0.005;
 constexpr double kPhotonWorstFactor = 2.25;
 // Seconds per ray of a view rendered from a bake per coefficient it reads: bench/trade_curve.py's
 // photon views at 256x192 took 0.031-0.091 us per ray and coefficient (1.3-4.1 us per ray with
@@ -65,6 +73,13 @@ constexpr double kFinerTallyPhotonSeconds = 1.3;
 // The zonal terms of the photon candidates: photon's default, which auto leaves as it is.
 const int kZonalOrder = PhotonBakeOptions{}.zonal_order;
 
+// Why a lattice's prediction includes latticeRimError (> 0).
+std::string rimWhy(const SceneTraits& traits, double rim) {
+  return "; " + fixed(100 * traits.hard_surface, 0) +
+         " % of the cloud's surface is hard, and the lattice's rim there adds " +
+         fixed(100 * rim, 1) + " %";
+}
+
 // Writing every view's EXR: the same for every candidate.
 double writeSeconds(const SceneTraits& traits) {
   return traits.pixels * traits.write_seconds_per_pixel;
@@ -93,12 +108,14 @@ AutoCandidate singleCandidate(const SceneTraits& traits, const PilotMeasure& pil
   // droplet's silver lining: auto_bench's droplet_sphere, share 0.82, single measured 1.92 over
   // its two views, 2.9 on the one against the sun).
   const double missing = std::max(pilot.multiple_fraction, pilot.multiple_rms);
-  c.error = kModelMargin * std::hypot(missing, bias);
+  const double rim = latticeRimError(traits, pilot, resolution);
+  c.error = kModelMargin * std::hypot(missing, bias, rim);
   c.seconds = latticeSeconds(resolution) * (traits.sky ? 2.0 : 1.0) +
               traits.pixels * c.samples * 1.5e-6 + writeSeconds(traits);
   c.why = "multiple scattering carries " + fixed(100 * pilot.multiple_fraction, 1) +
           " % of the cloud's light in the pilot (" + fixed(100 * missing, 1) +
           " % as an RMS); the lattice's bias " + fixed(100 * bias, 1) + " %";
+  if (rim >= kRimWorthSaying) c.why += rimWhy(traits, rim);
   return c;
 }
 
@@ -127,8 +144,12 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   // The bound rests on the bench scenes, whose own errors it covers; a scene whose light this
   // order's truncation misses by more (measurePhotonTruncation) is predicted from that instead.
   const double checked = photonCheckedError(pilot, rung.order);
-  c.error = kPhotonMargin * std::max(photonViewsError(traits, pilot, rung.bunny_error * factor),
-                                     kPhotonCheckToError * checked);
+  // The bench scenes' soft edges are in the bound; a hard surface's rim is not.
+  const double rim = latticeRimError(traits, pilot, rung.light_resolution);
+  c.error = kPhotonMargin *
+            std::hypot(std::max(photonViewsError(traits, pilot, rung.bunny_error * factor),
+                                kPhotonCheckToError * checked),
+                       rim);
   // A photon's walk costs about what a camera path through the cloud does: both random-walk
   // the same medium with a next event per collision (fitted in docs/methods.md); where small
   // bakes measured it, what they took.
@@ -154,6 +175,7 @@ AutoCandidate photonCandidate(const SceneTraits& traits, const PilotMeasure& pil
   if (measured != pilot.photon_seconds.end()) {
     c.why += " and took " + fixed(1e6 * measured->second, 2) + " us a photon";
   }
+  if (rim >= kRimWorthSaying) c.why += rimWhy(traits, rim);
   if (traits.peak_split) {
     c.why += "; the droplet's aureole adds " + fixed(100 * aureole, 1) +
              " % (views against the sun, " + fixed(100 * kAureoleFloor, 0) + " % + " +
@@ -264,6 +286,26 @@ double photonViewsError(const SceneTraits& traits, const PilotMeasure& pilot, do
   double sum = 0;
   for (double a : pilot.aureole) sum += std::hypot(bound, aureoleTerm(a));
   return sum / double(pilot.aureole.size());
+}
+
+double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int resolution) {
+  // The lattice blurs a hard surface over one of its voxels, and where the sun lies behind the
+  // surface the blurred shell's single scattering is a bright rim the path tracer has not.
+  // Measured on spheres of extinction 15 and 50 (radius 0.7, HG 0.8, albedo 0.95; 80x60 views
+  // 12 and 5 degrees from the sun, against 8192-path references, their noise removed), the
+  // `single` layer's error over the scattered light's mean: 0.24-0.28 at 64 voxels, 0.11-0.15
+  // at 128, 0.06-0.08 at 192, 0.04-0.045 at 320, first order in the voxel's size and nearly the
+  // same at either extinction, and 0.7-1.7 times the single-scattering share of the light (0.08
+  // -0.1 there) per 128 / N; on views lit from the front 0.2-0.4 times it. An outside probe's
+  // sphere of extinction 50 against the sun read 0.44 of its single layer at 320 voxels, 1.1
+  // per 128 / N.
+  // An optically thin surface has no rim to speak of: a sphere of extinction 3 (0.033 a 1/128
+  // voxel) measured 0.019-0.033 of the share per 128 / N, 0.011-0.02 of the thick spheres' 1.7.
+  // The square of its optical thickness over kRimFullDepth bounds that by 1.5-2.5x.
+  const double thick = std::min(1.0, std::pow(traits.tau_voxel_128 / kRimFullDepth, 2));
+  const double single_share = std::clamp(1.0 - pilot.multiple_fraction, 0.0, 1.0);
+  return std::min(1.0, kRimPerVoxel * thick * single_share * traits.hard_surface * 128.0 /
+                           std::max(resolution, 1));
 }
 
 double latticeSingleBias(const SceneTraits& traits, int resolution) {

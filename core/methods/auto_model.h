@@ -27,6 +27,12 @@ struct SceneTraits {
   /// cloud is dense (the 90th percentile of sigma_t inside it): how much a lattice's linear
   /// interpolation of the transmittance errs.
   double tau_voxel_128 = 0;
+  /// The share of the cloud's surface that is hard: of the points holding density a quarter of
+  /// such a voxel from an empty point (inside the box: not its own faces), those whose sigma_t
+  /// is at least half the dense one (tau_voxel_128's). 1 for an analytic sphere; near 0 for a
+  /// soft cloud's edge, and for a gridded one (a voxelised mesh's too) whose voxels are not much
+  /// finer than the 128-voxel lattice's.
+  double hard_surface = 0;
   /// Voxels of a 128-voxel lattice across the cloud's bounds along their thinnest side.
   double thinnest_voxels_128 = 128;
   int views = 0;
@@ -165,6 +171,14 @@ bool photonTallyResolves(const SceneTraits& traits, const PhotonRung& rung);
 /// Bias of single scattering read from a lattice of `resolution` voxels, relative: tau^2 / 2 per
 /// voxel of optical thickness tau (measured on Disney's cloud; auto_model.cpp).
 double latticeSingleBias(const SceneTraits& traits, int resolution);
+
+/// The error of single scattering read from a lattice of `resolution` voxels at a hard surface
+/// (a relative RMSE of the cloud's light): the blurred surface's rim, first order in the voxel,
+/// kRimPerVoxel x the single-scattering share of the light (1 - PilotMeasure::multiple_fraction)
+/// x SceneTraits::hard_surface x 128 / resolution, less where a 1/128 voxel is optically thin
+/// (auto_model.cpp), at most 1. Part of
+/// `single`'s and `photon`'s predictions, whose sun light comes from such a lattice.
+double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int resolution);
 
 /// The candidates the model predicts, cheapest first among those within `tolerance`; `limits`:
 /// most samples per pixel a pathtrace candidate may ask (0: 1e6).
