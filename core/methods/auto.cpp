@@ -265,7 +265,7 @@ std::vector<std::string> AutoChoice::planLines() const {
                     fixed(traits.phase_spikiness, 1) +
                     (traits.peak_split ? " (photon splits its forward peak off)" : "") +
                     ", optical thickness of a 1/128 voxel " + fixed(traits.tau_voxel_128, 3) +
-                    ", " + fixed(100 * traits.hard_surface, 0) + " % of its surface hard" + ", " +
+                    ", " + fixed(100 * traits.hard_surface, 0) + " % of its surface hard, " +
                     fixed(traits.thinnest_voxels_128, 1) +
                     " such voxels across the cloud's thinnest side" +
                     ", the views' aureole brightness " + aureoleList(pilot.aureole));
@@ -316,6 +316,7 @@ nlohmann::json AutoChoice::toJson() const {
             {"sky", traits.sky},
             {"tau_voxel_128", traits.tau_voxel_128},
             {"hard_surface", traits.hard_surface},
+            {"sunward_views", traits.sunward_views},
             {"thinnest_voxels_128", traits.thinnest_voxels_128},
             {"views", traits.views},
             {"pixels", traits.pixels},

@@ -19,6 +19,7 @@ namespace cloudbake {
 namespace {
 
 constexpr double kCloudAlpha = 0.05;
+constexpr double kEdgeProbeFraction = 1.0 / 512;  // hardSurfaceShare's step, of the box's side
 
 // The 90th percentile of sigma_t over the cloud's box where there is any density: a lattice's
 // interpolation errs where the cloud is dense, and a percentile ignores the odd spike.
@@ -43,19 +44,20 @@ double denseSigmaT(const Medium& medium) {
 }
 
 // The share of the cloud's surface that is hard: random points holding density with an empty
-// point a quarter of a 1/128 of the box's longest side away along an axis, counted where sigma_t
-// is at least half `dense_sigma_t`. Empty points outside the box do not count: the lattice's
-// planes lie along its faces (an outside probe's boxes measured 0.01-0.06 from 128 voxels, as
-// the bench's soft clouds did). An analytic sphere is hard all over; a soft cloud's edge fades
-// to 0 within that distance, and so does a gridded one's (a voxelised mesh's too) whose voxels
-// are not much finer than it, which the lattice, no finer than the grid, then resolves (the
-// bench scenes and an outside probe's nine: 0). A lattice's trilinear density blurs a hard
-// surface over one of its voxels (latticeRimError).
+// point kEdgeProbeFraction of the box's longest side away along an axis (a quarter of a 1/128
+// voxel), counted where sigma_t is at least half `dense_sigma_t`. Empty points outside the box
+// do not count: a box's own faces are flat and read as soft clouds do (an outside probe's boxes
+// measured 0.01-0.06 from 128 voxels); the rim is a curved limb's. An analytic sphere is hard
+// all over; a soft cloud's edge fades to 0 within that distance, and so does a gridded cloud's
+// (a voxelised mesh's, a VDB's) unless its voxels are finer than that distance: the bench
+// scenes, an outside probe's nine and the Stanford bunny voxelised at 96 and 256 read 0. A
+// lattice's trilinear density blurs a hard surface over one of its voxels (latticeRimError).
 double hardSurfaceShare(const Medium& medium, double dense_sigma_t) {
+  if (!(dense_sigma_t > 0)) return 0;  // no extinction: no surface to speak of
   const DensityField& field = *medium.density;
   const Bounds3 b = field.bounds();
   const Vec3 size = b.max - b.min;
-  const double h = std::max({size.x, size.y, size.z}) / 512.0;
+  const double h = std::max({size.x, size.y, size.z}) * kEdgeProbeFraction;
   auto lookup = field.lookup();
   Rng rng(0xed9e5eedULL, 11);
   int64_t edge = 0, hard = 0;
@@ -82,6 +84,15 @@ double hardSurfaceShare(const Medium& medium, double dense_sigma_t) {
     if (d * medium.extinction >= 0.5 * dense_sigma_t) ++hard;
   }
   return edge > 0 ? double(hard) / double(edge) : 0.0;
+}
+
+// The share of the views that look towards the sun's side (their axis within 90 degrees of the
+// sun's direction); 1 without views, as the views of a later render may.
+double sunwardShare(const std::vector<Camera>& views, const Vec3& sun_direction) {
+  if (views.empty()) return 1;
+  int sunward = 0;
+  for (const Camera& c : views) sunward += dot(c.look_at - c.position, sun_direction) > 0 ? 1 : 0;
+  return double(sunward) / double(views.size());
 }
 
 // A view's cloud light summed over each tile of kPilotTile pixels (the edge tiles smaller) and
@@ -135,6 +146,7 @@ SceneTraits measureSceneTraits(const ShotSpec& shot, const Scene& scene) {
   if (shot.outputs.exr) {  // views are rendered only then
     t.views = int(shot.views.size());
     for (const Camera& c : shot.views) t.pixels += double(c.width_px) * c.height_px;
+    t.sunward_views = sunwardShare(shot.views, scene.sun.direction);
     // The writes were measured with every layer, 22 channels; a view of fewer writes in about
     // their share (measured: four 640x480 views' ZIP writes 2.2-2.4 s -> 0.4-0.5 s with `cloud`
     // alone, docs/methods.md).

@@ -28,12 +28,15 @@ constexpr double kHeavyTailMargin = 1.75;
 constexpr double kModelMargin = 1.25;
 constexpr double kPhotonMargin = 1.1;
 // The rim's error at a hard surface per voxel of a 128-voxel lattice and per unit of the
-// single-scattering share (latticeRimError): the worst view measured, 1.7.
+// single-scattering share (latticeRimError): the worst view measured towards the sun, 1.7; lit
+// from the front or the side, 0.24-0.38 measured.
 constexpr double kRimPerVoxel = 1.7;
+constexpr double kRimPerVoxelLitFromFront = 0.5;
 // A 1/128 voxel's optical thickness from which a hard surface's rim is full (the sphere of
 // extinction 15: 0.164).
 constexpr double kRimFullDepth = 0.15;
-// The rim's share below which a plan does not mention it (a soft cloud's: 0.1-2 %).
+// The rim below which a plan does not mention it (a cloud's whose surface is hard in a few
+// places).
 constexpr double kRimWorthSaying = 0.005;
 constexpr double kPhotonWorstFactor = 2.25;
 // Seconds per ray of a view rendered from a bake per coefficient it reads: bench/trade_curve.py's
@@ -76,8 +79,8 @@ const int kZonalOrder = PhotonBakeOptions{}.zonal_order;
 // Why a lattice's prediction includes latticeRimError (> 0).
 std::string rimWhy(const SceneTraits& traits, double rim) {
   return "; " + fixed(100 * traits.hard_surface, 0) +
-         " % of the cloud's surface is hard, and the lattice's rim there adds " +
-         fixed(100 * rim, 1) + " %";
+         " % of the cloud's surface is hard, and the lattice's rim there is " +
+         fixed(100 * rim, 1) + " % (in quadrature)";
 }
 
 // Writing every view's EXR: the same for every candidate.
@@ -109,7 +112,8 @@ AutoCandidate singleCandidate(const SceneTraits& traits, const PilotMeasure& pil
   // its two views, 2.9 on the one against the sun).
   const double missing = std::max(pilot.multiple_fraction, pilot.multiple_rms);
   const double rim = latticeRimError(traits, pilot, resolution);
-  c.error = kModelMargin * std::hypot(missing, bias, rim);
+  // hypot of hypot: with no rim, the same bits as before it.
+  c.error = kModelMargin * std::hypot(std::hypot(missing, bias), rim);
   c.seconds = latticeSeconds(resolution) * (traits.sky ? 2.0 : 1.0) +
               traits.pixels * c.samples * 1.5e-6 + writeSeconds(traits);
   c.why = "multiple scattering carries " + fixed(100 * pilot.multiple_fraction, 1) +
@@ -293,18 +297,25 @@ double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int
   // surface the blurred shell's single scattering is a bright rim the path tracer has not.
   // Measured on spheres of extinction 15 and 50 (radius 0.7, HG 0.8, albedo 0.95; 80x60 views
   // 12 and 5 degrees from the sun, against 8192-path references, their noise removed), the
-  // `single` layer's error over the scattered light's mean: 0.24-0.28 at 64 voxels, 0.11-0.15
-  // at 128, 0.06-0.08 at 192, 0.04-0.045 at 320, first order in the voxel's size and nearly the
-  // same at either extinction, and 0.7-1.7 times the single-scattering share of the light (0.08
-  // -0.1 there) per 128 / N; on views lit from the front 0.2-0.4 times it. An outside probe's
-  // sphere of extinction 50 against the sun read 0.44 of its single layer at 320 voxels, 1.1
-  // per 128 / N.
+  // `single` layer's error over the scattered light's mean, each sphere's worst view: 0.24-0.28
+  // at 64 voxels, 0.11-0.15 at 128, 0.06-0.08 at 192, 0.04-0.045 at 320, first order in the
+  // voxel's size and nearly the same at either extinction. Over the single layer's own mean
+  // (the scattered light's times the single-scattering share, 0.08-0.1 there) that is 0.7-1.7
+  // per 128 / N over both views, and 0.24-0.38 on views lit from the front or the side (their
+  // axis 90 degrees or more from the sun). An outside probe's sphere of extinction 50 against
+  // the sun read 0.44 of its single layer at 320 voxels: 1.1 per 128 / N.
   // An optically thin surface has no rim to speak of: a sphere of extinction 3 (0.033 a 1/128
-  // voxel) measured 0.019-0.033 of the share per 128 / N, 0.011-0.02 of the thick spheres' 1.7.
-  // The square of its optical thickness over kRimFullDepth bounds that by 1.5-2.5x.
+  // voxel) measured 0.019-0.033 per 128 / N, 0.011-0.02 of the thick spheres' 1.7. The square
+  // of its optical thickness over kRimFullDepth bounds that by 2.5-4.3x.
+  // Without a pilot (a shot without views) the single-scattering share is unknown: all of it.
+  // A NaN share or thickness reads as the largest rim (std::min(1.0, NaN) is 1).
   const double thick = std::min(1.0, std::pow(traits.tau_voxel_128 / kRimFullDepth, 2));
-  const double single_share = std::clamp(1.0 - pilot.multiple_fraction, 0.0, 1.0);
-  return std::min(1.0, kRimPerVoxel * thick * single_share * traits.hard_surface * 128.0 /
+  const double single_share =
+      pilot.samples > 0 ? std::clamp(1.0 - pilot.multiple_fraction, 0.0, 1.0) : 1.0;
+  const double sunward = std::clamp(traits.sunward_views, 0.0, 1.0);
+  const double per_voxel =
+      kRimPerVoxelLitFromFront + (kRimPerVoxel - kRimPerVoxelLitFromFront) * sunward;
+  return std::min(1.0, per_voxel * thick * single_share * traits.hard_surface * 128.0 /
                            std::max(resolution, 1));
 }
 

@@ -33,6 +33,9 @@ struct SceneTraits {
   /// soft cloud's edge, and for a gridded one (a voxelised mesh's too) whose voxels are not much
   /// finer than the 128-voxel lattice's.
   double hard_surface = 0;
+  /// The share of the views whose axis lies within 90 degrees of the sun's direction (1 where
+  /// the shot renders no views): where a hard surface's rim shows (latticeRimError).
+  double sunward_views = 1;
   /// Voxels of a 128-voxel lattice across the cloud's bounds along their thinnest side.
   double thinnest_voxels_128 = 128;
   int views = 0;
@@ -174,8 +177,9 @@ double latticeSingleBias(const SceneTraits& traits, int resolution);
 
 /// The error of single scattering read from a lattice of `resolution` voxels at a hard surface
 /// (a relative RMSE of the cloud's light): the blurred surface's rim, first order in the voxel,
-/// kRimPerVoxel x the single-scattering share of the light (1 - PilotMeasure::multiple_fraction)
-/// x SceneTraits::hard_surface x 128 / resolution, less where a 1/128 voxel is optically thin
+/// 1.7 where every view looks towards the sun's side (0.5 where none does) x the
+/// single-scattering share of the light (1 - PilotMeasure::multiple_fraction) x
+/// SceneTraits::hard_surface x 128 / resolution, less where a 1/128 voxel is optically thin
 /// (auto_model.cpp), at most 1. Part of
 /// `single`'s and `photon`'s predictions, whose sun light comes from such a lattice.
 double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int resolution);

@@ -115,6 +115,25 @@ TEST(AutoModel, AHardSurfacesRimRaisesTheLatticesPredictions) {
   thin.hard_surface = 1;
   EXPECT_GE(latticeRimError(thin, pilotOf(2, 0.57), 64), 0.028);
   EXPECT_LE(latticeRimError(thin, pilotOf(2, 0.57), 64), 0.1);
+  // Views lit from the front or the side measured a quarter as much rim as views towards the
+  // sun; a shot without views (no pilot) takes every view as towards it and all the light as
+  // scattered once.
+  SceneTraits front = hard;
+  front.sunward_views = 0;
+  EXPECT_NEAR(latticeRimError(front, pilot, 128), latticeRimError(hard, pilot, 128) * 0.5 / 1.7,
+              1e-12);
+  PilotMeasure none;
+  none.multiple_fraction = 1;  // what auto puts there without views
+  EXPECT_NEAR(latticeRimError(hard, none, 128), 1.0, 1e-12);
+  // single's prediction carries it too.
+  auto singleError = [&](const SceneTraits& t) {
+    for (const AutoCandidate& c : autoCandidates(t, pilotOf(2, 0.3), 0.3, 0)) {
+      if (c.method == "single") return c.error;
+    }
+    ADD_FAILURE() << "no single candidate";
+    return 0.0;
+  };
+  EXPECT_GT(singleError(hard), singleError(traitsOf(0.547)) * 1.2);
   EXPECT_LE(latticeRimError(hard, pilotOf(2, 0), 1), 1.0);
   auto photon = [&](const SceneTraits& t, int64_t photons) {
     for (const AutoCandidate& c : autoCandidates(t, pilot, 0.3, 0)) {
@@ -134,7 +153,7 @@ TEST(AutoModel, AHardSurfacesRimRaisesTheLatticesPredictions) {
   for (const Sphere& sphere : spheres) {
     SceneTraits h = traitsOf(sphere.tau), s = traitsOf(sphere.tau), n = traitsOf(sphere.tau);
     h.hard_surface = 1;
-    s.hard_surface = 0.02;  // the most of the bench scenes' (the thin layer's)
+    s.hard_surface = 0.02;  // a few hard places (every bench scene reads 0)
     int missed_before = 0;
     for (const auto& [photons, error] : sphere.measured) {
       const AutoCandidate with_rim = photon(h, photons);
@@ -802,6 +821,7 @@ TEST(AutoPilot, TraitsTellAHardSurfaceFromASoftEdge) {
       traits(R"({"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})");
   EXPECT_GT(sphere.tau_voxel_128, 0.3);
   EXPECT_EQ(sphere.hard_surface, 1.0);
+  EXPECT_EQ(sphere.sunward_views, 0.0);  // its one view looks across the sun's direction
   const SceneTraits box = traits(R"({"box": {"min": [-1, -1, -1], "max": [1, 1, 1]}})");
   EXPECT_GT(box.tau_voxel_128, 0.3);
   EXPECT_EQ(box.hard_surface, 0.0);
