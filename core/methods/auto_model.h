@@ -30,8 +30,8 @@ struct SceneTraits {
   /// The share of the cloud's surface that is hard: of the points holding density a quarter of
   /// such a voxel from an empty point (inside the box: not its own faces), those whose sigma_t
   /// is at least half the dense one (tau_voxel_128's). 1 for an analytic sphere; near 0 for a
-  /// soft cloud's edge, and for a gridded one (a voxelised mesh's too) whose voxels are not much
-  /// finer than the 128-voxel lattice's.
+  /// soft cloud's edge, and for a gridded one (a voxelised mesh's too) whose voxels are not
+  /// finer than that quarter voxel.
   double hard_surface = 0;
   /// The share of the views whose axis lies within 90 degrees of the sun's direction (1 where
   /// the shot renders no views): where a hard surface's rim shows (latticeRimError).
@@ -178,10 +178,10 @@ double latticeSingleBias(const SceneTraits& traits, int resolution);
 /// The error of single scattering read from a lattice of `resolution` voxels at a hard surface
 /// (a relative RMSE of the cloud's light): the blurred surface's rim, first order in the voxel,
 /// 1.7 where every view looks towards the sun's side (0.5 where none does) x the
-/// single-scattering share of the light (1 - PilotMeasure::multiple_fraction) x
-/// SceneTraits::hard_surface x 128 / resolution, less where a 1/128 voxel is optically thin
-/// (auto_model.cpp), at most 1. Part of
-/// `single`'s and `photon`'s predictions, whose sun light comes from such a lattice.
+/// single-scattering share of the light (1 - PilotMeasure::multiple_fraction; 1 without a
+/// pilot) x SceneTraits::hard_surface x 128 / resolution, less where a 1/128 voxel is optically
+/// thin (auto_model.cpp), at most 1. Part of `single`'s and `photon`'s predictions, whose sun
+/// light comes from such a lattice.
 double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int resolution);
 
 /// The candidates the model predicts, cheapest first among those within `tolerance`; `limits`:
