@@ -35,6 +35,9 @@ constexpr double kRimPerVoxelLitFromFront = 0.5;
 // A 1/128 voxel's optical thickness from which a hard surface's rim is full (the sphere of
 // extinction 15: 0.164).
 constexpr double kRimFullDepth = 0.15;
+// The single-scattering share a shot without views (no pilot) is taken to have: the spheres'
+// measured 0.08-0.1 (latticeRimError).
+constexpr double kRimShareWithoutPilot = 0.1;
 // The rim below which a plan does not mention it (a cloud's whose surface is hard in a few
 // places).
 constexpr double kRimWorthSaying = 0.005;
@@ -307,11 +310,15 @@ double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int
   // An optically thin surface has no rim to speak of: a sphere of extinction 3 (0.033 a 1/128
   // voxel) measured 0.019-0.033 per 128 / N, 0.011-0.02 of the thick spheres' 1.7. The square
   // of its optical thickness over kRimFullDepth bounds that by 2.5-4.3x.
-  // Without a pilot (a shot without views) the single-scattering share is unknown: all of it.
+  // Without a pilot (a shot without views, whose bake.vdb later views read) the share is not
+  // measured: the thick spheres' 0.1 (kRimShareWithoutPilot), with every view towards the sun.
+  // All of the light, a first form, put the 16M rung at 75 % on a sphere of
+  // extinction 50, a bake no tolerance could ask for; a thin surface keeps its damping.
   // A NaN share or thickness reads as the largest rim (std::min(1.0, NaN) is 1).
   const double thick = std::min(1.0, std::pow(traits.tau_voxel_128 / kRimFullDepth, 2));
-  const double single_share =
-      pilot.samples > 0 ? std::clamp(1.0 - pilot.multiple_fraction, 0.0, 1.0) : 1.0;
+  const double single_share = pilot.samples > 0
+                                  ? std::clamp(1.0 - pilot.multiple_fraction, 0.0, 1.0)
+                                  : kRimShareWithoutPilot;
   const double sunward = std::clamp(traits.sunward_views, 0.0, 1.0);
   const double per_voxel =
       kRimPerVoxelLitFromFront + (kRimPerVoxel - kRimPerVoxelLitFromFront) * sunward;

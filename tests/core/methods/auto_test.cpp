@@ -116,15 +116,15 @@ TEST(AutoModel, AHardSurfacesRimRaisesTheLatticesPredictions) {
   EXPECT_GE(latticeRimError(thin, pilotOf(2, 0.57), 64), 0.028);
   EXPECT_LE(latticeRimError(thin, pilotOf(2, 0.57), 64), 0.1);
   // Views lit from the front or the side measured a quarter as much rim as views towards the
-  // sun; a shot without views (no pilot) takes every view as towards it and all the light as
-  // scattered once.
+  // sun; a shot without views (no pilot) takes every view as towards it and the thick spheres'
+  // share of light scattered once, 0.1.
   SceneTraits front = hard;
   front.sunward_views = 0;
   EXPECT_NEAR(latticeRimError(front, pilot, 128), latticeRimError(hard, pilot, 128) * 0.5 / 1.7,
               1e-12);
   PilotMeasure none;
   none.multiple_fraction = 1;  // what auto puts there without views
-  EXPECT_NEAR(latticeRimError(hard, none, 128), 1.0, 1e-12);
+  EXPECT_NEAR(latticeRimError(hard, none, 128), 1.7 * 0.1, 1e-12);
   // single's prediction carries it too.
   auto singleError = [&](const SceneTraits& t) {
     for (const AutoCandidate& c : autoCandidates(t, pilotOf(2, 0.3), 0.3, 0)) {
