@@ -28,9 +28,10 @@ constexpr double kHeavyTailMargin = 1.75;
 constexpr double kModelMargin = 1.25;
 constexpr double kPhotonMargin = 1.1;
 // The rim's error at a hard surface per voxel of a 128-voxel lattice and per unit of the
-// single-scattering share (latticeRimError): the worst view measured towards the sun, 1.7; lit
-// from the front or the side, 0.24-0.38 measured.
-constexpr double kRimPerVoxel = 1.7;
+// single-scattering share (latticeRimError): towards the sun, what an outside probe's spheres
+// needed for their photon rungs to be bounded (2.4-4.9; the developers' own views needed 1.7);
+// lit from the front or the side, 0.24-0.38 measured.
+constexpr double kRimPerVoxel = 5.0;
 constexpr double kRimPerVoxelLitFromFront = 0.5;
 // A 1/128 voxel's optical thickness from which a hard surface's rim is full (the sphere of
 // extinction 15: 0.164).
@@ -307,9 +308,14 @@ double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int
   // per 128 / N over both views, and 0.24-0.38 on views lit from the front or the side (their
   // axis 90 degrees or more from the sun). An outside probe's sphere of extinction 50 against
   // the sun read 0.44 of its single layer at 320 voxels: 1.1 per 128 / N.
+  // How much of a view the rim covers depends on where the sun lies behind the limb: another
+  // outside probe's spheres (radius 0.6 and 0.7, extinction 15 and 20; views 5-13 degrees from
+  // the sun at other distances and framings) measured photon's rungs at up to 0.548 (524288
+  // photons, one view 8 degrees from the sun) where 1.7 predicted 0.27. Bounding every rung
+  // there takes 2.4-4.9 per 128 / N, of the share, towards the sun: kRimPerVoxel.
   // An optically thin surface has no rim to speak of: a sphere of extinction 3 (0.033 a 1/128
   // voxel) measured 0.019-0.033 per 128 / N, 0.011-0.02 of the thick spheres' 1.7. The square
-  // of its optical thickness over kRimFullDepth bounds that by 2.5-4.3x.
+  // of its optical thickness over kRimFullDepth bounds that by 2.5-4.3x (by 7-13x with 5).
   // Without a pilot (a shot without views, whose bake.vdb later views read) the share is not
   // measured: the thick spheres' 0.1 (kRimShareWithoutPilot), with every view towards the sun.
   // All of the light, a first form, put the 16M rung at 75 % on a sphere of

@@ -177,7 +177,7 @@ double latticeSingleBias(const SceneTraits& traits, int resolution);
 
 /// The error of single scattering read from a lattice of `resolution` voxels at a hard surface
 /// (a relative RMSE of the cloud's light): the blurred surface's rim, first order in the voxel,
-/// 1.7 where every view looks towards the sun's side (0.5 where none does) x the
+/// 5 where every view looks towards the sun's side (0.5 where none does) x the
 /// single-scattering share of the light (1 - PilotMeasure::multiple_fraction; 0.1 without a
 /// pilot) x SceneTraits::hard_surface x 128 / resolution, less where a 1/128 voxel is optically
 /// thin (auto_model.cpp), at most 1. Part of `single`'s and `photon`'s predictions, whose sun

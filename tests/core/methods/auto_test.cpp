@@ -110,21 +110,22 @@ TEST(AutoModel, AHardSurfacesRimRaisesTheLatticesPredictions) {
               1e-12);
   EXPECT_EQ(latticeRimError(traitsOf(0.547), pilot, 64), 0.0);
   // A sphere of extinction 3 (0.033 a 1/128 voxel) against the sun measured 0.022-0.028 at 64
-  // voxels, with 43 % of its light scattered once: thin surfaces have little rim.
+  // voxels, with 43 % of its light scattered once: thin surfaces have little rim (a tenth of a
+  // thick one's here).
   SceneTraits thin = traitsOf(0.033);
   thin.hard_surface = 1;
   EXPECT_GE(latticeRimError(thin, pilotOf(2, 0.57), 64), 0.028);
-  EXPECT_LE(latticeRimError(thin, pilotOf(2, 0.57), 64), 0.1);
+  EXPECT_LE(latticeRimError(thin, pilotOf(2, 0.57), 64), 0.25);
   // Views lit from the front or the side measured a quarter as much rim as views towards the
   // sun; a shot without views (no pilot) takes every view as towards it and the thick spheres'
   // share of light scattered once, 0.1.
   SceneTraits front = hard;
   front.sunward_views = 0;
-  EXPECT_NEAR(latticeRimError(front, pilot, 128), latticeRimError(hard, pilot, 128) * 0.5 / 1.7,
+  EXPECT_NEAR(latticeRimError(front, pilot, 128), latticeRimError(hard, pilot, 128) * 0.5 / 5,
               1e-12);
   PilotMeasure none;
   none.multiple_fraction = 1;  // what auto puts there without views
-  EXPECT_NEAR(latticeRimError(hard, none, 128), 1.7 * 0.1, 1e-12);
+  EXPECT_NEAR(latticeRimError(hard, none, 128), 5 * 0.1, 1e-12);
   // single's prediction carries it too.
   auto singleError = [&](const SceneTraits& t) {
     for (const AutoCandidate& c : autoCandidates(t, pilotOf(2, 0.3), 0.3, 0)) {
@@ -146,10 +147,15 @@ TEST(AutoModel, AHardSurfacesRimRaisesTheLatticesPredictions) {
     double tau;
     std::vector<std::pair<int64_t, double>> measured;  // photons, relative RMSE
   };
-  // At extinction 50 the 131072 rung's tally is too thick to be a candidate.
+  // At extinction 50 the 131072 rung's tally is too thick to be a candidate. The last two are an
+  // outside probe's: the sphere of extinction 15 framed otherwise, and one of extinction 20 and
+  // radius 0.6 seen 8 degrees from the sun (one view; its pilot put 89 % of the light multiply
+  // scattered, as this test's does 90 %).
   const std::vector<Sphere> spheres = {
       {0.164, {{131072, 0.347}, {524288, 0.189}, {2097152, 0.104}, {4194304, 0.095}}},
-      {0.547, {{524288, 0.219}, {2097152, 0.128}, {4194304, 0.111}, {16777216, 0.069}}}};
+      {0.547, {{524288, 0.219}, {2097152, 0.128}, {4194304, 0.111}, {16777216, 0.069}}},
+      {0.164, {{524288, 0.359}, {2097152, 0.214}}},
+      {0.188, {{524288, 0.548}, {2097152, 0.323}}}};
   for (const Sphere& sphere : spheres) {
     SceneTraits h = traitsOf(sphere.tau), s = traitsOf(sphere.tau), n = traitsOf(sphere.tau);
     h.hard_surface = 1;
