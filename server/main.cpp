@@ -16,6 +16,7 @@
 #include <string_view>
 #include <thread>
 
+#include "common/cli_number.h"
 #include "common/exit_codes.h"
 #include "core/error.h"
 #include "core/io/exr_io.h"
@@ -185,19 +186,19 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
   app.add_option("--max-job-seconds", o.max_job_seconds,
                  "wall-clock seconds a job may run before it is stopped and FAILED (0: no limit)")
       ->envname("CLOUDBAKE_MAX_JOB_SECONDS")
-      ->check(CLI::Range(0.0, 1e9))
+      ->check(cloudbake::numberIn(0, 1e9))
       ->capture_default_str();
   app.add_option("--keep-jobs-hours", f->keep_jobs_hours,
                  "finished jobs (records, inputs, outputs) older than this are pruned, unless a "
                  "client touched them in the last 10 minutes (0: kept forever)")
       ->envname("CLOUDBAKE_KEEP_JOBS_HOURS")
-      ->check(CLI::Range(0.0, 1e6))
+      ->check(cloudbake::numberIn(0, 1e6))
       ->capture_default_str();
   app.add_option("--scrub-hours", f->scrub_hours,
                  "every stored output and asset is hashed again this often: corrupt assets are "
                  "dropped, corrupt outputs rebuilt from the cache when they can be (0: never)")
       ->envname("CLOUDBAKE_SCRUB_HOURS")
-      ->check(CLI::Range(0.0, 1e6))
+      ->check(cloudbake::numberIn(0, 1e6))
       ->capture_default_str();
   app.add_option("--max-finished-jobs", o.max_finished_jobs,
                  "finished jobs kept at most; the oldest beyond it are pruned (0: no limit)")

@@ -22,6 +22,7 @@
 
 #include "client/shot_paths.h"
 #include "cloudbake/v1/bake_service.grpc.pb.h"
+#include "common/cli_number.h"
 #include "common/cli_suggest.h"
 #include "common/exit_codes.h"
 #include "common/grpc_status.h"
@@ -1002,16 +1003,16 @@ void addGlobalOptions(CLI::App& app, Client* c, double* deadline_s, std::string*
   c->server = env_server && *env_server ? env_server : "127.0.0.1:50051";
   app.add_option("--server", c->server, "HOST:PORT of cloudbake-server (env CLOUDBAKE_SERVER)");
   app.add_option("--timeout", c->timeout_s, "deadline in seconds for connecting and short calls")
-      ->check(CLI::PositiveNumber);
+      ->check(cloudbake::numberIn(0, 1e6, true));
   app.add_option("--deadline", *deadline_s,
                  "seconds the whole command may take (uploads, submit, watch, fetch); on expiry "
                  "exit 4 and the job goes on (default: none)")
-      ->check(CLI::PositiveNumber);
+      ->check(cloudbake::numberIn(0, 1e7, true));
   app.add_flag("--json", c->json, "machine-readable output on stdout (logs stay on stderr)");
   app.add_option("--retry-seconds", c->retry_s,
                  "how long submit retries when the server's queue is full or the server is "
                  "briefly unavailable (exponential backoff with jitter; 0: no retry)")
-      ->check(CLI::Range(0.0, 86400.0))
+      ->check(cloudbake::numberIn(0, 86400))
       ->capture_default_str();
   app.add_flag("--tls", c->tls, "connect with TLS, trusting the system's CA certificates");
   app.add_option("--tls-ca", c->tls_ca,
@@ -1139,6 +1140,17 @@ int reportError(std::exception_ptr error) {
   return cloudbake::exitCodeFor(e.kind);
 }
 
+// The global options that take a value, as "--name": the word after one is its value, not a
+// mistyped command (a `--retry-seconds 1e9` out of range was called an unknown command '1e9').
+std::vector<std::string> valueOptions(const CLI::App& app) {
+  std::vector<std::string> names;
+  for (const CLI::Option* o : app.get_options()) {
+    if (o->get_type_size_max() <= 0) continue;  // a flag
+    for (const std::string& n : o->get_lnames()) names.push_back("--" + n);
+  }
+  return names;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -1155,8 +1167,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     std::vector<std::string> commands;
     for (const CLI::App* sub : app.get_subcommands({})) commands.push_back(sub->get_name());
-    const std::string typo =
-        cloudbake::unknownCommand(argc, argv, commands, {"--server", "--timeout", "--deadline"});
+    const std::string typo = cloudbake::unknownCommand(argc, argv, commands, valueOptions(app));
     if (!typo.empty()) {
       std::cerr << "cloudctl: " << cloudbake::unknownCommandMessage(typo, commands) << "\n";
       return ExitCode::kBadInput;

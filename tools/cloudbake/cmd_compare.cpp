@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "common/cli_number.h"
 #include "core/error.h"
 #include "core/io/exr_io.h"
 #include "core/transport/layers_exr.h"
@@ -133,7 +134,7 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--cloud-alpha", opt->cloud_alpha,
                   "count only the pixels whose reference beauty alpha is at least this (0..1; "
                   "default 0 = every pixel)")
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(numberIn(0, 1));
   cmd->add_option("--mask-from", opt->mask_from,
                   "with --cloud-alpha: take the alpha from this EXR's beauty instead of the "
                   "reference's (e.g. to compare two renders of another renderer over one cloud)");

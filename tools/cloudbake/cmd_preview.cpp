@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "common/cli_number.h"
 #include "core/error.h"
 #include "core/io/exr_io.h"
 #include "core/io/png_writer.h"
@@ -72,7 +73,7 @@ void addPreviewCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--exposure", opt->exposure,
                   "radiance multiplier (default: auto, the 99th percentile of luminance at 0.8), "
                   "so previews of different files compare")
-      ->check(CLI::PositiveNumber);
+      ->check(numberIn(0, 1e12, true));
   cmd->callback([opt, exit_code] {
     // CLI11's PositiveNumber lets NaN through (every comparison with it is false).
     if (!(opt->exposure >= 0 && opt->exposure <= 1e12)) {

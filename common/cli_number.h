@@ -1,0 +1,44 @@
+// A CLI11 check for options that take a real number, shared by cloudbake, cloudctl and
+// cloudbake-server. Header-only, beside cli_suggest.h.
+//
+// CLI::Range and CLI::PositiveNumber let NaN through (every comparison with it is false: a
+// `--timeout nan` became a deadline of -2147483648 s) and print their bounds with six decimals
+// (PositiveNumber's upper one as 309 digits). This check parses the text itself, refuses what
+// does not read whole as a finite number, and names the range as it was written.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+namespace cloudbake {
+
+/// Shortest decimal form of a bound: 0, 86400, 1e+06.
+inline std::string cliBound(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+/// Accepts a number x with lo <= x <= hi (lo < x where `lo_open`); the error reads
+/// "must be a number in (0, 1e+06], got nan", which CLI11 prefixes with the option's name.
+inline CLI::Validator numberIn(double lo, double hi, bool lo_open = false) {
+  const std::string range = (lo_open ? "(" : "[") + cliBound(lo) + ", " + cliBound(hi) + "]";
+  return CLI::Validator(
+      [lo, hi, lo_open, range](std::string& text) -> std::string {
+        const char* begin = text.c_str();
+        char* end = nullptr;
+        errno = 0;
+        const double x = std::strtod(begin, &end);
+        const bool whole = end != begin && *end == '\0' && errno != ERANGE;
+        const bool inside = std::isfinite(x) && (lo_open ? x > lo : x >= lo) && x <= hi;
+        if (whole && inside) return {};
+        return "must be a number in " + range + ", got " + text;
+      },
+      "NUMBER in " + range);
+}
+
+}  // namespace cloudbake
