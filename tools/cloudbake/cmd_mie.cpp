@@ -45,7 +45,7 @@ void addMieCommand(CLI::App& app, int* exit_code) {
   CLI::App* cmd = app.add_subcommand("mie",
                                      "Lorenz-Mie efficiencies of a homogeneous sphere; prints "
                                      "{\"qext\",\"qsca\",\"qback\",\"g\"} as one JSON line");
-  cmd->add_option("--x", opt->x, "size parameter x = 2 pi r / lambda, in (0, 1e5]")->required();
+  cmd->add_option("--x", opt->x, "size parameter x = 2 pi r / lambda, in [1e-8, 1e5]")->required();
   cmd->add_option("--m", opt->m,
                   "relative refractive index RE,IM; absorption may be written with either sign "
                   "of IM (1.33,-1e-5 == 1.33,1e-5)")
