@@ -8,10 +8,10 @@
 namespace cloudbake::tool {
 namespace {
 
-std::atomic<bool> g_interrupted{false};
-static_assert(std::atomic<bool>::is_always_lock_free, "set from a signal handler");
+std::atomic<int> g_signal{0};  // the first SIGINT or SIGTERM; 0 before it
+static_assert(std::atomic<int>::is_always_lock_free, "set from a signal handler");
 
-extern "C" void onInterrupt(int) { g_interrupted.store(true, std::memory_order_relaxed); }
+extern "C" void onInterrupt(int signal) { g_signal.store(signal, std::memory_order_relaxed); }
 
 }  // namespace
 
@@ -30,6 +30,8 @@ void installInterruptHandler() {
   }
 }
 
-bool interrupted() { return g_interrupted.load(std::memory_order_relaxed); }
+bool interrupted() { return interruptSignal() != 0; }
+
+int interruptSignal() { return g_signal.load(std::memory_order_relaxed); }
 
 }  // namespace cloudbake::tool

@@ -15,4 +15,7 @@ void installInterruptHandler();
 /// True once SIGINT or SIGTERM has arrived.
 bool interrupted();
 
+/// The first of them that arrived (SIGINT or SIGTERM), 0 before either.
+int interruptSignal();
+
 }  // namespace cloudbake::tool

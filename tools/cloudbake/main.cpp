@@ -1,5 +1,6 @@
 // Entry point of the `cloudbake` tool: parses the command line and dispatches to a subcommand.
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <exception>
 #include <iostream>
 #include <string>
@@ -25,6 +26,12 @@ int reportError(std::exception_ptr error) {
   } catch (const cloudbake::StorageFullError& full) {
     e.message = "no space left on the device: " + full.detail();
   } catch (...) {
+  }
+  // A signal's cancel says which signal, not the bare "cancelled: cancelled" it printed.
+  if (e.kind == ErrorKind::kCancelled && cloudbake::tool::interruptSignal() != 0) {
+    e.message = std::string("interrupted by ") +
+                (cloudbake::tool::interruptSignal() == SIGINT ? "SIGINT (Ctrl-C)" : "SIGTERM") +
+                "; the run's outputs were not kept";
   }
   const char* label = e.kind == ErrorKind::kInternal    ? "internal error"
                       : e.kind == ErrorKind::kCancelled ? "cancelled"
