@@ -38,7 +38,8 @@ class AutoMethod final : public BakeMethod {
     // 18: its choice `photon` is version 14 (the check's small bakes too), and photon's
     // seconds are those the check's small bakes took.
     // 19: a hard surface's rim on the lattice is part of single's and photon's predictions.
-    info_.version = 19;
+    // 20: so is any cloud's, in the share of the views against the sun beyond the bench's.
+    info_.version = 20;
     info_.default_samples = 1;
     info_.animates = true;
     info_.knobs = {

@@ -180,8 +180,12 @@ double latticeSingleBias(const SceneTraits& traits, int resolution);
 /// 5 where every view looks towards the sun's side (0.5 where none does) x the
 /// single-scattering share of the light (1 - PilotMeasure::multiple_fraction; 0.1 without a
 /// pilot) x SceneTraits::hard_surface x 128 / resolution, less where a 1/128 voxel is optically
-/// thin (auto_model.cpp), at most 1. Part of `single`'s and `photon`'s predictions, whose sun
-/// light comes from such a lattice.
+/// thin (auto_model.cpp), at most 1. Any cloud, hard or soft, has a rim too, which the bench
+/// shots' errors hold for one view in two against the sun: where more of a shot's views look
+/// against the sun (PilotMeasure::aureole; every view without a pilot), the surface counts as
+/// hard as 0.16 x that excess share, unless the phase's peak was split (a droplet's views
+/// against the sun have their own term). Part of `single`'s and `photon`'s predictions, whose
+/// sun light comes from such a lattice.
 double latticeRimError(const SceneTraits& traits, const PilotMeasure& pilot, int resolution);
 
 /// The candidates the model predicts, cheapest first among those within `tolerance`; `limits`:
