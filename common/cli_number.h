@@ -8,7 +8,6 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
-#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -16,24 +15,31 @@
 
 namespace cloudbake {
 
-/// Shortest decimal form of a bound: 0, 86400, 1e+06.
+/// A bound as one writes it: 0, 86400, 1e6, 1e-8.
 inline std::string cliBound(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
+  std::string s = buf;
+  const size_t e = s.find('e');
+  if (e == std::string::npos) return s;
+  std::string exponent = s.substr(e + 1);  // "+06", "-08"
+  const bool negative = exponent[0] == '-';
+  exponent.erase(0, exponent.find_first_not_of("+-0"));
+  return s.substr(0, e + 1) + (negative ? "-" : "") + (exponent.empty() ? "0" : exponent);
 }
 
 /// Accepts a number x with lo <= x <= hi (lo < x where `lo_open`); the error reads
-/// "must be a number in (0, 1e+06], got nan", which CLI11 prefixes with the option's name.
+/// "must be a number in (0, 1e6], got nan", which CLI11 prefixes with the option's name. A
+/// value too small for a double reads as 0 or a subnormal, as strtod gives it; one too large
+/// reads as infinite and is refused.
 inline CLI::Validator numberIn(double lo, double hi, bool lo_open = false) {
   const std::string range = (lo_open ? "(" : "[") + cliBound(lo) + ", " + cliBound(hi) + "]";
   return CLI::Validator(
       [lo, hi, lo_open, range](std::string& text) -> std::string {
         const char* begin = text.c_str();
         char* end = nullptr;
-        errno = 0;
         const double x = std::strtod(begin, &end);
-        const bool whole = end != begin && *end == '\0' && errno != ERANGE;
+        const bool whole = end != begin && *end == '\0';
         const bool inside = std::isfinite(x) && (lo_open ? x > lo : x >= lo) && x <= hi;
         if (whole && inside) return {};
         return "must be a number in " + range + ", got " + text;

@@ -1145,7 +1145,7 @@ int reportError(std::exception_ptr error) {
 std::vector<std::string> valueOptions(const CLI::App& app) {
   std::vector<std::string> names;
   for (const CLI::Option* o : app.get_options()) {
-    if (o->get_type_size_max() <= 0) continue;  // a flag
+    if (o->get_items_expected_max() == 0) continue;  // a flag (CLI11 2.1 keeps its type size 1)
     for (const std::string& n : o->get_lnames()) names.push_back("--" + n);
   }
   return names;

@@ -1151,10 +1151,15 @@ TEST(CloudctlCommandLine, AMalformedServerAddressIsBadInputNamingTheOption) {
 }
 
 TEST(CloudctlCommandLine, MistypedCommandIsNamedWithTheNearestOne) {
-  const CmdResult r = run(std::string(CLOUDCTL_BIN) + " --server 127.0.0.1:1 sumbit shot.json");
-  EXPECT_EQ(r.code, 2);
-  EXPECT_NE(r.err.find("unknown command 'sumbit' (did you mean 'submit'?)"), std::string::npos)
-      << r.err;
+  // Flags take no value: the word after one is the command (a review found `--json sumbit`
+  // reported as "A subcommand is required" and `--json --timeout 5 sumbit` as command '5').
+  for (const char* before : {"--server 127.0.0.1:1", "--json", "--json --timeout 5", "--tls",
+                             "--wait-for-server --retry-seconds=3", "--deadline 9 --json"}) {
+    const CmdResult r = run(std::string(CLOUDCTL_BIN) + " " + before + " sumbit shot.json");
+    EXPECT_EQ(r.code, 2) << before;
+    EXPECT_NE(r.err.find("unknown command 'sumbit' (did you mean 'submit'?)"), std::string::npos)
+        << before << ": " << r.err;
+  }
 }
 
 // Seconds are read as numbers in a named range: CLI11's own checks let NaN through (a
@@ -1162,11 +1167,11 @@ TEST(CloudctlCommandLine, MistypedCommandIsNamedWithTheNearestOne) {
 // option the command-typo check did not know, read as an unknown command.
 TEST(CloudctlCommandLine, NumericOptionsRefuseNanInfAndOutOfRangeByName) {
   const std::vector<std::pair<std::string, std::string>> cases = {
-      {"--timeout nan", "--timeout: must be a number in (0, 1e+06], got nan"},
-      {"--timeout 0", "--timeout: must be a number in (0, 1e+06], got 0"},
-      {"--timeout 1e300", "--timeout: must be a number in (0, 1e+06], got 1e300"},
-      {"--deadline -3", "--deadline: must be a number in (0, 1e+07], got -3"},
-      {"--deadline inf", "--deadline: must be a number in (0, 1e+07], got inf"},
+      {"--timeout nan", "--timeout: must be a number in (0, 1e6], got nan"},
+      {"--timeout 0", "--timeout: must be a number in (0, 1e6], got 0"},
+      {"--timeout 1e300", "--timeout: must be a number in (0, 1e6], got 1e300"},
+      {"--deadline -3", "--deadline: must be a number in (0, 1e7], got -3"},
+      {"--deadline inf", "--deadline: must be a number in (0, 1e7], got inf"},
       {"--retry-seconds 1e9", "--retry-seconds: must be a number in [0, 86400], got 1e9"},
       {"--retry-seconds 5x", "--retry-seconds: must be a number in [0, 86400], got 5x"}};
   for (const auto& [args, message] : cases) {
@@ -1181,15 +1186,17 @@ TEST(ServerCommandLine, SecondsOptionsRefuseNanFromTheFlagAndTheEnvironment) {
   for (const std::string& args :
        {std::string("--max-job-seconds=nan"), std::string("--keep-jobs-hours=inf"),
         std::string("--scrub-hours=-1")}) {
-    const CmdResult r = run(std::string(CLOUDBAKE_SERVER_BIN) +
+    // Under `timeout`: a server that took the value would start and serve, not fail the test.
+    const CmdResult r = run("timeout 30 " + std::string(CLOUDBAKE_SERVER_BIN) +
                             " --listen=127.0.0.1:0 --cache-dir=/nonexistent/x " + args);
     EXPECT_EQ(r.code, 2) << args << ": " << r.err;
     EXPECT_NE(r.err.find("must be a number in [0, "), std::string::npos) << args << ": " << r.err;
   }
-  const CmdResult env = run("CLOUDBAKE_MAX_JOB_SECONDS=nan " + std::string(CLOUDBAKE_SERVER_BIN) +
-                            " --listen=127.0.0.1:0 --cache-dir=/nonexistent/x");
+  const CmdResult env =
+      run("CLOUDBAKE_MAX_JOB_SECONDS=nan timeout 30 " + std::string(CLOUDBAKE_SERVER_BIN) +
+          " --listen=127.0.0.1:0 --cache-dir=/nonexistent/x");
   EXPECT_EQ(env.code, 2) << env.err;
-  EXPECT_NE(env.err.find("--max-job-seconds: must be a number in [0, 1e+09], got nan"),
+  EXPECT_NE(env.err.find("--max-job-seconds: must be a number in [0, 1e9], got nan"),
             std::string::npos)
       << env.err;
 }

@@ -75,7 +75,7 @@ void addPreviewCommand(CLI::App& app, int* exit_code) {
                   "so previews of different files compare")
       ->check(numberIn(0, 1e12, true));
   cmd->callback([opt, exit_code] {
-    // CLI11's PositiveNumber lets NaN through (every comparison with it is false).
+    // numberIn checks what was typed; 0, the default (auto), is never typed.
     if (!(opt->exposure >= 0 && opt->exposure <= 1e12)) {
       throw InputError("--exposure: must be a number in (0, 1e12], got " +
                        std::to_string(opt->exposure));

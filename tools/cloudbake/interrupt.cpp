@@ -3,15 +3,25 @@
 #include <atomic>
 #include <csignal>
 #include <cstring>
-#include <initializer_list>
 
 namespace cloudbake::tool {
 namespace {
 
 std::atomic<int> g_signal{0};  // the first SIGINT or SIGTERM; 0 before it
 static_assert(std::atomic<int>::is_always_lock_free, "set from a signal handler");
+// The signals whose handler was installed, written before any is: after the first signal
+// both go back to their default action, so a second one of either kind ends the process
+// (SA_RESETHAND resets only the one that arrived).
+bool g_installed[2] = {false, false};
+constexpr int kSignals[2] = {SIGINT, SIGTERM};
 
-extern "C" void onInterrupt(int signal) { g_signal.store(signal, std::memory_order_relaxed); }
+extern "C" void onInterrupt(int signal) {
+  int none = 0;
+  g_signal.compare_exchange_strong(none, signal, std::memory_order_relaxed);
+  for (int i = 0; i < 2; ++i) {
+    if (g_installed[i]) std::signal(kSignals[i], SIG_DFL);  // async-signal-safe
+  }
+}
 
 }  // namespace
 
@@ -22,11 +32,12 @@ void installInterruptHandler() {
   sigemptyset(&sa.sa_mask);
   // The handler runs once: the next signal takes its default action and ends the process.
   sa.sa_flags = SA_RESETHAND | SA_RESTART;
-  for (const int signal : {SIGINT, SIGTERM}) {
+  for (int i = 0; i < 2; ++i) {
     // A signal the parent set to be ignored stays ignored (nohup, a shell's background job).
     struct sigaction old;
-    if (sigaction(signal, nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
-    sigaction(signal, &sa, nullptr);
+    if (sigaction(kSignals[i], nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+    g_installed[i] = true;
+    sigaction(kSignals[i], &sa, nullptr);
   }
 }
 
