@@ -37,9 +37,9 @@ constexpr double kRimPerVoxelLitFromFront = 0.5;
 // bench shots' half (latticeRimError), as a hardness: what the Perlin cloud of sharpness 0.05
 // needed with both views against the sun (0.07-0.15 over its rungs; at sharpness 0.9, 0.04-0.08).
 constexpr double kRimBeyondBench = 0.16;
-// The share of their views the bench shots (photonSceneFactor's five) have against the sun, in
-// which their measured errors already hold the rim: one of two views, one of three for the
-// droplet.
+// The share of their views the bench shots have against the sun, in which their measured errors
+// already hold the rim: one of two views in photonSceneFactor's five (one of three in
+// perlin_droplet, whose phase has its own term).
 constexpr double kBenchAureoleShare = 0.5;
 // A 1/128 voxel's optical thickness from which a hard surface's rim is full (the sphere of
 // extinction 15: 0.164).

@@ -229,6 +229,11 @@ TEST(AutoModel, ViewsAgainstTheSunBeyondTheBenchsShareRaiseTheLatticesPrediction
   SceneTraits no_sun = traits;
   no_sun.sun = false;
   EXPECT_EQ(latticeRimError(no_sun, full, 128), 0.0);
+  // A shot without views (a bake that later views read) takes every view as against the sun,
+  // with the single-scattering share of the hard surfaces' rule: 5 x 0.16 x 0.1 at 128 voxels.
+  PilotMeasure none;
+  none.multiple_fraction = 1;  // what auto puts there without views
+  EXPECT_NEAR(latticeRimError(traits, none, 128), 5 * 0.16 * 0.1, 1e-12);
 }
 
 TEST(AutoModel, CandidatesMeetingTheToleranceComeFirstCheapestFirst) {
