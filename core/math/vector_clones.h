@@ -15,3 +15,12 @@
 #else
 #define CLOUDBAKE_VECTOR_CLONES
 #endif
+
+// The same with a third clone for AVX-512 (eight doubles a register), for loops written on
+// 64-byte vectors. AVX-512F has fused multiply-adds of its own, so a file that uses this must be
+// compiled with -ffp-contract=off for its clones to agree bit for bit (as shexp.cpp is).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#define CLOUDBAKE_WIDE_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define CLOUDBAKE_WIDE_VECTOR_CLONES
+#endif
