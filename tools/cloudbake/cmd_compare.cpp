@@ -141,9 +141,6 @@ void addCompareCommand(CLI::App& app, int* exit_code) {
   cmd->callback([opt, exit_code] {
     ExrContents test = readExr(opt->test);
     ExrContents ref = readExr(opt->ref);
-    if (!(opt->cloud_alpha >= 0 && opt->cloud_alpha <= 1)) {
-      throw InputError("--cloud-alpha: must be in [0, 1], got " + std::to_string(opt->cloud_alpha));
-    }
     if (!opt->mask_from.empty() && !(opt->cloud_alpha > 0)) {
       throw InputError("--mask-from: needs --cloud-alpha");
     }

@@ -74,12 +74,8 @@ void addPreviewCommand(CLI::App& app, int* exit_code) {
                   "radiance multiplier (default: auto, the 99th percentile of luminance at 0.8), "
                   "so previews of different files compare")
       ->check(numberIn(0, 1e12, true));
+  // numberIn checks what was typed; 0, the default (auto), is never typed.
   cmd->callback([opt, exit_code] {
-    // numberIn checks what was typed; 0, the default (auto), is never typed.
-    if (!(opt->exposure >= 0 && opt->exposure <= 1e12)) {
-      throw InputError("--exposure: must be a number in (0, 1e12], got " +
-                       std::to_string(opt->exposure));
-    }
     const ExrContents exr = readExr(opt->exr);
     const std::string name = pickLayer(exr, opt->layer, opt->exr);
     checkFinite(exr.layers.at(name), opt->exr, name.empty() ? "cloud" : name);
