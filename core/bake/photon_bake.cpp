@@ -90,6 +90,8 @@ void validate(const Medium& medium, const Vec3& sun_dir, const PhotonBakeOptions
 constexpr int kSpikeDegree = 24;
 constexpr double kMaxTopLegendre = 0.1;
 constexpr double kMaxCutDegrees = 30;
+// How far the phase's integral on that grid may be from 1 (phaseIntegralOnPeakGrid).
+constexpr double kMaxPeakGridError = 0.005;
 
 /// Per-voxel SH moments of a radiance field, summed as fixed-point integers (TallyWriter adds
 /// to it). One colour channel stands for all three where every photon's throughput is grey.
@@ -759,6 +761,22 @@ void recordKnobs(const PhotonBakeOptions& options, const ForwardPeak& split, int
 }  // namespace
 
 ForwardPeak photonPeakSplit(const PhaseFunction& phase, const PhotonBakeOptions& o) {
+  // A peak narrower than the grid of angles the split integrates on makes every integral of it
+  // wrong, the peak's share of scattering too: HG 0.9999 read 1.12 there and its views came out
+  // 12 % bright, 0.99995 1.9x, 0.99999 infinite. Droplets' peaks (Mie tables up to r_eff 50 um)
+  // integrate to 1 within 2e-4.
+  const Rgb norm = phaseIntegralOnPeakGrid(phase);
+  double worst = 0;
+  for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(norm[c] - 1));
+  if (!(worst <= kMaxPeakGridError)) {
+    throw InputError(
+        "/medium/phase: this phase's forward peak is narrower than method photon's "
+        "grid of scattering angles resolves (steps of " +
+        str(180.0 / kPeakGridSteps, 2) + " degrees): it integrates to " +
+        str(maxComponent(norm), 4) +
+        " there, not 1 (an hg phase resolves up to g = 0.9995). Use method "
+        "pathtrace or single, or a broader phase");
+  }
   const int top = std::max({o.order, o.zonal_order, kSpikeDegree});
   bool found = false;
   const ForwardPeak split = splitForwardPeak(phase, top, kMaxTopLegendre, kMaxCutDegrees, &found);

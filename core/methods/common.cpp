@@ -9,9 +9,12 @@
 
 #include "core/bake/bake_lattice.h"
 #include "core/bake/baked_light_vdb.h"
+#include "core/bake/phase_lut.h"
+#include "core/bake/sky_sh_scatter.h"
 #include "core/bake/sparse_film.h"
 #include "core/error.h"
 #include "core/format.h"
+#include "core/phase/phase_factory.h"
 #include "core/transport/layers_exr.h"
 
 namespace cloudbake {
@@ -232,6 +235,22 @@ void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const 
        << " (--max-voxels)";
     throw InputError(os.str());
   }
+}
+
+void checkPhaseTable(const ShotSpec& shot, const std::string& source, const char* method) {
+  if (shot.medium.phase.type == PhaseSpec::Type::kMie) return;
+  const PhaseLut lut(*makePhaseFunction(shot.medium.phase));
+  const auto lambda = phaseEigenvalues(lut);
+  double worst = 1;
+  for (int c = 0; c < 3; ++c) {
+    if (std::abs(lambda[size_t(c)][0] - 1) > std::abs(worst - 1)) worst = lambda[size_t(c)][0];
+  }
+  if (std::abs(worst - 1) <= kMaxPhaseTableError) return;
+  throw InputError(source + ": /medium/phase: this phase's peak is narrower than method " + method +
+                   "'s table of it resolves: the table integrates to " + str(worst, 4) +
+                   " over the sphere, not 1 within " + str(kMaxPhaseTableError) +
+                   " (an hg phase resolves up to |g| = 0.999). Use method pathtrace, or a "
+                   "broader phase");
 }
 
 void checkAnalyticLattice(const ShotSpec& shot, int resolution, const std::string& source,

@@ -68,6 +68,16 @@ void checkLatticeVoxels(int64_t resolution, double lattices_times_floats, const 
 void checkAnalyticLattice(const ShotSpec& shot, int resolution, const std::string& source,
                           const std::string& pointer = "/bake/light_resolution");
 
+/// How far from 1 the integral over the sphere of a phase's table (PhaseLut) may be.
+constexpr double kMaxPhaseTableError = 0.02;
+
+/// Methods that read the phase from its table (every light bake and its views): InputError
+/// naming /medium/phase where the table does not integrate to 1 within kMaxPhaseTableError, a
+/// peak narrower than its bins (HG |g| above about 0.999: 0.9995 integrates to 1.04, 0.9999 to
+/// 2.4, 0.99999 to 195, and the light scattered through it with it). Lorenz-Mie tables, whose
+/// peaks the table resolves, are not built for the check (they take seconds).
+void checkPhaseTable(const ShotSpec& shot, const std::string& source, const char* method);
+
 /// InputError naming `pointer` and --max-points when `points` exceeds the server's limit.
 void checkPointCount(int64_t points, const std::string& pointer, const MethodLimits& limits,
                      const std::string& source);

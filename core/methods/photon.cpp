@@ -71,6 +71,7 @@ class PhotonMethod final : public BakeMethod {
   const MethodInfo& info() const override { return info_; }
 
   void validate(const ShotSpec& shot, const std::string& source) const override {
+    checkPhaseTable(shot, source, "photon");
     const PhotonBakeOptions o = photonBakeOptions(shot);
     if (o.tally_resolution != 0 && o.tally_resolution < 8) {
       throw InputError(source +

@@ -54,6 +54,7 @@ class PointcloudMethod final : public BakeMethod {
   const MethodInfo& info() const override { return info_; }
 
   void validate(const ShotSpec& shot, const std::string& source) const override {
+    checkPhaseTable(shot, source, "pointcloud");
     const KnobValues& k = shot.bake.knobs;
     if (k.boolean("output_mapping") && k.choice("rule") != "paper") {
       throw InputError(source +

@@ -486,6 +486,7 @@ class PrecomputedMethod final : public BakeMethod {
 // The walk's knobs need a database of basic volumes (a sequence), and the dissolve must fit in
 // it (Iwasaki et al.: a jump to l plays l .. l + H - 1).
 void PrecomputedMethod::validate(const ShotSpec& shot, const std::string& source) const {
+  checkPhaseTable(shot, source, "precomputed");
   const KnobValues& k = shot.bake.knobs;
   const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume);
   if (!seq) {

@@ -38,6 +38,7 @@ class SingleMethod final : public BakeMethod {
   }
 
   void validate(const ShotSpec& shot, const std::string& source) const override {
+    checkPhaseTable(shot, source, "single");
     checkAnalyticLattice(shot, singleBakeOptions(shot).light_resolution, source);
   }
 

@@ -17,9 +17,7 @@ Rgb ForwardPeak::peak(double mu, const Rgb& p_mu) const {
 
 namespace {
 
-// Midpoints in theta: as fine as the Legendre coefficients of method photon (a droplet's
-// forward peak is about a degree wide, 110 steps here).
-constexpr int kSteps = 20000;
+constexpr int kSteps = kPeakGridSteps;
 // Cuts tried: every this many steps (0.045 degrees).
 constexpr int kCutStride = 5;
 
@@ -92,6 +90,16 @@ ForwardPeak splitForwardPeak(const PhaseFunction& phase, int degree, double max_
   }
   *found = false;
   return split;
+}
+
+Rgb phaseIntegralOnPeakGrid(const PhaseFunction& phase) {
+  const double dtheta = kPi / kSteps;
+  Rgb sum(0.0);
+  for (int k = 0; k < kSteps; ++k) {
+    const double theta = (k + 0.5) * dtheta;
+    sum += phase.eval(std::cos(theta)) * (2 * kPi * std::sin(theta) * dtheta);
+  }
+  return sum;
 }
 
 // Nodes across the cone in angle and in azimuth: the cone is a few degrees at most, so 32 x 16

@@ -23,9 +23,9 @@ double hgSampleCosTheta(double g, double u) {
 }
 
 HenyeyGreensteinPhase::HenyeyGreensteinPhase(double g) : g_(g) {
-  if (!std::isfinite(g) || !(g > -1.0 && g < 1.0)) {
+  if (!std::isfinite(g) || !(std::abs(g) <= kMaxHgAsymmetry)) {
     std::ostringstream os;
-    os << "phase.g: must be in (-1, 1), got " << g;
+    os << "phase.g: must be in [-" << kMaxHgAsymmetry << ", " << kMaxHgAsymmetry << "], got " << g;
     throw InputError(os.str());
   }
 }

@@ -15,6 +15,7 @@
 #include "core/format.h"
 #include "core/io/exr_compression.h"
 #include "core/methods/registry.h"
+#include "core/phase/henyey_greenstein.h"
 #include "core/shot/json_reader.h"
 #include "core/shot/shot_sections.h"
 
@@ -51,7 +52,7 @@ PhaseSpec parsePhase(const Object& o) {
   } else if (type == "hg") {
     p.type = PhaseSpec::Type::kHenyeyGreenstein;
     o.allowOnly({"type", "g", "mie_ratio"}, "for phase type 'hg'");
-    p.g = r.numberIn(o.required("g"), o.path("g"), -1, 1, true, true);
+    p.g = r.numberIn(o.required("g"), o.path("g"), -kMaxHgAsymmetry, kMaxHgAsymmetry);
   } else if (type == "mie_approx") {
     p.type = PhaseSpec::Type::kMieApprox;
     o.allowOnly({"type", "diameter_um", "mie_ratio"}, "for phase type 'mie_approx'");

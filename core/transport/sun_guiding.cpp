@@ -19,7 +19,7 @@ double phaseSpikiness(const PhaseFunction& phase, int n) {
 
 double autoSunGuiding(const PhaseFunction& phase) {
   const double v = phaseSpikiness(phase);
-  return 0.5 * v / (v + 40);
+  return std::isinf(v) ? 0.5 : 0.5 * v / (v + 40);  // inf / inf would be NaN
 }
 
 SunGuide::SunGuide(const PhaseFunction& phase, const Vec3& to_sun, double eps)

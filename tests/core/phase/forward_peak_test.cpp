@@ -80,6 +80,19 @@ TEST(ForwardPeak, ADropletsPeakIsCutWhereTheRestFallsUnderTheBound) {
   EXPECT_GT(tighter.cos_cut, split.cos_cut);
 }
 
+// The grid the split integrates on holds a droplet's peak and HG's up to g = 0.9995; past that
+// its integral of the phase drifts from 1 (photonPeakSplit refuses such phases).
+TEST(ForwardPeak, TheGridResolvesDropletsButNotTheNarrowestHgPeaks) {
+  for (double g : {0.0, 0.85, 0.999, 0.9995}) {
+    EXPECT_NEAR(phaseIntegralOnPeakGrid(HenyeyGreensteinPhase(g)).x, 1.0, 0.005) << g;
+  }
+  const Rgb droplets = phaseIntegralOnPeakGrid(MieTablePhase());  // r_eff 10 um, v_eff 0.1
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(droplets[c], 1.0, 2e-4) << c;
+  for (double g : {0.9999, 0.99999, kMaxHgAsymmetry}) {
+    EXPECT_GT(std::abs(phaseIntegralOnPeakGrid(HenyeyGreensteinPhase(g)).x - 1), 0.05) << g;
+  }
+}
+
 TEST(ForwardPeak, ABackwardPeakCannotBeCut) {
   bool found = true;
   splitForwardPeak(HenyeyGreensteinPhase(-0.99), 24, 0.1, 30, &found);

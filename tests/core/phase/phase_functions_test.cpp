@@ -83,6 +83,23 @@ TEST_P(HenyeyGreenstein, IsNormalisedSampledAndHasMeanCosineG) {
 INSTANTIATE_TEST_SUITE_P(Asymmetries, HenyeyGreenstein,
                          ::testing::Values(-0.999, -0.5, 0.0, 0.75, 0.999));
 
+// At the largest |g| a shot may give, the peak is still resolved: the value at the peak is the
+// closed form's, (1 + g) / (4 pi (1 - g)^2), to a part in 1e3, and every value is finite and
+// positive. Past it, 1 + g^2 - 2 g cos_theta rounds to zero or below (NaN pixels at 1 - 1e-9).
+TEST(HenyeyGreenstein, HoldsItsPeakUpToTheLargestAsymmetryAllowed) {
+  for (double g : {kMaxHgAsymmetry, -kMaxHgAsymmetry}) {
+    const HenyeyGreensteinPhase hg(g);
+    const double peak_mu = g > 0 ? 1.0 : -1.0;
+    const double exact = (1 + std::abs(g)) / (4 * kPi * (1 - std::abs(g)) * (1 - std::abs(g)));
+    EXPECT_NEAR(hg.pdf(peak_mu) / exact, 1.0, 1e-3) << g;
+    for (double u : {0.0, 1e-9, 0.5, 1 - 1e-9}) {
+      const double mu = hg.sampleCosTheta(u);
+      ASSERT_TRUE(std::isfinite(hg.pdf(mu)) && hg.pdf(mu) > 0) << g << " " << u;
+    }
+  }
+  EXPECT_THROW(HenyeyGreensteinPhase(std::nextafter(kMaxHgAsymmetry, 1.0)), InputError);
+}
+
 TEST(HenyeyGreensteinSampling, MatchesTextbookInverseAndIsUniformAtZero) {
   // The cancellation-free form equals the textbook formula where that one is well conditioned.
   for (double g : {-0.7, 0.3, 0.9}) {
@@ -210,8 +227,10 @@ void expectInputError(const std::string& spec_text, const std::string& needle) {
 }
 
 TEST(PhaseFactory, BadInputsThrowInputErrorNamingTheField) {
-  expectInputError("hg:g=1.5", "phase.g: must be in (-1, 1), got 1.5");
+  expectInputError("hg:g=1.5", "phase.g: must be in [-0.999999, 0.999999], got 1.5");
   expectInputError("hg:g=-1", "phase.g");
+  expectInputError("hg:g=0.9999999", "phase.g");
+  expectInputError("hg:g=-0.9999999", "phase.g");
   expectInputError("hg:g=nan", "phase.g");
   expectInputError("hg:g=0.5x", "phase.g");
   expectInputError("hg", "phase.g");

@@ -529,7 +529,12 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
        },
        "/medium/albedo/1: must be in [0, 1]"},
       {"g = 1", [](json& j) { j["medium"]["phase"]["g"] = 1; },
-       "/medium/phase/g: must be in (-1, 1), got 1"},
+       "/medium/phase/g: must be in [-0.999999, 0.999999], got 1"},
+      // Past double precision's resolution of the peak: the path tracer's pixels were NaN.
+      {"g = 1 - 1e-9", [](json& j) { j["medium"]["phase"]["g"] = 0.999999999; },
+       "/medium/phase/g: must be in [-0.999999, 0.999999], got 0.999999999"},
+      {"g = -1 + 1e-7", [](json& j) { j["medium"]["phase"]["g"] = -0.9999999; },
+       "/medium/phase/g: must be in [-0.999999, 0.999999]"},
       {"hg without g", [](json& j) { j["medium"]["phase"].erase("g"); },
        "/medium/phase/g: missing (required)"},
       {"mie variance out of range",

@@ -60,6 +60,20 @@ TEST(SunGuiding, AutoProbabilityGrowsWithThePeakAndStaysBelowHalf) {
   EXPECT_NEAR(autoSunGuiding(HenyeyGreensteinPhase(0.85)), 0.5 * 21.37 / 61.37, 0.01);
 }
 
+// A phase whose sampled values overflow (a peak narrower than double precision) has an infinite
+// spikiness; the lobe's probability takes its limit, 0.5, not inf / inf.
+TEST(SunGuiding, AutoProbabilityOfAnOverflowingPeakIsItsLimit) {
+  struct Overflowing final : PhaseFunction {
+    Rgb eval(double) const override { return Rgb(INFINITY); }
+    double pdf(double) const override { return INFINITY; }
+    double sampleCosTheta(double) const override { return 1.0; }
+    Rgb meanCosine() const override { return Rgb(1.0); }
+    std::string describe() const override { return "overflowing"; }
+  };
+  EXPECT_EQ(phaseSpikiness(Overflowing()), INFINITY);
+  EXPECT_EQ(autoSunGuiding(Overflowing()), 0.5);
+}
+
 TEST(SunGuiding, RejectsBadProbabilityAndDirection) {
   const HenyeyGreensteinPhase hg(0.8);
   EXPECT_THROW(SunGuide(hg, Vec3(0, 0, 1), 1.0), InputError);
