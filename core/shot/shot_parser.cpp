@@ -352,6 +352,16 @@ void checkOutputsAgainstVolume(const Reader& r, const ShotSpec& shot) {
            std::string("missing: required when outputs.vdb is true for a ") +
                volumeTypeName(shot.volume) + " volume");
   }
+  // A voxel wider than the volume's thinnest side cannot hold its shape: a 4 x 4 x 1 box at a
+  // voxel of 3 came out a 3 x 3 x 3 cube, at 1e12 one voxel 1e12 across, and the run succeeded.
+  const double thinnest = std::min({b->extent().x, b->extent().y, b->extent().z});
+  if (out.vdb_voxel_size > thinnest) {
+    r.fail("/outputs/vdb_voxel_size",
+           "is " + exactNumber(out.vdb_voxel_size) + ", wider than the volume's thinnest side (" +
+               exactNumber(thinnest) +
+               "): its grid could not hold the shape (use at most that, and a few voxels across "
+               "for a recognisable one)");
+  }
   double voxels = 1;
   for (int a = 0; a < 3; ++a) voxels *= std::ceil(b->extent()[a] / out.vdb_voxel_size);
   if (!(voxels <= kMaxVdbVoxels)) {

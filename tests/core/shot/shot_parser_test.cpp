@@ -448,6 +448,11 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["outputs"] = {{"vdb", true}, {"vdb_voxel_size", 0.001}};
        },
        "/outputs/vdb_voxel_size: gives 1e+13 voxels"},
+      {"vdb voxel wider than the volume",
+       [](json& j) {
+         j["outputs"] = {{"vdb", true}, {"vdb_voxel_size", 1e12}};
+       },
+       "/outputs/vdb_voxel_size: is 1e+12, wider than the volume's thinnest side"},
       {"vdb output of a box without voxel size", [](json& j) { j["outputs"]["vdb"] = true; },
        "/outputs/vdb_voxel_size: missing"},
       {"procedural resolution too large",
