@@ -1,8 +1,14 @@
 #include "core/job/run_shot.h"
 
+#include <fcntl.h>
+#include <stdlib.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -55,6 +61,15 @@ void makeOutputFolder(const std::string& dir) {
   if (ec || !fs::is_directory(dir)) {
     throw InputError("out: cannot create folder '" + dir + "'" + (ec ? ": " + ec.message() : ""));
   }
+  // A folder the run cannot write in is refused now, not after the render it would hold (a
+  // read-only --out failed at the first EXR, the whole render's work lost).
+  std::string probe = (fs::path(dir) / ".cloudbake-write-test-XXXXXX").string();
+  const int fd = ::mkostemp(probe.data(), O_CLOEXEC);
+  if (fd < 0) {
+    throw InputError("out: cannot write in folder '" + dir + "': " + std::strerror(errno));
+  }
+  ::close(fd);
+  ::unlink(probe.c_str());
 }
 
 // The shot's EXR compression. A shot built in code, not parsed, may carry any name: runShot

@@ -1,6 +1,8 @@
 #include "core/volume/vdb_header_check.h"
 
+#include <cerrno>
 #include <cstdint>
+#include <cstring>
 #include <fstream>
 
 #include "core/error.h"
@@ -12,10 +14,15 @@ namespace {
 class Bytes {
  public:
   explicit Bytes(const std::string& path) : path_(path), in_(path, std::ios::binary) {
+    // Why the open failed (a file of mode 600 read by another user: "Permission denied").
+    const int open_error = in_ ? 0 : errno;
     in_.seekg(0, std::ios::end);
     size_ = left_ = in_ ? static_cast<long long>(in_.tellg()) : -1;
     in_.seekg(0);
-    if (left_ < 0) throw InputError(path + ": cannot read the VDB file");
+    if (left_ < 0) {
+      throw InputError(path + ": cannot read the VDB file" +
+                       (open_error ? std::string(": ") + std::strerror(open_error) : ""));
+    }
   }
   long long position() const { return size_ - left_; }
   long long size() const { return size_; }

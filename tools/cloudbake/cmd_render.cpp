@@ -42,7 +42,8 @@ struct RenderOptions {
   double png_exposure = 0;
   std::string stats_json;  // "": none
   bool dry_run = false;
-  int64_t max_voxels = -1;  // -1: from this machine's memory (defaultMaxVoxels); 0: no limit
+  int64_t max_voxels = 0;         // 0: no limit; unless given, from this machine's memory
+  bool max_voxels_given = false;  // else defaultMaxVoxels()
   bool vdb_in_process = false;
 };
 
@@ -172,11 +173,12 @@ std::vector<std::string> render(const RenderOptions& opt) {
                                                   static_cast<size_t>(opt.threads));
     setExrThreads(opt.threads);
   }
-  if (opt.max_voxels < -1) {
+  // The default is a flag of its own, not a value (-1 was, and --max-voxels -1 passed).
+  if (opt.max_voxels < 0) {
     throw InputError("--max-voxels: must be at least 0 (0 = no limit), got " +
                      std::to_string(opt.max_voxels));
   }
-  const uint64_t max_voxels = opt.max_voxels == -1 ? defaultMaxVoxels() : uint64_t(opt.max_voxels);
+  const uint64_t max_voxels = opt.max_voxels_given ? uint64_t(opt.max_voxels) : defaultMaxVoxels();
   const ShotSpec shot = parseShotFile(opt.shot);
   checkRunnable(shot, opt.shot);
   checkShotVoxels(shot, max_voxels, opt.shot);
@@ -260,7 +262,8 @@ void addRenderCommand(CLI::App& app, int* exit_code) {
   cmd->add_option("--max-voxels", opt->max_voxels,
                   "most floats (4 bytes each) the shot's volume, lattices and tallies may hold, "
                   "checked before anything runs (default: half of this machine's memory; 0 = no "
-                  "limit)");
+                  "limit)")
+      ->each([opt](const std::string&) { opt->max_voxels_given = true; });
   cmd->add_flag("--dry-run", opt->dry_run,
                 "print what the run would do (method auto: its choice, predicted error and "
                 "cost, after measuring the scene with a short pilot render) and write nothing");

@@ -237,6 +237,28 @@ TEST_F(RenderCli, BadShotExitsWith2AndNamesTheField) {
   EXPECT_FALSE(fs::exists(dir_ / "o/nadir.exr"));
 }
 
+// A folder the run cannot write in is refused before the render, not at its first file. /proc's
+// folders refuse new files even to root (the tests run as root, whom modes do not stop), and
+// one that is a regular file cannot be a folder.
+TEST_F(RenderCli, AnOutputFolderThatCannotBeWrittenIsRefusedBeforeTheRender) {
+  std::ofstream(dir_ / "file") << "x";
+  for (const std::string& out : {std::string("/proc/self"), (dir_ / "file").string()}) {
+    const CliResult r =
+        run("render '" + writeShot("s.json", slab()).string() + "' --out '" + out + "'");
+    EXPECT_EQ(r.rc, 2) << out;
+    EXPECT_NE(r.err.find("out: cannot"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("path trace"), std::string::npos) << "rendered first: " << r.err;
+  }
+  // A folder it can write in keeps no trace of the check.
+  ASSERT_EQ(run("render '" + writeShot("s.json", slab()).string() + "' --out '" +
+                (dir_ / "o").string() + "' --quiet")
+                .rc,
+            0);
+  for (const auto& e : fs::directory_iterator(dir_ / "o")) {
+    EXPECT_EQ(e.path().filename().string().find(".cloudbake-write-test"), std::string::npos);
+  }
+}
+
 TEST_F(RenderCli, MalformedJsonAndBadArgumentsExitWith2) {
   std::ofstream(dir_ / "broken.json") << "{\"version\": 1,";
   CliResult r =
@@ -320,9 +342,12 @@ TEST_F(RenderCli, WorkTooLargeForTheMemoryIsRefusedBeforeItRuns) {
   EXPECT_NE(r.err.find("/bake/light_resolution: "), std::string::npos) << r.err;
   r = run("render '" + small + "' --out '" + (dir_ / "s").string() + "' --quiet --max-voxels 0");
   EXPECT_EQ(r.rc, 0) << r.err;
-  r = run("render '" + small + "' --out '" + (dir_ / "s").string() + "' --max-voxels -5");
-  EXPECT_EQ(r.rc, 2);
-  EXPECT_NE(r.err.find("--max-voxels: must be at least 0"), std::string::npos) << r.err;
+  // -1 too: it once stood for the default inside, and passed.
+  for (const char* bad : {"-5", "-1"}) {
+    r = run("render '" + small + "' --out '" + (dir_ / "s").string() + "' --max-voxels " + bad);
+    EXPECT_EQ(r.rc, 2) << bad;
+    EXPECT_NE(r.err.find("--max-voxels: must be at least 0"), std::string::npos) << r.err;
+  }
 }
 
 // A views' step far under the lattice's voxel is refused as the bake starts, before its work,
