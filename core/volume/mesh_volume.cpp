@@ -337,8 +337,13 @@ DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& 
   grid->setName("density");
   if (grid->activeVoxelCount() == 0) {
     std::ostringstream os;
+    // The bounds too: one stray vertex far out (1e39) sets a resolution's voxel size, and the
+    // advice to shrink it then only meets the voxel budget.
     os << options.path << ": mesh encloses no voxel centre at voxel size " << h
-       << " (too thin or open; try a smaller voxel size)";
+       << " over its bounds [" << exactNumber(b.min.x) << ", " << exactNumber(b.min.y) << ", "
+       << exactNumber(b.min.z) << "] - [" << exactNumber(b.max.x) << ", " << exactNumber(b.max.y)
+       << ", " << exactNumber(b.max.z)
+       << "] (too thin or open, or a vertex far from the rest; try a smaller voxel size)";
     throw InputError(os.str());
   }
   return makeGridVolume(grid, options.path);

@@ -251,6 +251,18 @@ TEST_F(MeshVolumeTest, ValidatesOptions) {
   broken = tetrahedron();
   broken.vertices[0].x = std::nan("");
   EXPECT_THROW(meshToVolume(broken, withResolution(16)), InputError);
+  // One stray vertex far out: the message shows the bounds it made, not only "too thin".
+  broken = tetrahedron();
+  broken.vertices.push_back({1e39, 1, 1});
+  broken.triangles.push_back({0, 1, 4});
+  try {
+    meshToVolume(broken, withResolution(16));
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("over its bounds [0.1, 0.05, 0.02] - [1e+39, 1, 1.01]"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 TEST_F(MeshVolumeTest, NoiseModulatesDensityDeterministically) {
