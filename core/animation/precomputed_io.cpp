@@ -1,5 +1,6 @@
 #include "core/animation/precomputed_io.h"
 
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -23,26 +24,43 @@ constexpr uint64_t kMaxCount = uint64_t(1) << 34;
 class Writer {
  public:
   explicit Writer(const std::string& path) : path_(path), out_(path, std::ios::binary) {
-    if (!out_) throw std::runtime_error(path + ": cannot open for writing");
+    if (!out_) fail("cannot open for writing");
   }
   template <class T>
   void put(const T& v) {
     static_assert(std::is_trivially_copyable<T>::value, "plain data only");
     out_.write(reinterpret_cast<const char*>(&v), sizeof(T));
+    noteError();
   }
   template <class T>
   void array(const std::vector<T>& v) {
     put(uint64_t(v.size()));
     out_.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(T)));
+    noteError();
   }
   void close() {
     out_.close();
-    if (!out_) throw std::runtime_error(path_ + ": write failed");
+    if (!out_) fail("write failed");
   }
 
  private:
+  // The system's reason where the stream failed first (a later call may overwrite errno).
+  void noteError() {
+    if (!out_ && error_ == 0) error_ = errno;
+  }
+  // A full volume is StorageFullError (the server's "no space", exit 4), as every other write
+  // to the cache reports it; a database of basic volumes was an internal error there.
+  [[noreturn]] void fail(const std::string& what) {
+    const int err = error_ != 0 ? error_ : errno;
+    const std::string detail =
+        path_ + ": " + what + (err != 0 ? ": " + std::string(std::strerror(err)) : "");
+    throwIfNoSpace(err, detail);
+    throw std::runtime_error(detail);
+  }
+
   std::string path_;
   std::ofstream out_;
+  int error_ = 0;
 };
 
 class Reader {

@@ -456,6 +456,20 @@ TEST(Precomputed, DatabaseRoundTripsThroughFiles) {
   }
   std::filesystem::remove(dir + "/shared.bin");
   EXPECT_THROW(readPrecomputedDatabase(dir), InputError);
+  // A full volume is "no space" (the server's exit 4), as every other write to its cache says,
+  // not an internal error: /dev/full refuses every write with ENOSPC.
+  const std::string full = ::testing::TempDir() + "/precomputed_full";
+  std::filesystem::remove_all(full);
+  std::filesystem::create_directories(full);
+  for (const char* name : {"shared.bin", "basic_0000.bin", "basic_0001.bin"}) {
+    std::filesystem::create_symlink("/dev/full", full + "/" + name);
+  }
+  try {
+    writePrecomputedDatabase(full, db);
+    ADD_FAILURE() << "a write to /dev/full succeeded";
+  } catch (const StorageFullError& e) {
+    EXPECT_NE(e.detail().find("No space left on device"), std::string::npos) << e.detail();
+  }
 }
 
 TEST(Precomputed, RefusesBadKnobsAndFrames) {
