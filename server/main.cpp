@@ -9,10 +9,12 @@
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
+#include <cctype>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <string_view>
 #include <thread>
 
@@ -93,6 +95,53 @@ std::string defaultStateDir() {
   return std::string(home && *home ? home : "/tmp") + "/.local/state/cloudbake";
 }
 
+// HOST:PORT for --listen and --metrics-listen, the port 0 (any free port) to 65535: gRPC
+// wrapped a port past it silently (70000 listened on 4464) and took an empty one as 443.
+CLI::Validator listenAddress(bool empty_is_off = false) {
+  return CLI::Validator(
+      [empty_is_off](std::string& text) -> std::string {
+        if (empty_is_off && text.empty()) return "";
+        const size_t colon = text.rfind(':');
+        const std::string host = colon == std::string::npos ? "" : text.substr(0, colon);
+        const std::string port = colon == std::string::npos ? "" : text.substr(colon + 1);
+        bool ok = !host.empty() && !port.empty() && port.size() <= 5;
+        for (char ch : port) ok = ok && ch >= '0' && ch <= '9';
+        if (ok && std::stoi(port) <= 65535) return "";
+        return "expected HOST:PORT with a port in 0..65535 (0: any free port), got '" + text + "'";
+      },
+      "HOST:PORT");
+}
+
+// A byte count, bare or with a unit (b, k/kb/kib, m/mb/mib, g/gb/gib, t/tb/tib: powers of 1024,
+// any case), rewritten as the bare count. CLI::AsSizeValue wrapped a negative count to 2^64 - 1
+// and let 2^64 through.
+CLI::Validator byteCount() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        size_t digits = 0;
+        while (digits < text.size() && text[digits] >= '0' && text[digits] <= '9') ++digits;
+        std::string unit = text.substr(digits);
+        for (char& ch : unit) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+        static const std::pair<const char*, int> kUnits[] = {
+            {"", 0},    {"b", 0}, {"k", 1},  {"kb", 1},  {"kib", 1}, {"m", 2},  {"mb", 2},
+            {"mib", 2}, {"g", 3}, {"gb", 3}, {"gib", 3}, {"t", 4},   {"tb", 4}, {"tib", 4}};
+        int power = -1;
+        for (const auto& [name, p] : kUnits) {
+          if (unit == name) power = p;
+        }
+        if (digits == 0 || digits > 19 || power < 0) {
+          return "expected a byte count such as 1048576, 512MB or 2GB, got '" + text + "'";
+        }
+        const unsigned long long count = std::stoull(text.substr(0, digits));
+        if (count > (std::numeric_limits<uint64_t>::max() >> 1 >> (10 * power))) {
+          return "more bytes than the server counts (2^63): '" + text + "'";
+        }
+        text = std::to_string(uint64_t(count) << (10 * power));
+        return "";
+      },
+      "BYTES");
+}
+
 struct ServerFlags {
   ServerFlags() { jobs.state_dir = defaultStateDir(); }
 
@@ -147,6 +196,7 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
   cloudbake::JobManagerOptions& o = f->jobs;
   app.add_option("--listen", f->listen, "HOST:PORT to listen on (port 0: any free port)")
       ->envname("CLOUDBAKE_LISTEN")
+      ->check(listenAddress())
       ->capture_default_str();
   app.add_option("--cache-dir", o.state_dir,
                  "folder for the job store, result cache and uploaded assets")
@@ -160,7 +210,7 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
   app.add_option("--cache-size", o.cache_max_bytes,
                  "bound of the result cache (bytes, or with a unit: 512MB, 2GB; 0: unbounded)")
       ->envname("CLOUDBAKE_CACHE_SIZE")
-      ->transform(CLI::AsSizeValue(false))
+      ->transform(byteCount())
       ->capture_default_str();
   app.add_option("--threads", o.worker_threads,
                  "threads of each job's TBB arena, and of OpenEXR's compression (0: all cores)")
@@ -207,7 +257,7 @@ void addServiceOptions(CLI::App& app, ServerFlags* f) {
       ->capture_default_str();
   app.add_option("--max-upload-bytes", o.max_upload_bytes, "largest asset upload")
       ->envname("CLOUDBAKE_MAX_UPLOAD_BYTES")
-      ->transform(CLI::AsSizeValue(false))
+      ->transform(byteCount())
       ->capture_default_str();
 }
 
@@ -278,6 +328,7 @@ void addLogOptions(CLI::App& app, ServerFlags* f) {
   app.add_option("--metrics-listen", f->metrics_listen,
                  "HOST:PORT to serve Prometheus metrics on at /metrics (plain HTTP; empty: off)")
       ->envname("CLOUDBAKE_METRICS_LISTEN")
+      ->check(listenAddress(/*empty_is_off=*/true))
       ->capture_default_str();
 }
 

@@ -910,8 +910,8 @@ TEST(ServerQueue, FullQueueAnswersResourceExhausted) {
   Workspace ws;
   ServerProc server(ws.path("state"));
   ASSERT_TRUE(
-      server.start({"--max-concurrent-jobs=1", "--queue-bound=1", "--max-upload-bytes=1000"}));
-  // The upload limit: a 2000-byte asset is refused before it is stored.
+      server.start({"--max-concurrent-jobs=1", "--queue-bound=1", "--max-upload-bytes=1kb"}));
+  // The upload limit (1kb: 1024 bytes): a 2000-byte asset is refused before it is stored.
   ws.write("big/blob.vdb", std::string(2000, 'x'));
   const std::string big =
       ws.write("big/shot.json",
@@ -1199,6 +1199,30 @@ TEST(ServerCommandLine, SecondsOptionsRefuseNanFromTheFlagAndTheEnvironment) {
   EXPECT_NE(env.err.find("--max-job-seconds: must be a number in [0, 1e9], got nan"),
             std::string::npos)
       << env.err;
+}
+
+// Ports past 65535 wrapped (70000 listened on 4464), an empty one listened on 443, and byte
+// counts wrapped (-1 became 2^64 - 1): each is refused naming its flag.
+TEST(ServerCommandLine, PortsAndByteCountsOutOfRangeAreRefused) {
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"--listen=127.0.0.1:70000", "--listen: expected HOST:PORT"},
+      {"--listen=127.0.0.1:", "--listen: expected HOST:PORT"},
+      {"--listen=127.0.0.1:0 --metrics-listen=127.0.0.1:99999", "--metrics-listen: expected"},
+      {"--listen=127.0.0.1:0 --cache-size=-1", "--cache-size: expected a byte count"},
+      {"--listen=127.0.0.1:0 --cache-size=18446744073709551616", "--cache-size: expected"},
+      {"--listen=127.0.0.1:0 --max-upload-bytes=-1kb", "--max-upload-bytes: expected"},
+      {"--listen=127.0.0.1:0 --max-upload-bytes=16777216tb", "--max-upload-bytes: more bytes"},
+  };
+  for (const auto& [args, needle] : bad) {
+    const CmdResult r = run("timeout 30 " + std::string(CLOUDBAKE_SERVER_BIN) +
+                            " --cache-dir=/nonexistent/x " + args);
+    EXPECT_EQ(r.code, 2) << args << ": " << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << args << ": " << r.err;
+  }
+  const CmdResult env = run("CLOUDBAKE_LISTEN=127.0.0.1:70000 timeout 30 " +
+                            std::string(CLOUDBAKE_SERVER_BIN) + " --cache-dir=/nonexistent/x");
+  EXPECT_EQ(env.code, 2) << env.err;
+  EXPECT_NE(env.err.find("--listen: expected HOST:PORT"), std::string::npos) << env.err;
 }
 
 TEST(ServerState, SecondServerOnTheSameStateFolderRefusesToStart) {
