@@ -145,6 +145,10 @@ struct JobManager::Job {
   ShotSpec shot;  // empty for a finished job restored after a restart (jobShot reads it)
   bool has_shot = false;
   double sun_tolerance_deg = 0;
+  // The submit's samples override of an auto shot (-1: none), applied to the method auto
+  // chooses as the run starts, as `cloudbake render --samples` does: written into the auto
+  // shot, the choice replaced it (a --samples 4 ran at 27625 paths a pixel).
+  int auto_samples = -1;
   std::atomic<bool> cancel{false};
   bool shutdown = false;  // cancelled because the manager stops, not by a client
   bool overtime = false;  // stopped by max_job_seconds (set under the manager's mutex)
@@ -214,6 +218,7 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
         job->shot = prepare(input, store_->jobDir(record.id)).shot;
         job->has_shot = true;
         job->sun_tolerance_deg = input.sun_tolerance_deg;
+        job->auto_samples = isAutoShot(job->shot) ? input.samples : -1;
         queue_.push_back(job);
       } catch (const std::exception& e) {
         spdlog::error("job {}: cannot requeue after restart: {}", record.id, e.what());
@@ -347,7 +352,7 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
     throw InputError(clientPaths(e.what(), input_dir));
   }
   checkSamplesOverride(input.samples, "samples");
-  if (input.samples != -1) p.shot.bake.samples = input.samples;
+  if (input.samples != -1 && !isAutoShot(p.shot)) p.shot.bake.samples = input.samples;
   if (!(input.sun_tolerance_deg >= 0 && input.sun_tolerance_deg <= 90)) {
     throw InputError("sun_tolerance_deg: must be in [0, 90] degrees, got " +
                      std::to_string(input.sun_tolerance_deg));
@@ -373,6 +378,10 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
   }
   if (lim.max_samples > 0 && p.shot.bake.samples > lim.max_samples) {
     throw InputError("shot.json: /bake/samples: " + std::to_string(p.shot.bake.samples) +
+                     " exceeds this server's limit of " + std::to_string(lim.max_samples));
+  }
+  if (lim.max_samples > 0 && input.samples > lim.max_samples) {
+    throw InputError("samples: " + std::to_string(input.samples) +
                      " exceeds this server's limit of " + std::to_string(lim.max_samples));
   }
   p.keys = computeCacheKeys(p.shot);
@@ -424,6 +433,12 @@ JobPlan JobManager::plan(const SubmitInput& input) {
       const AutoChoice choice = chooseAutoForRun(p.shot, ro);
       auto_lines = choice.planLines();
       p.shot = choice.shot;
+      if (input.samples != -1) {
+        auto_lines.push_back("samples: " + std::to_string(input.samples) +
+                             " from the request, not the choice's " +
+                             std::to_string(p.shot.bake.samples));
+        p.shot.bake.samples = input.samples;
+      }
     } catch (const InputError& e) {
       throw InputError(clientPaths(e.what(), (fs::path(dir) / "input").string()));
     }
@@ -456,6 +471,7 @@ JobRecord JobManager::enqueue(Prepared prepared, const std::string& dir, const s
   job->shot = std::move(prepared.shot);
   job->has_shot = true;
   job->sun_tolerance_deg = prepared.input.sun_tolerance_deg;
+  job->auto_samples = isAutoShot(job->shot) ? prepared.input.samples : -1;
   JobRecord& r = job->record;
   r.id = id;
   r.shot_name = job->shot.name;
@@ -1005,6 +1021,7 @@ RunOptions JobManager::runOptions(const std::shared_ptr<Job>& job) {
   ro.cache = cache_.get();
   ro.directions = directions_.get();
   ro.sun_tolerance_deg = job->sun_tolerance_deg;
+  ro.samples = job->auto_samples;
   // An event per new message or per percent of progress, so a long run does not flood the
   // event log; the answer is whether the run may go on.
   ro.progress = [this, job](const RunProgress& p) {

@@ -888,6 +888,30 @@ TEST(ServerQueue, JobPastItsTimeLimitIsStoppedAndFailed) {
   EXPECT_EQ(next.code, 0) << next.err;
 }
 
+// `cloudctl submit --samples N` of an auto shot runs the chosen method at N, as `cloudbake
+// render --samples` does: written into the auto shot, the choice replaced it (an outside probe's
+// --samples 4 ran at 27625 paths a pixel). The dry run says so too.
+TEST(ServerQueue, ASamplesOverrideOfAnAutoShotReachesTheChosenMethod) {
+  Workspace ws;
+  ServerProc server(ws.path("state"));
+  ASSERT_TRUE(server.start());
+  const std::string shot =
+      ws.write("auto.json", replaced(replaced(sphereShot(8, 1), "\"samples\": 1, ", ""),
+                                     "\"pathtrace\"", "\"auto\", \"tolerance\": 0.3"));
+  const CmdResult plan = run(server.cloudctl() + " submit " + shot + " --samples 3 --dry-run");
+  ASSERT_EQ(plan.code, 0) << plan.err;
+  EXPECT_NE((plan.out + plan.err).find("samples: 3 from the request"), std::string::npos)
+      << plan.out << plan.err;
+  const CmdResult r =
+      run(server.cloudctl() + " submit " + shot + " --samples 3 --quiet --out " + ws.path("out"));
+  ASSERT_EQ(r.code, 0) << r.err;
+  // The view's header: cloudbake:samples, a string attribute of one character, "3".
+  const std::string exr = slurp(ws.path("out/front.exr"));
+  const std::string attribute = std::string("cloudbake:samples") + '\0' + "string" + '\0' +
+                                std::string("\x01\0\0\0", 4) + "3";
+  EXPECT_NE(exr.find(attribute), std::string::npos);
+}
+
 // Streams beyond --max-streams are answered RESOURCE_EXHAUSTED (exit 4, "retry later") instead
 // of each taking a server thread without bound (1000 watchers made 1017 threads).
 TEST(ServerQueue, StreamsBeyondTheBoundAreRefused) {
