@@ -513,6 +513,16 @@ JobRecord JobManager::submit(const SubmitInput& input) {
 JobRecord JobManager::render(const std::string& job_id, const std::string& views_json,
                              const std::string& sun_irradiance_json, const std::string& owner) {
   const std::shared_ptr<Job> old = find(job_id);
+  {
+    // A view is rendered from a finished job's bake, which only a succeeded job has: from a
+    // cancelled, failed or running one the "render" was a whole new run of its shot.
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (old->record.state != JobState::kSucceeded) {
+      throw FailedPreconditionError("job " + job_id + " is " + jobStateName(old->record.state) +
+                                    "; views are rendered from SUCCEEDED jobs only (submit its "
+                                    "shot again to run it)");
+    }
+  }
   SubmitInput input;
   try {
     input = readSubmission(store_->jobDir(job_id));

@@ -290,6 +290,12 @@ TEST_F(ServerTest, ClientDeadlinesEndStreamsPromptly) {
     run(server_.cloudctl() + " cancel " + j.at("id").get<std::string>());
   }
   EXPECT_EQ(run(server_.cloudctl() + " watch " + id).code, 6);
+  // A cancelled job has no bake to render views from: refused (exit 5), not run again whole.
+  const CmdResult render = run(server_.cloudctl() + " render " + id + " --quiet");
+  EXPECT_EQ(render.code, 5) << render.err;
+  EXPECT_NE(render.err.find("is CANCELLED; views are rendered from SUCCEEDED jobs only"),
+            std::string::npos)
+      << render.err;
 }
 
 TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
