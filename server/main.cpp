@@ -363,9 +363,19 @@ std::shared_ptr<grpc::ServerCredentials> serverCredentials(const ServerFlags& f)
   if (f.tls_cert.empty() || f.tls_key.empty()) {
     throw std::runtime_error("--tls-cert and --tls-key go together");
   }
+  // gRPC refuses a file that is not PEM only when it binds, which read as "cannot listen on"
+  // (exit 4) with the cause in its own log lines: the files are checked here, by name.
+  const std::string cert = cloudbake::readWholeFile(f.tls_cert);
+  const std::string key = cloudbake::readWholeFile(f.tls_key);
+  if (cert.find("-----BEGIN CERTIFICATE-----") == std::string::npos) {
+    throw std::runtime_error("--tls-cert " + f.tls_cert + ": not a PEM certificate chain");
+  }
+  if (key.find("-----BEGIN") == std::string::npos ||
+      key.find("PRIVATE KEY-----") == std::string::npos) {
+    throw std::runtime_error("--tls-key " + f.tls_key + ": not a PEM private key");
+  }
   grpc::SslServerCredentialsOptions ssl;
-  ssl.pem_key_cert_pairs.push_back(
-      {cloudbake::readWholeFile(f.tls_key), cloudbake::readWholeFile(f.tls_cert)});
+  ssl.pem_key_cert_pairs.push_back({key, cert});
   return grpc::SslServerCredentials(ssl);
 }
 

@@ -152,6 +152,11 @@ int jobExitCode(const v1::Job& j) {
 
 /// A small text file an option names; CliError naming the option when it cannot be read.
 std::string readTextFile(const std::string& path, const std::string& option) {
+  // A folder opens as a stream and fails at the first read, with the library's own words.
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    throw CliError{ExitCode::kBadInput, option + " " + path + ": is a folder, not a file"};
+  }
   std::ifstream in(path, std::ios::binary);
   if (!in.is_open()) throw CliError{ExitCode::kBadInput, option + " " + path + ": cannot open"};
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -192,7 +197,12 @@ struct Client {
   std::shared_ptr<grpc::ChannelCredentials> credentials() const {
     if (!tls && tls_ca.empty()) return grpc::InsecureChannelCredentials();
     grpc::SslCredentialsOptions ssl;
-    if (!tls_ca.empty()) ssl.pem_root_certs = readTextFile(tls_ca, "--tls-ca");
+    if (!tls_ca.empty()) {
+      ssl.pem_root_certs = readTextFile(tls_ca, "--tls-ca");
+      if (ssl.pem_root_certs.find("-----BEGIN CERTIFICATE-----") == std::string::npos) {
+        throw CliError{ExitCode::kBadInput, "--tls-ca " + tls_ca + ": not a PEM certificate"};
+      }
+    }
     return grpc::SslCredentials(ssl);
   }
 

@@ -1180,6 +1180,31 @@ TEST(CloudctlCommandLine, AMalformedServerAddressIsBadInputNamingTheOption) {
   }
 }
 
+// Credential files that cannot serve are bad input naming their option: a folder read as
+// "basic_filebuf::underflow error" (exit 1), a CA file with no certificate was taken silently.
+TEST(CloudctlCommandLine, CredentialFilesThatCannotServeAreBadInputNamingTheOption) {
+  Workspace ws;
+  const std::string empty = ws.write("empty.pem", "");
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"--token-file " + ws.path(""), "--token-file " + ws.path("") + ": is a folder"},
+      {"--tls-ca " + ws.path(""), "--tls-ca " + ws.path("") + ": is a folder"},
+      {"--tls-ca " + empty, "--tls-ca " + empty + ": not a PEM certificate"},
+  };
+  for (const auto& [args, needle] : bad) {
+    const CmdResult r = run(std::string(CLOUDCTL_BIN) + " " + args + " --timeout 2 health");
+    EXPECT_EQ(r.code, 2) << args << ": " << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << args << ": " << r.err;
+  }
+  // The server: a certificate that is not PEM was "cannot listen" (exit 4).
+  const CmdResult server = run("timeout 30 " + std::string(CLOUDBAKE_SERVER_BIN) +
+                               " --listen=127.0.0.1:0 --cache-dir=" + ws.path("state") +
+                               " --tls-cert=" + empty + " --tls-key=" + empty);
+  EXPECT_EQ(server.code, 2) << server.err;
+  EXPECT_NE((server.out + server.err).find("--tls-cert " + empty + ": not a PEM certificate"),
+            std::string::npos)
+      << server.out << server.err;
+}
+
 TEST(CloudctlCommandLine, MistypedCommandIsNamedWithTheNearestOne) {
   // Flags take no value: the word after one is the command (a review found `--json sumbit`
   // reported as "A subcommand is required" and `--json --timeout 5 sumbit` as command '5').
