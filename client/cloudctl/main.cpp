@@ -212,6 +212,7 @@ struct Client {
     grpc::ChannelArguments args;
     args.SetMaxReceiveMessageSize(4 << 20);
     channel = grpc::CreateCustomChannel(server, credentials(), args);
+    const auto start = std::chrono::system_clock::now();
     const auto until = deadline();
     grpc_connectivity_state state = channel->GetState(/*try_to_connect=*/true);
     while (state != GRPC_CHANNEL_READY) {
@@ -222,9 +223,18 @@ struct Client {
                            "--wait-for-server keeps trying for --timeout seconds)"};
       }
       if (!channel->WaitForStateChange(state, until)) {
+        // The wait ends at --timeout or at --deadline, whichever is first: say which, in the
+        // seconds it waited (a --deadline 3 said "within 10 s", a --timeout 1e-6 "within 1 s").
+        const double waited = std::chrono::duration<double>(until - start).count();
+        const bool by_deadline =
+            command_deadline &&
+            *command_deadline <
+                start + std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
+        char seconds[32];
+        std::snprintf(seconds, sizeof seconds, "%.2g", std::max(0.0, waited));
         throw CliError{ExitCode::kUnavailable,
-                       server + ": server unavailable (no connection within " +
-                           std::to_string(int(std::ceil(timeout_s))) + " s)"};
+                       server + ": server unavailable (no connection within " + seconds + " s, " +
+                           (by_deadline ? "--deadline" : "--timeout") + ")"};
       }
       state = channel->GetState(/*try_to_connect=*/true);
     }

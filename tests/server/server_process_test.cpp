@@ -1205,6 +1205,30 @@ TEST(CloudctlCommandLine, CredentialFilesThatCannotServeAreBadInputNamingTheOpti
       << server.out << server.err;
 }
 
+// A server that accepts the connection and never answers: the wait ends at --timeout or at
+// --deadline, whichever comes first, and the message says which and after how long (a
+// --deadline 1 said "no connection within 10 s").
+TEST(CloudctlCommandLine, ASilentServerIsReportedByTheLimitThatEndedTheWait) {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  ASSERT_EQ(listen(fd, 16), 0);  // the kernel completes connections; nobody answers them
+  socklen_t len = sizeof addr;
+  getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  const std::string server = " --server 127.0.0.1:" + std::to_string(ntohs(addr.sin_port));
+  const CmdResult by_deadline = run(std::string(CLOUDCTL_BIN) + server + " --deadline 1 health");
+  EXPECT_EQ(by_deadline.code, 4) << by_deadline.err;
+  EXPECT_NE(by_deadline.err.find("no connection within 1 s, --deadline)"), std::string::npos)
+      << by_deadline.err;
+  const CmdResult by_timeout = run(std::string(CLOUDCTL_BIN) + server + " --timeout 0.5 health");
+  EXPECT_EQ(by_timeout.code, 4) << by_timeout.err;
+  EXPECT_NE(by_timeout.err.find("no connection within 0.5 s, --timeout)"), std::string::npos)
+      << by_timeout.err;
+  close(fd);
+}
+
 TEST(CloudctlCommandLine, MistypedCommandIsNamedWithTheNearestOne) {
   // Flags take no value: the word after one is the command (a review found `--json sumbit`
   // reported as "A subcommand is required" and `--json --timeout 5 sumbit` as command '5').
