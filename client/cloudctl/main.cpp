@@ -456,6 +456,13 @@ std::string fetchOne(Client& c, const std::string& job, const v1::OutputFile& fi
     throw CliError{ExitCode::kFailure, "server sent an unsafe output name '" + file.name() + "'"};
   }
   const fs::path final_path = fs::path(dir) / file.name();
+  // Checked before the download: the rename at its end failed ("filesystem error", exit 1)
+  // with the whole file left beside it.
+  if (fs::is_directory(final_path, ec)) {
+    throw CliError{ExitCode::kBadInput, "--out: " + final_path.string() +
+                                            " is a folder; the output '" + file.name() +
+                                            "' cannot be written there"};
+  }
   if (fs::is_regular_file(final_path, ec) && fs::file_size(final_path, ec) == file.size() &&
       cloudbake::sha256File(final_path.string()) == file.sha256()) {
     return final_path.string();

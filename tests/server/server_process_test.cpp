@@ -342,6 +342,14 @@ TEST_F(ServerTest, SubmitWaitFetchAndOpenTheOutputs) {
   fetch = run(server_.cloudctl() + " fetch " + id + " --name front.exr --out " + ws_.path("again"));
   EXPECT_EQ(fetch.code, 0) << fetch.err;
   EXPECT_EQ(slurp(ws_.path("again/front.exr")), slurp(out + "/front.exr"));
+  // A folder where the output goes is refused before the download, which left the whole file
+  // as a .part after a failed rename (exit 1).
+  fs::create_directories(ws_.path("folder/front.exr"));
+  fetch =
+      run(server_.cloudctl() + " fetch " + id + " --name front.exr --out " + ws_.path("folder"));
+  EXPECT_EQ(fetch.code, 2) << fetch.err;
+  EXPECT_NE(fetch.err.find("front.exr is a folder"), std::string::npos) << fetch.err;
+  EXPECT_FALSE(fs::exists(ws_.path("folder/front.exr.part")));
   // An identical file already there is kept, not downloaded again (its time stays put).
   const fs::path kept = ws_.path("again/bake.vdb");
   const auto old_time = fs::file_time_type::clock::now() - std::chrono::hours(24);
