@@ -295,6 +295,8 @@ RunResult runShotOnSlurm(const ShotSpec& shot_in, const RunOptions& ro, const Sl
   if (isAutoShot(shot)) {
     const AutoChoice choice = chooseAutoForRun(shot, ro);
     preset = RunOptions::AutoPreset{choice.shot, autoSummary(choice), choice.toJson()};
+    // The override is the chosen method's, as runShot applies it (the choice replaced it).
+    if (ro.samples != -1) preset->shot.bake.samples = ro.samples;
   }
   const TaskPlan plan = planTasks(shot, so.tasks, preset);
   const fs::path dir = fs::path(so.shared_dir) / "tasks" / plan.id;
