@@ -441,6 +441,39 @@ std::string upload(Client& c, const std::string& path, bool quiet) {
 
 // ---- fetch -------------------------------------------------------------------------------
 
+/// Appends `file` from `offset` on to `part`. A stream that fails before a byte arrived (an
+/// output gone from the server) leaves no empty .part behind.
+void downloadPart(Client& c, const std::string& job, const v1::OutputFile& file,
+                  const fs::path& part, uint64_t offset) {
+  const uint64_t start = offset;
+  grpc::ClientContext ctx;
+  c.streamCall(&ctx);
+  v1::FetchResultRequest req;
+  req.set_job_id(job);
+  req.set_name(file.name());
+  req.set_offset(offset);
+  auto reader = c.stub->FetchResult(&ctx, req);
+  std::ofstream out(part, std::ios::binary | std::ios::app);
+  v1::ResultChunk chunk;
+  while (reader->Read(&chunk)) {
+    if (chunk.offset() != offset) {
+      throw CliError{ExitCode::kFailure, "fetch " + file.name() + ": chunk out of order"};
+    }
+    out.write(chunk.data().data(), std::streamsize(chunk.data().size()));
+    offset += chunk.data().size();
+  }
+  out.close();
+  if (!out) {
+    throw CliError{ExitCode::kFailure,
+                   "fetch " + file.name() + ": cannot write " + part.string() +
+                       " (disk full or not writable); the partial file is kept for a resume"};
+  }
+  const grpc::Status status = reader->Finish();
+  std::error_code ec;
+  if (!status.ok() && start == 0 && fs::file_size(part, ec) == 0) fs::remove(part, ec);
+  check(status, "fetch " + file.name());
+}
+
 /// Downloads one output to DIR/<name>, resuming DIR/<name>.part, verifying size and SHA-256. A
 /// file already there with the same size and SHA-256 (the unchanged bake.vdb of a RenderView of
 /// the same job) is kept as it is, without a download.
@@ -473,34 +506,14 @@ std::string fetchOne(Client& c, const std::string& job, const v1::OutputFile& fi
     fs::remove(part);
     offset = 0;
   }
-  if (offset < file.size() || file.size() == 0) {
-    grpc::ClientContext ctx;
-    c.streamCall(&ctx);
-    v1::FetchResultRequest req;
-    req.set_job_id(job);
-    req.set_name(file.name());
-    req.set_offset(offset);
-    auto reader = c.stub->FetchResult(&ctx, req);
-    std::ofstream out(part, std::ios::binary | std::ios::app);
-    v1::ResultChunk chunk;
-    while (reader->Read(&chunk)) {
-      if (chunk.offset() != offset) {
-        throw CliError{ExitCode::kFailure, "fetch " + file.name() + ": chunk out of order"};
-      }
-      out.write(chunk.data().data(), std::streamsize(chunk.data().size()));
-      offset += chunk.data().size();
-    }
-    out.close();
-    if (!out) {
-      throw CliError{ExitCode::kFailure,
-                     "fetch " + file.name() + ": cannot write " + part.string() +
-                         " (disk full or not writable); the partial file is kept for a resume"};
-    }
-    check(reader->Finish(), "fetch " + file.name());
-  }
+  const bool resumed = offset > 0;
+  if (offset < file.size() || file.size() == 0) downloadPart(c, job, file, part, offset);
   const std::string got = cloudbake::sha256File(part.string());
   if (fs::file_size(part) != file.size() || got != file.sha256()) {
     fs::remove(part);
+    // A .part that was not a prefix of this output (a stale one, another version of the file)
+    // spoils only the resume: the whole file is fetched again once, not left for a second run.
+    if (resumed) return fetchOne(c, job, file, dir);
     throw CliError{ExitCode::kFailure, "fetch " + file.name() + ": checksum mismatch (expected " +
                                            file.sha256() + ", got " + got +
                                            "); the partial file was removed"};
