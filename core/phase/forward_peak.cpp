@@ -75,6 +75,7 @@ ForwardPeak splitForwardPeak(const PhaseFunction& phase, int degree, double max_
     p_top += g.p[k] * (g.weight[k] * g.p_top[k]);
   }
   ForwardPeak split;
+  split.integral = p_l0;
   *found = true;
   double worst = 0;
   for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(p_top[c] / p_l0[c]));

@@ -23,6 +23,9 @@ struct ForwardPeak {
   double cos_cut = 1;  ///< 1: nothing split off (peak = 0)
   Rgb p_cut{0.0};      ///< p(cos_cut) per channel, sr^-1
   Rgb fraction{0.0};   ///< the integral of peak over the sphere per channel: its share of p
+  /// p's own integral over the sphere per channel on the grid the split integrates on (see
+  /// phaseIntegralOnPeakGrid): 1 where the grid resolves the peak.
+  Rgb integral{1.0};
 
   bool active() const { return cos_cut < 1; }
   /// peak(mu) given p(mu) = p_mu, per channel, sr^-1.
@@ -33,7 +36,8 @@ struct ForwardPeak {
 /// rest_degree / rest_0 (rest_l = 2 pi integral of rest(mu) P_l(mu) dmu), is at most
 /// `max_legendre` in absolute value in every channel: none (cos_cut = 1) when p itself satisfies
 /// it, else cuts up to `max_angle_deg`. *found is false when no cut up to that angle does (a peak
-/// elsewhere, such as a backward one); the widest cut tried is returned then.
+/// elsewhere, such as a backward one); the widest cut tried is returned then. The result's
+/// `integral` is set in every case.
 ForwardPeak splitForwardPeak(const PhaseFunction& phase, int degree, double max_legendre,
                              double max_angle_deg, bool* found);
 

@@ -93,6 +93,16 @@ TEST(ForwardPeak, TheGridResolvesDropletsButNotTheNarrowestHgPeaks) {
   }
 }
 
+// The split reports the same integral, so photon need not integrate the phase twice.
+TEST(ForwardPeak, TheSplitCarriesThePhasesIntegralOnItsGrid) {
+  for (double g : {0.85, 0.9999}) {
+    bool found = false;
+    const HenyeyGreensteinPhase hg(g);
+    const ForwardPeak split = splitForwardPeak(hg, 24, 0.1, 30, &found);
+    EXPECT_NEAR(split.integral.x, phaseIntegralOnPeakGrid(hg).x, 1e-12) << g;
+  }
+}
+
 TEST(ForwardPeak, ABackwardPeakCannotBeCut) {
   bool found = true;
   splitForwardPeak(HenyeyGreensteinPhase(-0.99), 24, 0.1, 30, &found);
