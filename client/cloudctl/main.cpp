@@ -31,6 +31,7 @@
 #include "common/stdout_check.h"
 #include "core/io/exr_io.h"
 #include "core/io/png_writer.h"
+#include "core/job/asset_limits.h"
 #include "core/job/sha256.h"
 
 namespace {
@@ -688,7 +689,14 @@ void addAssets(Client& c, const SubmitArgs& a, v1::SubmitJobRequest* req) {
   }
   const fs::path base = fs::absolute(a.shot).parent_path();
   bool rewritten = false;
-  for (const cloudbake::client::ShotPath& path : cloudbake::client::shotPaths(shot)) {
+  const std::vector<cloudbake::client::ShotPath> paths = cloudbake::client::shotPaths(shot);
+  if (paths.size() > cloudbake::kMaxJobAssets) {
+    throw CliError{ExitCode::kBadInput,
+                   a.shot + ": names " + std::to_string(paths.size()) + " files (" +
+                       paths.back().pointer + " the last), more than the " +
+                       std::to_string(cloudbake::kMaxJobAssets) + " a job may name"};
+  }
+  for (const cloudbake::client::ShotPath& path : paths) {
     Json* node = path.node;
     const std::string p = node->get<std::string>();
     const std::string field = a.shot + ": " + path.pointer + ": ";

@@ -21,6 +21,7 @@ from cloudbake.v1 import bake_service_pb2_grpc as pb_grpc
 from cloudbake_shot_paths import referenced_paths
 
 CHUNK = 1 << 20  # upload message size (the server accepts at most 1 MiB per message)
+MAX_JOB_ASSETS = 4096  # files one job may name: kMaxJobAssets of core/job/asset_limits.h
 
 
 class JobFailed(Exception):
@@ -139,7 +140,12 @@ class BakeClient:
             shot = json.loads(shot_json)
         except ValueError:
             shot = None  # the server reports where the JSON breaks
-        for rel in referenced_paths(shot) if shot is not None else []:
+        paths = referenced_paths(shot) if shot is not None else []
+        if len(paths) > MAX_JOB_ASSETS:
+            # Counted before any file is hashed (core/job/asset_limits.h, which cloudctl reads).
+            raise ValueError("shot names %d files, more than the %d a job may name"
+                             % (len(paths), MAX_JOB_ASSETS))
+        for rel in paths:
             if not isinstance(rel, str):
                 continue  # the server names the field
             norm = os.path.normpath(rel)

@@ -35,7 +35,6 @@ double unixNow() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-constexpr size_t kMaxAssets = 4096;  // files one job may name
 constexpr long kMaxAssetDepth = 32;  // folders in one asset path
 
 // A client-chosen asset path becomes a path under the job's input folder: it must stay inside.
@@ -316,9 +315,9 @@ JobManager::Prepared JobManager::prepare(const SubmitInput& input, const std::st
   Prepared p;
   p.input = input;
   const std::string input_dir = (fs::path(dir) / "input").string();
-  if (input.assets.size() > kMaxAssets) {
+  if (input.assets.size() > kMaxJobAssets) {
     throw InputError("assets: " + std::to_string(input.assets.size()) + " files, more than the " +
-                     std::to_string(kMaxAssets) + " a job may name");
+                     std::to_string(kMaxJobAssets) + " a job may name");
   }
   std::vector<std::string> rels;
   for (size_t i = 0; i < input.assets.size(); ++i) {
@@ -663,10 +662,16 @@ OutputFile JobManager::output(const std::string& id, const std::string& name) {
   if (!verified_outputs_.check(out.path, out.sha256) &&
       !rebuildOutput(id, out, kRebuildSecondsOnFetch)) {
     ++outputs_corrupt_;
-    spdlog::error("job {}: output '{}' does not match its recorded size and SHA-256", id, name);
-    throw FailedPreconditionError("job " + id + ": output '" + name +
-                                  "' is damaged on the server and cannot be served; resubmit the "
-                                  "job (what it computed is in the server's cache)");
+    std::error_code ec;
+    const bool gone = !fs::exists(out.path, ec);
+    spdlog::error("job {}: output '{}' {}", id, name,
+                  gone ? "is gone" : "does not match its recorded size and SHA-256");
+    // The rebuild has just failed, so the cache may no longer hold what the job computed: a
+    // resubmission reuses whatever it still holds.
+    throw FailedPreconditionError("job " + id + ": output '" + name + "' is " +
+                                  (gone ? "gone from" : "damaged on") +
+                                  " the server and cannot be served; resubmit the job (it reuses "
+                                  "the server's cache where that still holds the bake)");
   }
   return out;
 }

@@ -18,6 +18,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/job/asset_limits.h"
 #include "core/job/asset_store.h"
 #include "core/job/bake_cache.h"
 #include "core/job/cache_key.h"

@@ -153,6 +153,14 @@ def main():
         job_link = client.wait(client.submit(json.dumps(linked), base_dir=os.path.join(work, "shot"),
                                              allow_outside=True).id)
         check(job_link.state == pb.SUCCEEDED, "allow_outside=True uploads it")
+        many = dict(vdb_shot, name="py_many",
+                    volume={"sequence": {"paths": ["f%d.vdb" % i for i in range(4097)]}})
+        try:
+            client.submit(json.dumps(many), base_dir=os.path.join(work, "shot"))
+            check(False, "a shot naming 4097 files is refused before any is read")
+        except ValueError as e:
+            check("4097 files, more than the 4096" in str(e),
+                  "a shot naming 4097 files is refused before any is read (%s)" % e)
         try:
             cloudbake_client.BakeClient("127.0.0.1:%d" % free_port(), timeout=0.5)
             check(False, "a server that is down is a clear error")

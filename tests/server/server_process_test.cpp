@@ -668,6 +668,11 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
   const std::string base = sphereShot(8, 1);
   const std::string vol =
       R"("volume": {"sphere": {"center": [0, 0, 0], "radius": 1, "density": 1}})";
+  auto manyFrames = [](int n) {
+    std::string paths;
+    for (int i = 0; i < n; ++i) paths += (i ? ", \"f" : "\"f") + std::to_string(i) + ".vdb\"";
+    return R"({"sequence": {"frames": )" + std::to_string(n) + R"(, "paths": [)" + paths + "]}}";
+  };
   auto withVolume = [&](const std::string& v) {
     return replaced(replaced(base, vol, "\"volume\": " + v),
                     R"("vdb": true, "vdb_voxel_size": 0.1)", R"("vdb": false)");
@@ -740,6 +745,9 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
        "/volume/vdb: crash.vdb: not a readable OpenVDB file",
        {{"crash.vdb",
          slurp(std::string(CLOUDBAKE_SOURCE_DIR) + "/tests/data/fuzz/vdb_blosc_abort.vdb")}}},
+      // Counted before any is hashed or looked for: these 4097 do not exist.
+      {"more files than a job may name", withVolume(manyFrames(4097)), 2,
+       "names 4097 files (/volume/sequence/paths/4096 the last), more than the 4096"},
   };
   ASSERT_GE(cases.size(), 20u);
   ws_.write("outside.vdb", vdb_bytes);
@@ -938,7 +946,9 @@ TEST(ServerQueue, AnOutputGoneEverywhereLeavesNoEmptyPart) {
   fs::remove_all(ws.path("state/cache"));
   const CmdResult fetch =
       run(server.cloudctl() + " fetch " + id + " --name front.exr --out " + ws.path("f"));
-  EXPECT_NE(fetch.code, 0) << fetch.err;
+  EXPECT_EQ(fetch.code, 5) << fetch.err;
+  EXPECT_NE(fetch.err.find("gone from the server"), std::string::npos) << fetch.err;
+  EXPECT_EQ(fetch.err.find("is in the server's cache"), std::string::npos) << fetch.err;
   EXPECT_FALSE(fs::exists(ws.path("f/front.exr.part"))) << fetch.err;
 }
 

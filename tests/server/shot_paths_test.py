@@ -8,6 +8,7 @@ Usage: shot_paths_test.py SOURCE_ROOT
 
 import json
 import os
+import re
 import sys
 
 PATH_REF = "#/$defs/path"
@@ -65,6 +66,13 @@ def main():
     for bad in ([1, 2], "shot", {"volume": []}, {"lighting": {"sky": "blue"}},
                 {"volume": {"vdb": {"path": 3}, "sequence": {"paths": "x"}}}):
         assert sp.referenced_paths(bad) == [], bad
+    # The Python client's copy of the server's limit on files per job (it checks it before
+    # hashing any): read as text, since importing the client needs grpc.
+    with open(os.path.join(root, "core", "job", "asset_limits.h")) as f:
+        limit = re.search(r"kMaxJobAssets = (\d+);", f.read())
+    with open(os.path.join(root, "client", "python", "cloudbake_client.py")) as f:
+        py_limit = re.search(r"^MAX_JOB_ASSETS = (\d+)", f.read(), re.M)
+    assert limit and py_limit and limit.group(1) == py_limit.group(1), "MAX_JOB_ASSETS differs"
     print("shot paths: %d pointers match docs/shot.schema.json" % len(listed))
     return 0
 
