@@ -322,6 +322,11 @@ OutputSpec parseOutputs(const Object& o) {
     out.exr_layers = parseExrLayers(r, *v, o.path("exr_layers"));
     if (!out.exr) r.fail(o.path("exr_layers"), "applies only when /outputs/exr is true");
   }
+  // A shot that writes nothing would bake, succeed and hand back no file (an outside probe of
+  // the server found such a job "succeeded" with no outputs).
+  if (!out.exr && !out.vdb) {
+    r.fail(o.ptr(), "asks for nothing: exr and vdb are both false (set one of them to true)");
+  }
   return out;
 }
 

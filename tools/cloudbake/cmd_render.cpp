@@ -182,10 +182,6 @@ std::vector<std::string> render(const RenderOptions& opt) {
   const ShotSpec shot = parseShotFile(opt.shot);
   checkRunnable(shot, opt.shot);
   checkShotVoxels(shot, max_voxels, opt.shot);
-  if (!shot.outputs.exr && !shot.outputs.vdb && !opt.quiet) {
-    std::fprintf(stderr, "%s: nothing to write (outputs.exr and outputs.vdb are both false)\n",
-                 shot.name.c_str());
-  }
 
   RunOptions run;
   run.out_dir = opt.out;

@@ -269,7 +269,7 @@ TEST(ShotParser, EveryVariantRoundTripsThroughTheCanonicalForm) {
       },
       [](json& j) {
         j["views"] = json::array();
-        j["outputs"] = {{"exr", false}};
+        j["outputs"] = {{"exr", false}, {"vdb", true}, {"vdb_voxel_size", 0.25}};
       },
   };
   for (size_t i = 0; i < variants.size(); ++i) {
@@ -746,6 +746,12 @@ TEST_F(BadShots, EachNamesTheOffendingField) {
          j["outputs"]["exr_layers"] = {"sun"};
        },
        "/outputs/exr_layers: applies only when /outputs/exr is true"},
+      {"no output at all",
+       [](json& j) {
+         j["outputs"]["exr"] = false;
+         j["outputs"]["vdb"] = false;
+       },
+       "/outputs: asks for nothing: exr and vdb are both false"},
       // An outside probe's findings: each was refused late, or blamed on the wrong field.
       {"a denormal extinction", [](json& j) { j["medium"]["extinction"] = 1e-320; },
        "/medium/extinction: must be 0 or at least 1e-30 (the grids hold densities as floats), "
