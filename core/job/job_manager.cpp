@@ -207,6 +207,9 @@ JobManager::JobManager(JobManagerOptions options) : options_(std::move(options))
       // Its outputs may be half-written: never serve them.
       job->record.state = JobState::kFailed;
       job->record.error = "interrupted: the server stopped while this job was running; resubmit";
+      // The stage on disk is the last one saved (often "build" at 0 %), not where it stopped.
+      job->record.stage = "interrupted";
+      job->record.fraction = 0;
       job->record.finished = unixNow();
       job->record.outputs.clear();
       fs::remove_all(store_->outputDir(record.id), ec);

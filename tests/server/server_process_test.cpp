@@ -1056,6 +1056,7 @@ TEST(ServerRestart, ResultsSurviveRestartsAndCrashesServeNothingCorrupt) {
     const Json crashed = status(again, id);
     EXPECT_EQ(crashed.at("state"), "FAILED");
     EXPECT_NE(crashed.at("error").get<std::string>().find("interrupted"), std::string::npos);
+    EXPECT_EQ(crashed.at("stage"), "interrupted");  // it had shown "build 0%"
     EXPECT_EQ(run(again.cloudctl() + " fetch " + id + " --out " + ws.path("f2")).code, 5);
     // The completed job's own result is intact and fetchable.
     EXPECT_EQ(run(again.cloudctl() + " fetch " + done_id + " --out " + ws.path("f3")).code, 0);
