@@ -25,6 +25,22 @@ std::string uniqueSuffix() {
   return s.str();
 }
 
+void makeWritableFolder(const std::string& dir, const std::string& what) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec || !fs::is_directory(dir)) {
+    throw InputError(what + ": cannot create folder '" + dir + "'" +
+                     (ec ? ": " + ec.message() : ""));
+  }
+  std::string probe = (fs::path(dir) / ".cloudbake-write-test-XXXXXX").string();
+  const int fd = ::mkostemp(probe.data(), O_CLOEXEC);
+  if (fd < 0) {
+    throw InputError(what + ": cannot write in folder '" + dir + "': " + std::strerror(errno));
+  }
+  ::close(fd);
+  ::unlink(probe.c_str());
+}
+
 void writeFileAtomic(const std::string& path, const std::string& data) {
   const std::string tmp = path + ".tmp." + uniqueSuffix();
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);

@@ -17,6 +17,11 @@ void writeFileAtomic(const std::string& path, const std::string& data);
 std::string readRegularFile(const std::string& path, uint64_t max_bytes);
 std::string readWholeFile(const std::string& path);
 
+/// Creates folder `dir` (and its parents) and checks that a file can be made in it, so a run
+/// refuses a folder it could not write before its work, not after. InputError "<what>: cannot
+/// create folder ..." or "<what>: cannot write in folder ...", with the system's reason.
+void makeWritableFolder(const std::string& dir, const std::string& what);
+
 /// A name unique within this process and very likely across processes (pid, time, counter):
 /// used for temporary files and folders next to their final location.
 std::string uniqueSuffix();

@@ -55,23 +55,6 @@ void checkRunOptions(const RunOptions& opt) {
   }
 }
 
-void makeOutputFolder(const std::string& dir) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir)) {
-    throw InputError("out: cannot create folder '" + dir + "'" + (ec ? ": " + ec.message() : ""));
-  }
-  // A folder the run cannot write in is refused now, not after the render it would hold (a
-  // read-only --out failed at the first EXR, the whole render's work lost).
-  std::string probe = (fs::path(dir) / ".cloudbake-write-test-XXXXXX").string();
-  const int fd = ::mkostemp(probe.data(), O_CLOEXEC);
-  if (fd < 0) {
-    throw InputError("out: cannot write in folder '" + dir + "': " + std::strerror(errno));
-  }
-  ::close(fd);
-  ::unlink(probe.c_str());
-}
-
 // The shot's EXR compression. A shot built in code, not parsed, may carry any name: runShot
 // checks it before anything runs (checkRunnable), and writeView looks it up again.
 ExrCompression exrCompressionOf(const ShotSpec& shot, const std::string& source) {
@@ -514,7 +497,9 @@ RunResult runShot(const ShotSpec& shot_in, const RunOptions& opt) {
   checkRunOptions(opt);
   ShotSpec shot = shot_in;
   checkRunnable(shot, opt.source);
-  makeOutputFolder(opt.out_dir);
+  // A folder the run cannot write in is refused now, not after the render it would hold (a
+  // read-only --out failed at the first EXR, the whole render's work lost).
+  makeWritableFolder(opt.out_dir, "out");
 
   // Auto resolves into the chosen method's shot before anything is baked, so its cache entries
   // are those of a shot naming that method; the density it measured is reused.

@@ -457,12 +457,11 @@ TaskRunResult runTask(const TaskPlan& plan, const std::string& task_id, RunOptio
     throw InputError("task: no task '" + task_id + "' in the plan (" + taskIds(plan) + ")");
   }
   if (!options.cache) throw InputError("--cache-dir: a task needs the plan's shared cache");
-  fs::create_directories(markers_dir);
-  TaskRunResult result;
-  if (markerIntact(markerPath(markers_dir, task_id), options.out_dir)) {
-    result.already_done = true;
-    return result;
-  }
+  // Its marker goes here after the run: a folder it cannot write in is refused before the work
+  // (an unwritable one failed as an internal error after the task had written its files).
+  makeWritableFolder(markers_dir, "--cache-dir");
+  // Gather answers for the whole shot: its dependencies are checked even when its own marker
+  // holds (an output of another task deleted since had still read as "already done").
   if (task->scope.part == Part::kGather) {
     for (const std::string& dep : task->after) {
       if (!markerIntact(markerPath(markers_dir, dep), options.out_dir)) {
@@ -470,6 +469,11 @@ TaskRunResult runTask(const TaskPlan& plan, const std::string& task_id, RunOptio
                          "' has not finished into this output folder (run it first)");
       }
     }
+  }
+  TaskRunResult result;
+  if (markerIntact(markerPath(markers_dir, task_id), options.out_dir)) {
+    result.already_done = true;
+    return result;
   }
   options.scope = task->scope;
   options.auto_preset = plan.auto_preset;
@@ -481,9 +485,17 @@ TaskRunResult runTask(const TaskPlan& plan, const std::string& task_id, RunOptio
       throw InternalError("task " + task_id + " wrote '" + f.name + "', which its plan omits");
     }
   }
-  writeFileAtomic(
-      markerPath(markers_dir, task_id),
-      Json{{"task", task_id}, {"plan", plan.id}, {"files", fileList(result.run.files)}}.dump(1));
+  try {
+    writeFileAtomic(
+        markerPath(markers_dir, task_id),
+        Json{{"task", task_id}, {"plan", plan.id}, {"files", fileList(result.run.files)}}.dump(1));
+  } catch (...) {
+    // Files without their marker would be written again by the next run: a failed task leaves
+    // none of its own behind, as a failed render does.
+    std::error_code ec;
+    for (const OutputFile& f : result.run.files) fs::remove(f.path, ec);
+    throw;
+  }
   return result;
 }
 

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "core/error.h"
@@ -110,17 +111,21 @@ void runTaskCommand(const RunTaskOptions& opt) {
     std::cout << p.id << "\n";
     return;
   }
-  std::error_code ec;
-  fs::create_directories(opt.cache_dir, ec);
-  if (ec || !fs::is_directory(opt.cache_dir)) {
-    throw InputError("--cache-dir: cannot create folder '" + opt.cache_dir + "'");
+  const std::string cache_root = (fs::path(opt.cache_dir) / "cache").string();
+  makeWritableFolder(cache_root, "--cache-dir");
+  std::optional<BakeCache> cache;
+  try {
+    cache.emplace(cache_root, BakeCacheOptions{});
+  } catch (const fs::filesystem_error& e) {
+    // A cache whose folders another user made read-only: the flag's problem, not ours.
+    throw InputError("--cache-dir: cannot use the cache in '" + cache_root +
+                     "': " + e.code().message());
   }
-  BakeCache cache((fs::path(opt.cache_dir) / "cache").string(), BakeCacheOptions{});
   RunOptions ro;
   ro.out_dir = opt.out;
   ro.source = opt.plan;
   ro.threads = opt.threads;
-  ro.cache = &cache;
+  ro.cache = &*cache;
   ro.vdb_reader.command = vdbReaderCommand();  // a corrupt file fails the task, not the node's run
   std::string last;
   ro.progress = [&](const RunProgress& progress) {

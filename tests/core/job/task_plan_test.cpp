@@ -174,6 +174,17 @@ TEST(TaskPlan, ADoneTaskIsNotRunAgainUnlessItsFilesChanged) {
   EXPECT_FALSE(again.already_done);
   EXPECT_EQ(sha256File((dir / "out" / "a.exr").string()), before);
   EXPECT_THROW(runTask(plan, "render.9", ro, markers), InputError);
+  // Gather, done, answers for the whole shot: a render's file gone since is not "already done"
+  // (an outside probe's gather said so, exit 0, with a view missing).
+  EXPECT_TRUE(runTask(plan, "gather", ro, markers).already_done);
+  fs::remove(dir / "out" / "a.exr");
+  try {
+    runTask(plan, "gather", ro, markers);
+    ADD_FAILURE() << "gather passed with a view missing";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("'render.000' has not finished"), std::string::npos)
+        << e.what();
+  }
   fs::remove_all(dir);
 }
 

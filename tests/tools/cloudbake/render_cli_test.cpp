@@ -663,6 +663,28 @@ TEST_F(RenderCli, FullDisksAndMissingFilesHaveTheirOwnExitCodes) {
   EXPECT_FALSE(fs::exists(csv));
 }
 
+// An outside probe: a --cache-dir the task cannot write in was an internal error (exit 1), after
+// the task had written its files. It is bad input naming the flag, before any work.
+TEST_F(RenderCli, ATaskRefusesACacheFolderItCannotWriteIn) {
+  json j = slab();
+  j["bake"] = {{"method", "single"}, {"light_resolution", 16}};
+  j["views"][0]["resolution"] = {8, 8};
+  const std::string shot = writeShot("farm.json", j).string();
+  const fs::path plan = dir_ / "plan.json";
+  CliResult r = run("plan '" + shot + "' --json");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  std::ofstream(plan) << r.out;
+  // /proc/self exists, and not even root can make a file in it.
+  for (const char* task : {"bake", "render.000"}) {
+    r = run("run-task '" + plan.string() + "' " + task + " --cache-dir /proc/self --out '" +
+            (dir_ / "o").string() + "'");
+    EXPECT_EQ(r.rc, 2) << task << ": " << r.err;
+    EXPECT_NE(r.err.find("--cache-dir: cannot create folder '/proc/self/cache'"), std::string::npos)
+        << r.err;
+    EXPECT_TRUE(!fs::exists(dir_ / "o") || fs::is_empty(dir_ / "o")) << task;
+  }
+}
+
 // A relative RMSE against a reference without light is undefined: null, not 0 (which read as a
 // perfect match of any image).
 TEST_F(RenderCli, CompareAgainstADarkReferenceSaysTheErrorIsUndefined) {
