@@ -1,26 +1,44 @@
 #include "tools/cloudbake/interrupt.h"
 
+#include <time.h>
+
 #include <atomic>
 #include <csignal>
+#include <cstdint>
 #include <cstring>
 
 namespace cloudbake::tool {
 namespace {
 
-std::atomic<int> g_signal{0};  // the first SIGINT or SIGTERM; 0 before it
+std::atomic<int> g_signal{0};        // the first SIGINT or SIGTERM; 0 before it
+std::atomic<int64_t> g_first_ns{0};  // when it arrived (CLOCK_MONOTONIC)
 static_assert(std::atomic<int>::is_always_lock_free, "set from a signal handler");
-// The signals whose handler was installed, written before any is: after the first signal
-// both go back to their default action, so a second one of either kind ends the process
-// (SA_RESETHAND resets only the one that arrived).
-bool g_installed[2] = {false, false};
+static_assert(std::atomic<int64_t>::is_always_lock_free, "set from a signal handler");
 constexpr int kSignals[2] = {SIGINT, SIGTERM};
+// A second signal this soon after the first is the same stop delivered twice: coreutils'
+// `timeout` signals its child and then the child's process group, and a scheduler may signal
+// every process of a job. Ending at once on it (an outside probe's `timeout 3`) left a
+// cancelled render's files behind.
+constexpr int64_t kRepeatNs = 1'000'000'000;
+
+int64_t monotonicNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);  // async-signal-safe
+  return int64_t(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
 
 extern "C" void onInterrupt(int signal) {
+  const int64_t now = monotonicNs();
   int none = 0;
-  g_signal.compare_exchange_strong(none, signal, std::memory_order_relaxed);
-  for (int i = 0; i < 2; ++i) {
-    if (g_installed[i]) std::signal(kSignals[i], SIG_DFL);  // async-signal-safe
+  if (g_signal.compare_exchange_strong(none, signal, std::memory_order_relaxed)) {
+    g_first_ns.store(now, std::memory_order_relaxed);
+    return;
   }
+  if (now - g_first_ns.load(std::memory_order_relaxed) < kRepeatNs) return;
+  // A later one ends the process as the signal would have: the default action, raised again
+  // (blocked in this handler, it is delivered as it returns).
+  std::signal(signal, SIG_DFL);  // async-signal-safe
+  std::raise(signal);
 }
 
 }  // namespace
@@ -30,14 +48,13 @@ void installInterruptHandler() {
   std::memset(&sa, 0, sizeof sa);
   sa.sa_handler = onInterrupt;
   sigemptyset(&sa.sa_mask);
-  // The handler runs once: the next signal takes its default action and ends the process.
-  sa.sa_flags = SA_RESETHAND | SA_RESTART;
-  for (int i = 0; i < 2; ++i) {
+  for (int signal : kSignals) sigaddset(&sa.sa_mask, signal);  // one handler at a time
+  sa.sa_flags = SA_RESTART;
+  for (int signal : kSignals) {
     // A signal the parent set to be ignored stays ignored (nohup, a shell's background job).
     struct sigaction old;
-    if (sigaction(kSignals[i], nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
-    g_installed[i] = true;
-    sigaction(kSignals[i], &sa, nullptr);
+    if (sigaction(signal, nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+    sigaction(signal, &sa, nullptr);
   }
 }
 
