@@ -12,7 +12,9 @@ namespace cloudbake {
 /// core/volume, core/shot/scene_builder: loading, voxelising and resampling the density.
 /// 2: an OBJ's UTF-8 byte-order mark is skipped (its first vertex had been dropped, and a mesh
 /// that never used its last vertex loaded with every index off by one).
-constexpr int kVolumeVersion = 2;
+/// 3: a mesh's faces are wound consistently before the inside test (orientConsistently): a
+/// closed mesh with some faces, or all, wound the other way had filled wrong or not at all.
+constexpr int kVolumeVersion = 3;
 /// core/phase: phase functions, the Lorenz-Mie solution and its tables.
 constexpr int kPhaseVersion = 2;
 /// core/transport: tracking, sky, camera, the path tracer's estimators and the views' EXR layers.
@@ -22,7 +24,7 @@ constexpr int kTransportVersion = 2;
 /// cells): the next change is 10, so no cache holds two views under one number.
 constexpr int kRenderFromBakeVersion = 8;
 
-/// "volume/2 phase/2 transport/2 render_from_bake/8": the shared part of every method's salt.
+/// "volume/3 phase/2 transport/2 render_from_bake/8": the shared part of every method's salt.
 inline std::string sharedVersionSalt() {
   return "volume/" + std::to_string(kVolumeVersion) + " phase/" + std::to_string(kPhaseVersion) +
          " transport/" + std::to_string(kTransportVersion) + " render_from_bake/" +

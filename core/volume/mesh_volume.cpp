@@ -9,6 +9,7 @@
 
 #include "core/error.h"
 #include "core/format.h"
+#include "core/volume/mesh_orientation.h"
 #include "core/volume/noise.h"
 #include "core/volume/openvdb_grid.h"
 #include "core/volume/voxel_limits.h"
@@ -329,7 +330,12 @@ DensityFieldPtr meshToVolume(const TriangleMesh& mesh, const MeshSourceOptions& 
   const Bounds3 b = meshBounds(mesh);
   const double h = meshVoxelSize(options, b);
   const IndexBox range = voxelRange(b, h);
-  const MeshBlockEvaluator eval(mesh, options, h, range, stop);
+  // The winding number counts a face wound the other way as a hole's negative: a closed cube
+  // with two of its twelve faces reversed came out hollow with a sheet below it, and one wound
+  // inwards throughout as empty (an outside probe).
+  TriangleMesh oriented = mesh;
+  orientConsistently(&oriented);
+  const MeshBlockEvaluator eval(oriented, options, h, range, stop);
   auto grid = buildGridFromBlocks(
       openvdb::CoordBBox(openvdb::Coord(range.lo[0], range.lo[1], range.lo[2]),
                          openvdb::Coord(range.hi[0], range.hi[1], range.hi[2])),

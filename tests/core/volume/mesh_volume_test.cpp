@@ -110,6 +110,26 @@ TEST_F(MeshVolumeTest, CubeVolumeAndCentreFromFiles) {
   testing::checkMajorants(*field, 20000);
 }
 
+// A closed mesh fills the same whatever its faces' winding (an outside probe's cube with two of
+// its twelve triangles reversed came out hollow with a sheet of density below it; wound inwards
+// throughout it was refused as enclosing nothing).
+TEST_F(MeshVolumeTest, AClosedMeshFillsTheSameWhateverItsWinding) {
+  const Vec3 lo(0.013, -0.21, 0.37), hi(0.987, 0.61, 1.07);
+  const std::string obj = dir_ + "/cube.obj";
+  testing::writeText(obj, cubeObj(lo, hi));
+  const TriangleMesh right = readMesh(obj);
+  const double expected = filledVolume(*meshToVolume(right, withResolution(24)));
+  TriangleMesh some = right, all = right;
+  for (size_t f : {0, 1, 7}) std::swap(some.triangles[f][1], some.triangles[f][2]);
+  for (auto& t : all.triangles) std::swap(t[1], t[2]);
+  for (const TriangleMesh* m : {&some, &all}) {
+    const auto field = meshToVolume(*m, withResolution(24));
+    EXPECT_DOUBLE_EQ(filledVolume(*field), expected);
+    EXPECT_NEAR(field->lookup()->density((lo + hi) * 0.5), 1.0, 1e-6);
+    EXPECT_EQ(field->lookup()->density(Vec3(0.5, 0.2, lo.z - 0.05)), 0.0);  // below the cube
+  }
+}
+
 TEST_F(MeshVolumeTest, TetrahedronVolumeMatchesAnalytic) {
   const TriangleMesh tet = tetrahedron();
   const Vec3 a = tet.vertices[1] - tet.vertices[0], b = tet.vertices[2] - tet.vertices[0],
