@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/methods/registry.h"
+#include "core/shot/scene_builder.h"
 #include "core/volume/grid_volume.h"
 #include "core/volume/mesh_io.h"
 #include "core/volume/mesh_volume.h"
@@ -111,7 +112,7 @@ void checkMeshVoxels(const ShotSpec& shot, uint64_t max_voxels, const std::strin
   try {
     h = meshVoxelSize(*m, b);
   } catch (const InputError& e) {
-    throw InputError(source + ": /volume/mesh: " + e.what());
+    throw InputError(source + ": " + volumeErrorAt("/volume/mesh", e.what(), "mesh."));
   }
   // The padded index box of meshToVolume (core/volume/mesh_volume.cpp).
   double n = 1;

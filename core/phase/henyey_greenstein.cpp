@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 
 namespace cloudbake {
 
@@ -25,7 +26,8 @@ double hgSampleCosTheta(double g, double u) {
 HenyeyGreensteinPhase::HenyeyGreensteinPhase(double g) : g_(g) {
   if (!std::isfinite(g) || !(std::abs(g) <= kMaxHgAsymmetry)) {
     std::ostringstream os;
-    os << "phase.g: must be in [-" << kMaxHgAsymmetry << ", " << kMaxHgAsymmetry << "], got " << g;
+    os << "phase.g: must be in [-" << kMaxHgAsymmetry << ", " << kMaxHgAsymmetry << "], got "
+       << exactNumber(g);
     throw InputError(os.str());
   }
 }

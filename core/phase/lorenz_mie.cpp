@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 
 namespace cloudbake {
 
@@ -24,7 +25,7 @@ Complex normalizeRefractiveIndex(Complex m) {
   if (std::abs(m) > kMaxRefractiveIndex) {
     std::ostringstream os;
     os << "mie.m: refractive index must have |m| <= " << kMaxRefractiveIndex << ", got |m| "
-       << std::abs(m);
+       << exactNumber(std::abs(m));
     throw InputError(os.str());
   }
   return {m.real(), std::abs(m.imag())};
@@ -33,14 +34,14 @@ Complex normalizeRefractiveIndex(Complex m) {
 void mieCoefficients(double x, Complex m_in, std::vector<Complex>* a, std::vector<Complex>* b) {
   if (!std::isfinite(x) || !(x >= 1e-8) || x > 1e5) {
     std::ostringstream os;
-    os << "mie.x: size parameter must be in [1e-8, 1e5], got " << x;
+    os << "mie.x: size parameter must be in [1e-8, 1e5], got " << exactNumber(x);
     throw InputError(os.str());
   }
   const Complex m = normalizeRefractiveIndex(m_in);
   const Complex mx = m * x;
   if (std::abs(mx) > kMaxMieMx) {  // the downward recurrence holds about 1.1 |m x| terms
     std::ostringstream os;
-    os << "mie.m: |m| x must be at most " << kMaxMieMx << ", got " << std::abs(mx);
+    os << "mie.m: |m| x must be at most " << kMaxMieMx << ", got " << exactNumber(std::abs(mx));
     throw InputError(os.str());
   }
   const int n_stop = mieTermCount(x);

@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/phase/draine.h"
 #include "core/phase/henyey_greenstein.h"
 
@@ -12,7 +13,7 @@ namespace cloudbake {
 MieApproxParams mieApproxParams(double d) {
   if (!std::isfinite(d) || d < 5.0 || d > 50.0) {
     std::ostringstream os;
-    os << "phase.d: droplet diameter must be in [5, 50] micrometres, got " << d;
+    os << "phase.d: droplet diameter must be in [5, 50] micrometres, got " << exactNumber(d);
     throw InputError(os.str());
   }
   MieApproxParams p;

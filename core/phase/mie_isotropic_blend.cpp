@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 
 namespace cloudbake {
 
@@ -13,7 +14,7 @@ MieIsotropicBlend::MieIsotropicBlend(std::shared_ptr<const PhaseFunction> inner,
   if (!inner_) throw InputError("phase: blend needs a phase function to wrap");
   if (!std::isfinite(ratio) || ratio < 0.0 || ratio > 1.0) {
     std::ostringstream os;
-    os << "phase.ratio: Mie/isotropic ratio must be in [0, 1], got " << ratio;
+    os << "phase.ratio: Mie/isotropic ratio must be in [0, 1], got " << exactNumber(ratio);
     throw InputError(os.str());
   }
 }

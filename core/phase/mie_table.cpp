@@ -130,13 +130,13 @@ void validateOptions(const MieTableOptions& o) {
   }
   if (!std::isfinite(o.dx) || o.dx < 0.01 || o.dx > 2.0) {
     std::ostringstream os;
-    os << "phase.dx: size-parameter step must be in [0.01, 2], got " << o.dx;
+    os << "phase.dx: size-parameter step must be in [0.01, 2], got " << exactNumber(o.dx);
     throw InputError(os.str());
   }
   if (!std::isfinite(o.relative_dx) || o.relative_dx < 0 || o.relative_dx > 0.1) {
     std::ostringstream os;
     os << "phase.relative_dx: relative size-parameter step must be in [0, 0.1], got "
-       << o.relative_dx;
+       << exactNumber(o.relative_dx);
     throw InputError(os.str());
   }
 }

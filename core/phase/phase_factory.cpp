@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/phase/henyey_greenstein.h"
 #include "core/phase/isotropic.h"
 #include "core/phase/mie_approx.h"
@@ -34,7 +35,7 @@ std::shared_ptr<const PhaseFunction> makePhaseFunction(const PhaseSpec& spec,
   // Validate the blend ratio first so a bad ratio is reported without building a Mie table.
   if (!std::isfinite(spec.mie_ratio) || spec.mie_ratio < 0.0 || spec.mie_ratio > 1.0) {
     std::ostringstream os;
-    os << "phase.ratio: Mie/isotropic ratio must be in [0, 1], got " << spec.mie_ratio;
+    os << "phase.ratio: Mie/isotropic ratio must be in [0, 1], got " << exactNumber(spec.mie_ratio);
     throw InputError(os.str());
   }
   std::shared_ptr<const PhaseFunction> base;

@@ -4,18 +4,19 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 
 namespace cloudbake {
 
 GammaSizeDistribution::GammaSizeDistribution(double r_eff, double v) : r_eff_(r_eff), v_(v) {
   if (!std::isfinite(r_eff) || r_eff < 1.0 || r_eff > 50.0) {
     std::ostringstream os;
-    os << "phase.reff: effective radius must be in [1, 50] micrometres, got " << r_eff;
+    os << "phase.reff: effective radius must be in [1, 50] micrometres, got " << exactNumber(r_eff);
     throw InputError(os.str());
   }
   if (!std::isfinite(v) || v < 0.01 || v >= 0.5) {
     std::ostringstream os;
-    os << "phase.veff: effective variance must be in [0.01, 0.5), got " << v;
+    os << "phase.veff: effective variance must be in [0.01, 0.5), got " << exactNumber(v);
     throw InputError(os.str());
   }
   alpha_ = (1.0 - 3.0 * v) / v;

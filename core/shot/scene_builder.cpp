@@ -1,5 +1,6 @@
 #include "core/shot/scene_builder.h"
 
+#include <cctype>
 #include <memory>
 #include <type_traits>
 
@@ -17,17 +18,38 @@ namespace {
 // Runs a factory, re-labelling its InputErrors with the shot field they came from, so a user
 // sees "shot.json: /volume/vdb: grid 'dens' not found in ..." rather than a bare message.
 template <typename F>
-auto labelled(const std::string& source, const std::string& pointer, F&& make) {
+auto labelled(const std::string& source, const std::string& pointer, F&& make,
+              const std::string& key_prefix = "") {
   try {
     return make();
   } catch (const MissingFileError&) {
     throw;
   } catch (const InputError& e) {
-    throw InputError(source + ": " + pointer + ": " + e.what());
+    throw InputError(source + ": " + volumeErrorAt(pointer, e.what(), key_prefix));
   }
 }
 
 }  // namespace
+
+// A volume builder names the key it refuses as "<prefix><key>: " ("perlin_cloud.cover: ...",
+// "cloud.ply: mesh.voxel_size: ..."): the error then names that key's pointer, which the
+// message no longer repeats (an outside probe found "/volume/sequence/procedural:
+// perlin_cloud.cover: ..." where the field is /volume/sequence/procedural/cover).
+std::string volumeErrorAt(const std::string& pointer, const std::string& what,
+                          const std::string& key_prefix) {
+  const size_t at = key_prefix.empty() ? std::string::npos : what.find(key_prefix);
+  const size_t key = at + key_prefix.size();
+  const size_t colon = at == std::string::npos ? at : what.find(": ", key);
+  if (colon == std::string::npos || colon == key) return pointer + ": " + what;
+  std::string name = what.substr(key, colon - key);
+  for (char& c : name) {
+    if (c == '.') c = '/';  // mesh.noise.frequency
+    if (!(std::islower(static_cast<unsigned char>(c)) || c == '_' || c == '/')) {
+      return pointer + ": " + what;
+    }
+  }
+  return pointer + "/" + name + ": " + what.substr(0, at) + what.substr(colon + 2);
+}
 
 DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source,
                             const std::function<bool()>& stop) {
@@ -46,9 +68,11 @@ DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source,
         } else if constexpr (std::is_same_v<T, VdbVolumeSpec>) {
           return labelled(source, ptr, [&] { return loadVdbVolume(v); });
         } else if constexpr (std::is_same_v<T, MeshVolumeSpec>) {
-          return labelled(source, ptr, [&] { return meshToVolume(v, stop); });
+          return labelled(
+              source, ptr, [&] { return meshToVolume(v, stop); }, "mesh.");
         } else if constexpr (std::is_same_v<T, ProceduralVolumeSpec>) {
-          return labelled(source, ptr, [&] { return makePerlinCloud(v.perlin, stop); });
+          return labelled(
+              source, ptr, [&] { return makePerlinCloud(v.perlin, stop); }, "perlin_cloud.");
         } else {
           throw InputError(source + ": " + ptr +
                            ": an animated volume has one density per frame; build it frame by "
@@ -68,8 +92,9 @@ DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame
     // The cloud at its own time plus `frame` steps: the octaves drift (perlin_cloud.h).
     PerlinCloudOptions options = sequence.procedural->perlin;
     options.time += frame * sequence.time_step;
-    return labelled(source, "/volume/sequence/procedural",
-                    [&] { return makePerlinCloud(options); });
+    return labelled(
+        source, "/volume/sequence/procedural", [&] { return makePerlinCloud(options); },
+        "perlin_cloud.");
   }
   VdbSourceOptions options;
   options.path = sequence.paths.at(static_cast<size_t>(frame));

@@ -25,6 +25,13 @@ DensityFieldPtr buildVolume(const VolumeSpec& volume, const std::string& source 
 DensityFieldPtr buildSequenceFrame(const SequenceVolumeSpec& sequence, int frame,
                                    const std::string& source = "shot.json");
 
+/// A volume builder's message `what` as a shot error under the volume's `pointer`: "<pointer>:
+/// <what>", or, where `what` names the key it refuses as "<key_prefix><key>: " ("perlin_cloud.
+/// cover: ...", "cloud.ply: mesh.voxel_size: ..."), "<pointer>/<key>: " and the message without
+/// that part (dots in the key become slashes: mesh.noise.frequency).
+std::string volumeErrorAt(const std::string& pointer, const std::string& what,
+                          const std::string& key_prefix);
+
 /// Builds a phase function from its description (e.g. through a server's cache).
 using PhaseBuilder = std::function<std::shared_ptr<const PhaseFunction>(const PhaseSpec&)>;
 

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/volume/noise.h"
 #include "core/volume/openvdb_grid.h"
 
@@ -144,7 +145,7 @@ DensityFieldPtr makePerlinCloud(const PerlinCloudOptions& o, const std::function
       openvdb::Vec3d(g.box_min.x + 0.5 * g.h, g.box_min.y + 0.5 * g.h, g.box_min.z + 0.5 * g.h));
   grid->setName("density");
   if (grid->activeVoxelCount() == 0) {
-    throw InputError("perlin_cloud.cover: " + std::to_string(o.cover) +
+    throw InputError("perlin_cloud.cover: " + exactNumber(o.cover) +
                      " leaves no cloud at all (lower it)");
   }
   return makeGridVolume(grid, "perlin_cloud");

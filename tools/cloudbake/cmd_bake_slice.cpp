@@ -129,11 +129,14 @@ void sliceRange(const Slice& s, const std::string& range, double* lo, double* hi
     int used = 0;
     const bool two =
         std::sscanf(range.c_str(), "%lf,%lf%n", lo, hi, &used) == 2 && size_t(used) == range.size();
-    // Finite ends whose difference is finite too: the colour map divides by it.
-    if (!two || !std::isfinite(*lo) || !std::isfinite(*hi) || !(*hi > *lo) ||
-        !std::isfinite(*hi - *lo)) {
+    if (!two || !std::isfinite(*lo) || !std::isfinite(*hi) || !(*hi > *lo)) {
       throw InputError("--range: expected LO,HI, two finite numbers with HI > LO, got '" + range +
                        "'");
+    }
+    // The colour map divides by the difference: it must be finite too.
+    if (!std::isfinite(*hi - *lo)) {
+      throw InputError("--range: HI - LO overflows (got '" + range +
+                       "'); the range must span less than 1.7e308");
     }
   }
 }

@@ -124,6 +124,37 @@ TEST(SceneBuilder, AssetErrorsNameTheField) {
   }
 }
 
+// A builder's refusal of one key names that key's pointer (an outside probe read
+// "/volume/sequence/procedural: perlin_cloud.cover: ..." and "/volume/mesh: ... mesh.voxel_size").
+TEST(SceneBuilder, ABuildersRefusalNamesTheKeysPointer) {
+  testing::TempDir dir;
+  dir.write("tet.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n");
+  json j = json::parse(kDesignSlab);
+  const auto error = [&] {
+    try {
+      const ShotSpec shot = parseShot(j.dump(), dir.path().string());
+      if (const auto* seq = std::get_if<SequenceVolumeSpec>(&shot.volume)) {
+        buildSequenceFrame(*seq, 0, "shot.json");
+      } else {
+        buildScene(shot, "shot.json");
+      }
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const json cloud = {{"type", "perlin_cloud"}, {"resolution", 12}, {"cover", 1}};
+  j["volume"] = {{"procedural", cloud}};
+  EXPECT_EQ(error(), "shot.json: /volume/procedural/cover: 1 leaves no cloud at all (lower it)");
+  j["volume"] = {{"sequence", {{"frames", 2}, {"procedural", cloud}}}};
+  EXPECT_EQ(error(),
+            "shot.json: /volume/sequence/procedural/cover: 1 leaves no cloud at all (lower it)");
+  j["volume"] = {{"mesh", {{"path", "tet.obj"}, {"voxel_size", 1e-4}}}};
+  const std::string mesh = error();
+  EXPECT_EQ(mesh.find("shot.json: /volume/mesh/voxel_size: "), 0u) << mesh;
+  EXPECT_NE(mesh.find("tet.obj: 1e-04 needs"), std::string::npos) << mesh;
+}
+
 // A sky map is read and checked as the scene is built, before any bake: a bad pixel was found
 // only when the first view rendered, after the bake.
 TEST(SceneBuilder, ABadSkyMapIsRefusedAsTheSceneIsBuilt) {
@@ -168,7 +199,8 @@ TEST(SceneBuilder, SharedAssets) {
     buildScene(parseShot(j.dump(), ""));
     FAIL();
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("shot.json: /volume/mesh: "), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("shot.json: /volume/mesh/voxel_size: "), std::string::npos)
+        << e.what();
     EXPECT_NE(std::string(e.what()).find("voxels"), std::string::npos) << e.what();
   }
   // Frame 1 of a two-frame sequence of the same file.
