@@ -506,6 +506,29 @@ TEST_F(RenderCli, BakeSliceAndCompareInspectABake) {
   const json twice = json::parse(r.out);
   EXPECT_NEAR(twice.at("sun").at("mean").get<double>(),
               2 * twice.at("sun").at("reference_mean").get<double>(), 1e-6);
+  // Per channel too, averaging to the layer's mean; a sun brighter in red alone shows in red
+  // alone (the layer's mean had hidden one channel's error behind the others').
+  const json& ch = twice.at("sun").at("channel_means");
+  const json& ch_ref = twice.at("sun").at("reference_channel_means");
+  ASSERT_EQ(ch.size(), 3u);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(ch[c].get<double>(), 2 * ch_ref[c].get<double>(), 1e-6) << c;
+  }
+  EXPECT_NEAR((ch[0].get<double>() + ch[1].get<double>() + ch[2].get<double>()) / 3,
+              twice.at("sun").at("mean").get<double>(), 1e-6);
+  j["lighting"]["sun"]["irradiance"] = {6.28318, 3.14159, 3.14159};
+  const fs::path red = dir_ / "red";
+  r = run("render '" + writeShot("red.json", j).string() + "' --out '" + red.string() +
+          "' --quiet");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  r = run("compare '" + (red / "nadir.exr").string() + "' '" + view + "' --json");
+  ASSERT_EQ(r.rc, 0) << r.err;
+  const json reds = json::parse(r.out).at("sun");
+  EXPECT_NEAR(reds.at("channel_means")[0].get<double>(),
+              2 * reds.at("reference_channel_means")[0].get<double>(), 1e-6);
+  EXPECT_NEAR(reds.at("channel_means")[1].get<double>(),
+              reds.at("reference_channel_means")[1].get<double>(), 1e-6);
+  j["lighting"]["sun"]["irradiance"] = {6.28318, 6.28318, 6.28318};
   // x = 2r: RMSE = sqrt(mean(r^2)), so rel. RMSE = sqrt(mean(r^2)) / mean(r).
   const Image ref = readExr(view).layers.at("sun");
   double s1 = 0, s2 = 0;
