@@ -33,6 +33,15 @@ bool equalConstantTime(const std::string& a, const std::string& b) {
   return diff == 0;
 }
 
+// Where a line's comment starts: a '#' at its start or after a blank. A '#' inside a token is
+// part of it (cutting there had accepted the token's first characters alone as the secret).
+size_t commentStart(const std::string& line) {
+  for (size_t i = 0; i < line.size(); ++i) {
+    if (line[i] == '#' && (i == 0 || line[i - 1] == ' ' || line[i - 1] == '\t')) return i;
+  }
+  return line.size();
+}
+
 }  // namespace
 
 TokenTable TokenTable::load(const std::string& path) {
@@ -43,7 +52,7 @@ TokenTable TokenTable::load(const std::string& path) {
   std::string line;
   for (int number = 1; std::getline(in, line); ++number) {
     const std::string where = "--auth-tokens " + path + ":" + std::to_string(number) + ": ";
-    std::istringstream words(line.substr(0, line.find('#')));
+    std::istringstream words(line.substr(0, commentStart(line)));
     std::string name, token, extra;
     if (!(words >> name)) continue;  // blank or comment
     if (!(words >> token) || (words >> extra)) {
