@@ -122,7 +122,7 @@ grpc::Status BakeServiceImpl::SubmitJob(Ctx* ctx, const v1::SubmitJobRequest* re
 
 void BakeServiceImpl::checkOwner(const std::string& caller, const std::string& id) const {
   // Another client's job answers exactly as a job that does not exist: ids reveal nothing.
-  if (auth_.enabled() && jobs_.get(id).owner != caller) {
+  if (auth_.enabled() && jobs_.ownerOf(id) != caller) {
     throw NotFoundError("job '" + id.substr(0, 64) + "' not found");
   }
 }

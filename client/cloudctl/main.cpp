@@ -124,6 +124,7 @@ Json jobJson(const v1::Job& j) {
           {"stage", j.stage()},
           {"fraction", j.fraction()},
           {"error", j.error()},
+          {"error_is_input", j.error_is_input()},
           {"error_no_space", j.error_no_space()},
           {"created_unix", j.created_unix()},
           {"started_unix", j.started_unix()},
@@ -158,6 +159,10 @@ std::string readTextFile(const std::string& path, const std::string& option) {
   if (std::filesystem::is_directory(path, ec)) {
     throw CliError{ExitCode::kBadInput, option + " " + path + ": is a folder, not a file"};
   }
+  // A missing file is exit 3 as for every command (it was 2, "cannot open").
+  if (!std::filesystem::exists(path, ec)) {
+    throw CliError{ExitCode::kNotFound, option + " " + path + ": file not found"};
+  }
   std::ifstream in(path, std::ios::binary);
   if (!in.is_open()) throw CliError{ExitCode::kBadInput, option + " " + path + ": cannot open"};
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -172,6 +177,10 @@ std::string readToken(const std::string& file) {
   const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; };
   while (!token.empty() && blank(token.back())) token.pop_back();
   while (!token.empty() && blank(token.front())) token.erase(token.begin());
+  if (!file.empty() && token.empty()) {
+    // Not "this server requires a token", as if none had been given.
+    throw CliError{ExitCode::kBadInput, "--token-file " + file + ": holds no token"};
+  }
   for (const char c : token) {
     if (static_cast<unsigned char>(c) <= ' ' || c == 0x7f) {
       throw CliError{ExitCode::kBadInput,
@@ -754,7 +763,14 @@ void submitWithRetries(Client& c, const SubmitArgs& a, const v1::SubmitJobReques
   for (double wait_s = 0.25;; wait_s = std::min(wait_s * 2, 8.0)) {
     grpc::ClientContext ctx;
     c.shortCall(&ctx);
-    const grpc::Status st = c.stub->SubmitJob(&ctx, req, reply);
+    grpc::Status st = c.stub->SubmitJob(&ctx, req, reply);
+    if (st.error_code() == grpc::StatusCode::CANCELLED) {
+      // This client cancels no submit: the server ended the call (a graceful stop) before any
+      // job existed. Retried as a server away, not "cancelled" (exit 6), which names a job.
+      st = grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                        "the server ended the call before a job was created (stopping?); "
+                        "nothing was submitted");
+    }
     const bool busy = st.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED ||
                       st.error_code() == grpc::StatusCode::UNAVAILABLE;
     const double sleep_s = wait_s * std::uniform_real_distribution<double>(0.5, 1.0)(rng);

@@ -560,6 +560,16 @@ std::shared_ptr<JobManager::Job> JobManager::find(const std::string& id) const {
   return it->second;
 }
 
+std::string JobManager::ownerOf(const std::string& id) const {
+  if (auto other = foreign(id)) return other->owner;
+  // Not through find(): asking whose a job is does not use it, so another client's question
+  // must not keep it from being pruned.
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = jobs_.find(id);
+  if (it == jobs_.end()) throw NotFoundError("job '" + id.substr(0, 64) + "' not found");
+  return it->second->record.owner;
+}
+
 JobRecord JobManager::get(const std::string& id) const {
   if (auto other = foreign(id)) return *other;
   auto job = find(id);
@@ -697,6 +707,15 @@ OutputFile JobManager::recordedOutput(const std::string& id, const std::string& 
   }
   for (const OutputFile& f : record.outputs) {
     if (f.name == name) {
+      // Records of other replicas are read from the shared folder: a name there that is not a
+      // plain file name (an edited record's "../../x") would serve a file outside the job.
+      const fs::path p(f.name);
+      if (f.name.empty() || p.has_parent_path() || p.is_absolute() || f.name == "." ||
+          f.name == "..") {
+        throw FailedPreconditionError("job " + id + ": its record names output '" +
+                                      f.name.substr(0, 256) +
+                                      "', which is not a file name; it is not served");
+      }
       OutputFile out = f;
       out.path = (fs::path(dir) / f.name).string();
       return out;

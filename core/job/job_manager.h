@@ -200,6 +200,9 @@ class JobManager {
 
   /// Throws NotFoundError.
   JobRecord get(const std::string& id) const;
+  /// The job's owner (SubmitInput::owner), without counting as a use of it (prune keeps jobs
+  /// used in the last minutes): NotFoundError for an unknown id.
+  std::string ownerOf(const std::string& id) const;
   /// Newest first; `state` filters when set; at most `limit` (0: all).
   std::vector<JobRecord> list(std::optional<JobState> state, size_t limit) const;
   /// Cancels a queued or running job (a running one stops within about a second). Cancelling

@@ -752,6 +752,16 @@ TEST_F(ServerTest, BadInputsAreAnsweredClearlyAndTheServerKeepsServing) {
   ASSERT_GE(cases.size(), 20u);
   ws_.write("outside.vdb", vdb_bytes);
   expectBadCases(server_, ws_, cases, "bad");
+  // A job that failed on its input says so in --json too, as its exit code 2 does (the field
+  // was left out, while error_no_space was there).
+  const CmdResult listed = run(server_.cloudctl() + " --json list");
+  ASSERT_EQ(listed.code, 0) << listed.err;
+  int input_failures = 0;
+  for (const Json& job : Json::parse(listed.out)) {
+    ASSERT_TRUE(job.contains("error_is_input")) << job.dump();
+    input_failures += job.at("state") == "FAILED" && job.at("error_is_input").get<bool>();
+  }
+  EXPECT_GE(input_failures, 1) << listed.out;
   // The escaping path is accepted when the client is asked to upload it (rewritten inside).
   const CmdResult outside = run(server_.cloudctl() + " submit " + ws_.path("bad22/shot.json") +
                                 " --allow-outside --quiet --out " + ws_.path("bad22/out"));
@@ -1224,11 +1234,20 @@ TEST(CloudctlCommandLine, CredentialFilesThatCannotServeAreBadInputNamingTheOpti
       {"--token-file " + ws.path(""), "--token-file " + ws.path("") + ": is a folder"},
       {"--tls-ca " + ws.path(""), "--tls-ca " + ws.path("") + ": is a folder"},
       {"--tls-ca " + empty, "--tls-ca " + empty + ": not a PEM certificate"},
+      // An empty token file had read as no token at all ("this server requires a token").
+      {"--token-file " + empty, "--token-file " + empty + ": holds no token"},
   };
   for (const auto& [args, needle] : bad) {
     const CmdResult r = run(std::string(CLOUDCTL_BIN) + " " + args + " --timeout 2 health");
     EXPECT_EQ(r.code, 2) << args << ": " << r.err;
     EXPECT_NE(r.err.find(needle), std::string::npos) << args << ": " << r.err;
+  }
+  // A missing one is exit 3, as a missing file is for every command (it was 2).
+  for (const std::string option : {"--token-file", "--tls-ca"}) {
+    const CmdResult r = run(std::string(CLOUDCTL_BIN) + " " + option + " " + ws.path("none") +
+                            " --timeout 2 health");
+    EXPECT_EQ(r.code, 3) << option << ": " << r.err;
+    EXPECT_NE(r.err.find(ws.path("none") + ": file not found"), std::string::npos) << r.err;
   }
   // The server: a certificate that is not PEM was "cannot listen" (exit 4).
   const CmdResult server = run("timeout 30 " + std::string(CLOUDBAKE_SERVER_BIN) +

@@ -1064,6 +1064,20 @@ TEST(JobManager, ReplicasOnOneSharedFolderShareTheirBakes) {
   EXPECT_TRUE(b.events(first.id, events.back().seq, std::chrono::milliseconds(0), &r).empty());
   EXPECT_THROW(b.get("j0123456789abcdef"), NotFoundError);
   EXPECT_THROW(b.output(first.id, "nope.exr"), NotFoundError);
+  // A published record is read from the shared folder, where anyone with access may edit it:
+  // an output name that leaves the job's folder is not served (an outside probe fetched a file
+  // outside the job by such a name through the other replica).
+  const fs::path published = dir / "shared" / "jobs" / first.id / "job.json";
+  ASSERT_TRUE(fs::exists(published));
+  nlohmann::json record = nlohmann::json::parse(readWholeFile(published.string()));
+  const std::string escape = "../outside.txt";
+  const fs::path target = fs::path(there.path).parent_path() / escape;
+  std::ofstream(target) << "secret\n";
+  record["outputs"][0]["name"] = escape;
+  record["outputs"][0]["size"] = fs::file_size(target);
+  record["outputs"][0]["sha256"] = sha256File(target.string());
+  std::ofstream(published) << record.dump();
+  EXPECT_THROW(b.output(first.id, escape), FailedPreconditionError);
   fs::remove_all(dir);
 }
 
