@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cmath>
 #include <cstdint>
 #include <unordered_map>
 #include <utility>
@@ -79,14 +78,9 @@ std::vector<int32_t> walkPart(const TriangleMesh& mesh,
 // About the bounds' centre: an open mesh's "volume" depends on the point its cones meet at,
 // and a far one (a mesh placed at 1e6) makes the sum cancel to rounding.
 double signedVolume(const TriangleMesh& mesh) {
-  Vec3 lo(INFINITY), hi(-INFINITY);
-  for (const Vec3& v : mesh.vertices) {
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = std::min(lo[a], v[a]);
-      hi[a] = std::max(hi[a], v[a]);
-    }
-  }
-  const Vec3 c = (lo + hi) * 0.5;
+  Bounds3 bounds;
+  for (const Vec3& v : mesh.vertices) bounds.expand(v);
+  const Vec3 c = bounds.center();
   double six_v = 0;
   for (const auto& t : mesh.triangles) {
     six_v += dot(mesh.vertices[size_t(t[0])] - c,

@@ -144,23 +144,23 @@ def main():
         os.symlink(os.path.join(work, "outside", "secret.vdb"),
                    os.path.join(work, "shot", "link.vdb"))
         linked = dict(vdb_shot, name="py_link", volume={"vdb": {"path": "link.vdb"}})
-        try:
-            client.submit(json.dumps(linked), base_dir=os.path.join(work, "shot"))
-            check(False, "a link leading outside the shot's folder is refused")
-        except ValueError as e:
-            check("leads outside the shot's folder" in str(e),
-                  "a link leading outside the shot's folder is refused (%s)" % e)
+        def refused(shot, needle, what):
+            """A submit the client refuses before any upload, saying `needle`."""
+            try:
+                client.submit(json.dumps(shot), base_dir=os.path.join(work, "shot"))
+                check(False, what)
+            except ValueError as e:
+                check(needle in str(e), "%s (%s)" % (what, e))
+
+        refused(linked, "leads outside the shot's folder",
+                "a link leading outside the shot's folder is refused")
         job_link = client.wait(client.submit(json.dumps(linked), base_dir=os.path.join(work, "shot"),
                                              allow_outside=True).id)
         check(job_link.state == pb.SUCCEEDED, "allow_outside=True uploads it")
         many = dict(vdb_shot, name="py_many",
                     volume={"sequence": {"paths": ["f%d.vdb" % i for i in range(4097)]}})
-        try:
-            client.submit(json.dumps(many), base_dir=os.path.join(work, "shot"))
-            check(False, "a shot naming 4097 files is refused before any is read")
-        except ValueError as e:
-            check("4097 files, more than the 4096" in str(e),
-                  "a shot naming 4097 files is refused before any is read (%s)" % e)
+        refused(many, "4097 files, more than the 4096",
+                "a shot naming 4097 files is refused before any is read")
         try:
             cloudbake_client.BakeClient("127.0.0.1:%d" % free_port(), timeout=0.5)
             check(False, "a server that is down is a clear error")
